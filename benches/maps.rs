@@ -1,0 +1,121 @@
+//! Speed targets (README "Performance"): gain maps of the paper scenario in both groupings,
+//! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, and the
+//! per-cell cost of the `fast` solver and of the certificate.
+//!
+//! `cargo bench` runs everything; `cargo bench -- gain` a subset. Single-core figures come from
+//! `RAYON_NUM_THREADS=1 cargo bench`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use irs_planner::channel::ChannelModel;
+use irs_planner::planner::CellGraph;
+use irs_planner::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress};
+use irs_planner::scenario::Scenario;
+use irs_planner::solver::{self, certificate, fast};
+use std::hint::black_box;
+use std::time::Duration;
+
+fn paper(file: &str, edit: impl FnOnce(&mut serde_json::Value)) -> Scenario {
+    let path = format!("{}/scenarios/{file}", env!("CARGO_MANIFEST_DIR"));
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    edit(&mut v);
+    Scenario::from_json(&v.to_string()).unwrap()
+}
+
+fn gain_maps(c: &mut Criterion) {
+    for grouping in ["coherent", "elements"] {
+        let s = paper("paper-single-user.json", |v| {
+            v["irs"]["grouping"] = grouping.into();
+        });
+        let key = MapKey::new(
+            "bench",
+            &s,
+            MapKind::Gain,
+            Some(PhaseMode::Continuous),
+            None,
+            None,
+        )
+        .unwrap();
+        c.bench_function(&format!("gain_map_41x41_{grouping}"), |b| {
+            b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+        });
+    }
+}
+
+fn large_grid(c: &mut Criterion) {
+    // The paper floor at 2 cm resolution: 1001 × 1001 cells, M = 1200 coherent.
+    let s = paper("paper-single-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.02.into();
+    });
+    let key = MapKey::new(
+        "bench",
+        &s,
+        MapKind::Gain,
+        Some(PhaseMode::Continuous),
+        None,
+        None,
+    )
+    .unwrap();
+    let mut group = c.benchmark_group("large");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(20));
+    group.bench_function("gain_map_1001x1001", |b| {
+        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+    });
+    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    let graph = CellGraph {
+        grid: &map.grid,
+        values: &map.values,
+        occupied: &map.occupied,
+    };
+    let start = map.grid.index(0, 500);
+    let goal = map.grid.index(1000, 500);
+    // A threshold that forces a detour, so the search explores much of the floor.
+    let threshold = -62.0;
+    group.bench_function("astar_1001x1001", |b| {
+        b.iter(|| graph.shortest_path(start, goal, black_box(threshold)))
+    });
+    group.bench_function("widest_path_1001x1001", |b| {
+        b.iter(|| graph.widest_path_threshold(start, goal))
+    });
+    group.finish();
+}
+
+fn rate_maps(c: &mut Criterion) {
+    let s = paper("paper-multi-user.json", |_| {});
+    let mut group = c.benchmark_group("rate");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(30));
+    let key = MapKey::new(
+        "bench",
+        &s,
+        MapKind::Rate,
+        Some(PhaseMode::Continuous),
+        Some(Access::Noma),
+        None,
+    )
+    .unwrap();
+    group.bench_function("noma_map_41x41_n60_fast_with_certificate", |b| {
+        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+    });
+    group.finish();
+
+    // Per cell, at a cell behind the central obstacle.
+    let channel = ChannelModel::new(&s);
+    let srus = solver::sru_part(&channel, &s, true);
+    let problem = solver::cell_problem(&channel, [3.0, -6.0, 1.0], &srus, true);
+    let model = solver::rate_model(&s, &key);
+    let mut group = c.benchmark_group("rate_cell");
+    group.bench_function("fast_n60", |b| {
+        b.iter(|| fast::solve(black_box(&problem), &model))
+    });
+    group.bench_function("certificate_n60", |b| {
+        b.iter(|| certificate::upper_bound(black_box(&problem), &model))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, gain_maps, large_grid, rate_maps);
+criterion_main!(benches);

@@ -1,0 +1,463 @@
+//! The channel model of SPEC §1 and the paper's Section II-A: per user location it yields the
+//! direct LoS coefficient h̃, the cascaded LoS coefficients w̃ ∈ C^N of the IRS sub-surfaces and
+//! the scattered power τ, so that the expected channel power gain for phases θ is
+//!
+//! λ(θ) = |h̃ + w̃ᵀθ|² + τ            (paper eqs. 5–6, Lemma 1)
+//!
+//! with
+//! * h̃ = √(L_AM K_AM/(K_AM+1)) · e^{−j2π d_AM/λ},
+//! * w̃_n = √(L_AI K_AI/(K_AI+1)) √(L_IM K_IM/(K_IM+1)) · Σ_{elements of n} e^{−j2π(d_A,e + d_e,U)/λ},
+//! * τ = L_AM/(K_AM+1) + L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
+//!
+//! Choices the paper leaves open (also in the README):
+//! * Path losses L_AI and L_IM use the distance to the IRS centre, as the paper's scalar
+//!   L_AI, L_IM(q) do; LoS *phases* use exact (spherical) distances to each sub-surface centre
+//!   (`coherent`) or each element (`elements`).
+//! * A link is LoS unless its segment passes through an obstacle's interior (grazing is LoS);
+//!   the IRS links are tested from the IRS centre.
+//! * The IRS reflects only into its front half-space: a user on or behind the surface's plane
+//!   gets no IRS term at all (neither w̃ nor the scattered part of τ).
+
+use crate::scenario::{Grouping, Scenario};
+use nalgebra::{Complex, Vector3};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use std::f64::consts::TAU;
+
+/// Complex baseband coefficient.
+pub type C64 = Complex<f64>;
+type P3 = Vector3<f64>;
+
+/// Large-scale parameters of one link: path gain L (linear, < 1) and Rician factor K (0 if NLoS).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkBudget {
+    pub los: bool,
+    pub path_gain: f64,
+    pub rician_k: f64,
+}
+
+impl LinkBudget {
+    /// √(L K/(K+1)), the amplitude of the deterministic LoS component.
+    #[inline]
+    pub fn los_amplitude(&self) -> f64 {
+        (self.path_gain * self.rician_k / (self.rician_k + 1.0)).sqrt()
+    }
+    /// L/(K+1), the power of the Rayleigh (NLoS) component.
+    #[inline]
+    pub fn scattered_power(&self) -> f64 {
+        self.path_gain / (self.rician_k + 1.0)
+    }
+}
+
+/// 3GPP TR 38.901 InF-SH path loss in dB (paper Section IV). `d` is clamped to ≥ 1 m.
+/// LoS: 31.84 + 21.50 log10 d + 19 log10 f_c; NLoS: max(LoS, 32.4 + 23 log10 d + 20 log10 f_c).
+pub fn path_loss_db(distance_m: f64, carrier_ghz: f64, los: bool) -> f64 {
+    let d = distance_m.max(1.0).log10();
+    let f = carrier_ghz.log10();
+    let pl_los = 31.84 + 21.50 * d + 19.0 * f;
+    if los { pl_los } else { pl_los.max(32.4 + 23.0 * d + 20.0 * f) }
+}
+
+/// An obstacle as a 3D box [lo, hi].
+#[derive(Debug, Clone, Copy)]
+struct Aabb {
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+/// True when the segment a→b passes through the open interior of `bx` (slab test with open
+/// intervals, so a segment that only grazes a face, edge or corner is not blocked).
+fn segment_hits_interior(a: &P3, b: &P3, bx: &Aabb) -> bool {
+    let mut t_low = 0.0f64;
+    let mut t_high = 1.0f64;
+    for axis in 0..3 {
+        let p = a[axis];
+        let d = b[axis] - a[axis];
+        if d == 0.0 {
+            if p <= bx.lo[axis] || p >= bx.hi[axis] {
+                return false;
+            }
+            continue;
+        }
+        let (t0, t1) = {
+            let t0 = (bx.lo[axis] - p) / d;
+            let t1 = (bx.hi[axis] - p) / d;
+            if t0 < t1 { (t0, t1) } else { (t1, t0) }
+        };
+        t_low = t_low.max(t0);
+        t_high = t_high.min(t1);
+        if t_high - t_low <= 1e-12 {
+            return false;
+        }
+    }
+    true
+}
+
+/// The IRS as the channel model sees it: its scattering points and the fixed AP–IRS link.
+#[derive(Debug, Clone)]
+struct IrsModel {
+    centre: P3,
+    normal: P3,
+    /// N.
+    subsurfaces: usize,
+    /// Scattering points: sub-surface centres (`coherent`) or elements (`elements`); the points
+    /// of sub-surface n are `points[n·per_sub .. (n+1)·per_sub]`.
+    points: Vec<P3>,
+    per_sub: usize,
+    /// How many elements each point stands for: N̄ (`coherent`) or 1 (`elements`).
+    weight: f64,
+    /// M.
+    elements: usize,
+    /// d(AP, point) for every point.
+    ap_distance: Vec<f64>,
+    ap_link: LinkBudget,
+}
+
+/// The deterministic part of the model for one scenario; cheap to share across threads.
+#[derive(Debug, Clone)]
+pub struct ChannelModel {
+    wavelength_m: f64,
+    carrier_ghz: f64,
+    kappa: f64,
+    ap: P3,
+    boxes: Vec<Aabb>,
+    irs: Option<IrsModel>,
+}
+
+/// (h̃, τ) of one location; w̃ is written into a caller's buffer so hot loops do not allocate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectAndScattered {
+    /// h̃, the direct LoS coefficient.
+    pub h: C64,
+    /// τ, the total scattered power.
+    pub tau: f64,
+}
+
+impl ChannelModel {
+    /// Builds the model of a validated scenario.
+    pub fn new(scenario: &Scenario) -> ChannelModel {
+        let lambda = scenario.wavelength_m();
+        let boxes = scenario
+            .obstacles
+            .iter()
+            .map(|o| Aabb {
+                lo: [o.center[0] - o.size[0] / 2.0, o.center[1] - o.size[1] / 2.0, 0.0],
+                hi: [o.center[0] + o.size[0] / 2.0, o.center[1] + o.size[1] / 2.0, o.height_m],
+            })
+            .collect();
+        let mut model = ChannelModel {
+            wavelength_m: lambda,
+            carrier_ghz: scenario.ap.carrier_ghz,
+            kappa: 10f64.powf(scenario.channel.rician_k_db / 10.0),
+            ap: P3::from(scenario.ap.position),
+            boxes,
+            irs: None,
+        };
+        if let Some(irs) = &scenario.irs {
+            let centre = P3::from(irs.center);
+            let normal = P3::from(irs.normal).normalize();
+            // Wall axes: horizontal u_h = ẑ × n (normalised), vertical u_v = n × u_h.
+            let u_h = P3::z().cross(&normal).normalize();
+            let u_v = normal.cross(&u_h);
+            let pitch = irs.sub_pitch_m.expect("defaults resolved");
+            let n_bar = irs.elements_per_sub;
+            let mut points = Vec::new();
+            let (per_sub, weight) = match irs.grouping {
+                Grouping::Coherent => (1, n_bar as f64),
+                Grouping::Elements => (n_bar, 1.0),
+            };
+            let element_pitch = irs.element_pitch_m.unwrap_or(0.0);
+            for ix in 0..irs.nx_sub {
+                for iz in 0..irs.nz_sub {
+                    let sub_centre = centre
+                        + u_h * ((ix as f64 - (irs.nx_sub as f64 - 1.0) / 2.0) * pitch)
+                        + u_v * ((iz as f64 - (irs.nz_sub as f64 - 1.0) / 2.0) * pitch);
+                    for k in 0..per_sub {
+                        let offset = (k as f64 - (per_sub as f64 - 1.0) / 2.0) * element_pitch;
+                        points.push(sub_centre + u_h * offset);
+                    }
+                }
+            }
+            let ap_distance = points.iter().map(|p| (p - model.ap).norm()).collect();
+            let ap_link = model.link_budget(&model.ap.clone(), &centre);
+            model.irs = Some(IrsModel {
+                centre,
+                normal,
+                subsurfaces: irs.subsurfaces(),
+                points,
+                per_sub,
+                weight,
+                elements: irs.elements(),
+                ap_distance,
+                ap_link,
+            });
+        }
+        model
+    }
+
+    /// N, the length of w̃ and θ (0 without an IRS).
+    pub fn subsurfaces(&self) -> usize {
+        self.irs.as_ref().map_or(0, |i| i.subsurfaces)
+    }
+
+    pub fn wavelength_m(&self) -> f64 {
+        self.wavelength_m
+    }
+
+    /// True when the segment between two points passes through an obstacle's interior.
+    pub fn is_blocked(&self, a: [f64; 3], b: [f64; 3]) -> bool {
+        let (a, b) = (P3::from(a), P3::from(b));
+        self.boxes.iter().any(|bx| segment_hits_interior(&a, &b, bx))
+    }
+
+    fn link_budget(&self, a: &P3, b: &P3) -> LinkBudget {
+        let los = !self.boxes.iter().any(|bx| segment_hits_interior(a, b, bx));
+        let pl = path_loss_db((a - b).norm(), self.carrier_ghz, los);
+        LinkBudget { los, path_gain: 10f64.powf(-pl / 10.0), rician_k: if los { self.kappa } else { 0.0 } }
+    }
+
+    /// e^{−j2π d/λ}, the LoS phase of a path of length d.
+    #[inline]
+    fn los_phase(&self, d: f64) -> C64 {
+        let phi = -TAU * (d / self.wavelength_m).fract();
+        let (s, c) = phi.sin_cos();
+        C64::new(c, s)
+    }
+
+    /// The IRS–user link budget, or `None` when the user is not in front of the IRS.
+    fn irs_user_link(&self, irs: &IrsModel, user: &P3) -> Option<LinkBudget> {
+        ((user - irs.centre).dot(&irs.normal) > 0.0).then(|| self.link_budget(&irs.centre, user))
+    }
+
+    /// Evaluates (h̃, w̃, τ) at `user`. `w` must have length N; it is filled with w̃ (zeros when
+    /// `with_irs` is false or the IRS cannot serve this location). Without the IRS, τ holds only
+    /// the direct link's scattered power: the "no IRS" benchmark of the paper's Section IV.
+    pub fn evaluate(&self, user: [f64; 3], with_irs: bool, w: &mut [C64]) -> DirectAndScattered {
+        debug_assert_eq!(w.len(), self.subsurfaces());
+        let q = P3::from(user);
+        let direct = self.link_budget(&self.ap, &q);
+        let h = self.los_phase((q - self.ap).norm()) * direct.los_amplitude();
+        let mut tau = direct.scattered_power();
+        w.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
+        let Some(irs) = self.irs.as_ref().filter(|_| with_irs) else {
+            return DirectAndScattered { h, tau };
+        };
+        let Some(user_link) = self.irs_user_link(irs, &q) else {
+            return DirectAndScattered { h, tau };
+        };
+        let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
+        // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
+        tau += irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
+            / ((ka + 1.0) * (ku + 1.0));
+        let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
+        if amplitude > 0.0 {
+            for (n, wn) in w.iter_mut().enumerate() {
+                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                let mut sum = C64::new(0.0, 0.0);
+                for (p, d_ap) in irs.points[range.clone()].iter().zip(&irs.ap_distance[range]) {
+                    sum += self.los_phase(d_ap + (q - p).norm());
+                }
+                *wn = sum * amplitude;
+            }
+        }
+        DirectAndScattered { h, tau }
+    }
+
+    /// Draws instantaneous channels c_u = h_u + Σ_e θ_{n(e)} r_{u,e} g_e for several users at once
+    /// from the per-element Rician model (paper eqs. 1–4), independent of the closed form above:
+    /// the Monte Carlo reference for Lemma 1 and for the exact expected rates (paper Fig. 10).
+    /// The AP–IRS channel g is common to all users of a draw, as it is physically.
+    /// `theta` is the phase vector (length N) or `None` for the no-IRS benchmark; `visit` is called
+    /// once per draw with one coefficient per user.
+    pub fn sample_channels<R: Rng + ?Sized>(
+        &self,
+        users: &[[f64; 3]],
+        theta: Option<&[f64]>,
+        draws: usize,
+        rng: &mut R,
+        mut visit: impl FnMut(&[C64]),
+    ) {
+        struct UserStats {
+            h_los: C64,
+            h_scatter: f64,
+            /// Per element: LoS IRS→user coefficient √(L K/(K+1)) e^{−j2π d/λ}, or none.
+            r_los: Vec<C64>,
+            r_scatter: f64,
+            irs: bool,
+        }
+        let irs = self.irs.as_ref().filter(|_| theta.is_some());
+        let rot: Vec<C64> = theta.map_or(Vec::new(), |t| t.iter().map(|&p| C64::from_polar(1.0, p)).collect());
+        // Per element: which sub-surface it belongs to and which scattering point carries its
+        // LoS phase (every element of a coherent sub-surface sits at the sub-surface centre).
+        let element_point = |e: usize, irs: &IrsModel| -> usize {
+            let n_bar = irs.elements / irs.subsurfaces;
+            if irs.per_sub == 1 { e / n_bar } else { e }
+        };
+        let stats: Vec<UserStats> = users
+            .iter()
+            .map(|u| {
+                let q = P3::from(*u);
+                let direct = self.link_budget(&self.ap, &q);
+                let h_los = self.los_phase((q - self.ap).norm()) * direct.los_amplitude();
+                let mut s = UserStats {
+                    h_los,
+                    h_scatter: direct.scattered_power().sqrt(),
+                    r_los: Vec::new(),
+                    r_scatter: 0.0,
+                    irs: false,
+                };
+                if let Some(irs) = irs {
+                    if let Some(link) = self.irs_user_link(irs, &q) {
+                        s.irs = true;
+                        s.r_scatter = link.scattered_power().sqrt();
+                        s.r_los = (0..irs.elements)
+                            .map(|e| {
+                                let p = irs.points[element_point(e, irs)];
+                                self.los_phase((q - p).norm()) * link.los_amplitude()
+                            })
+                            .collect();
+                    }
+                }
+                s
+            })
+            .collect();
+        let g_los: Vec<C64> = irs.map_or(Vec::new(), |irs| {
+            (0..irs.elements)
+                .map(|e| {
+                    let pt = element_point(e, irs);
+                    self.los_phase(irs.ap_distance[pt]) * irs.ap_link.los_amplitude()
+                })
+                .collect()
+        });
+        let g_scatter = irs.map_or(0.0, |i| i.ap_link.scattered_power().sqrt());
+        let cn = |rng: &mut R| -> C64 {
+            let re: f64 = StandardNormal.sample(rng);
+            let im: f64 = StandardNormal.sample(rng);
+            C64::new(re, im) * std::f64::consts::FRAC_1_SQRT_2
+        };
+        let mut g = vec![C64::new(0.0, 0.0); g_los.len()];
+        let mut c = vec![C64::new(0.0, 0.0); users.len()];
+        for _ in 0..draws {
+            for (ge, gl) in g.iter_mut().zip(&g_los) {
+                *ge = gl + cn(rng) * g_scatter;
+            }
+            for (cu, s) in c.iter_mut().zip(&stats) {
+                *cu = s.h_los + cn(rng) * s.h_scatter;
+                if let (true, Some(irs)) = (s.irs, irs) {
+                    let n_bar = irs.elements / irs.subsurfaces;
+                    let mut reflected = C64::new(0.0, 0.0);
+                    for (e, (ge, rl)) in g.iter().zip(&s.r_los).enumerate() {
+                        let r = rl + cn(rng) * s.r_scatter;
+                        reflected += rot[e / n_bar] * r * ge;
+                    }
+                    *cu += reflected;
+                }
+            }
+            visit(&c);
+        }
+    }
+}
+
+/// λ(θ) = |h̃ + Σ_n w̃_n e^{jθ_n}|² + τ (paper eq. 6) for an explicit phase vector.
+pub fn expected_gain(direct: &DirectAndScattered, w: &[C64], theta: &[f64]) -> f64 {
+    let mut sum = direct.h;
+    for (wn, &t) in w.iter().zip(theta) {
+        sum += wn * C64::from_polar(1.0, t);
+    }
+    sum.norm_sqr() + direct.tau
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    fn small() -> Scenario {
+        Scenario::from_json(include_str!("../scenarios/small-test.json")).unwrap()
+    }
+
+    #[test]
+    fn path_loss_matches_the_3gpp_formulas() {
+        // d = 10 m, f_c = 2 GHz: LoS 31.84 + 21.5 + 19·0.30103.
+        let los = path_loss_db(10.0, 2.0, true);
+        assert!((los - (31.84 + 21.5 + 19.0 * 2f64.log10())).abs() < 1e-12);
+        let nlos = path_loss_db(10.0, 2.0, false);
+        assert!((nlos - (32.4 + 23.0 + 20.0 * 2f64.log10())).abs() < 1e-12);
+        // Below 1 m the distance is clamped; NLoS never beats LoS.
+        assert_eq!(path_loss_db(0.1, 2.0, true), path_loss_db(1.0, 2.0, true));
+        assert!(path_loss_db(1.0, 2.0, false) >= path_loss_db(1.0, 2.0, true));
+    }
+
+    #[test]
+    fn blockage_needs_the_interior_grazing_is_los() {
+        let bx = Aabb { lo: [0.0, 0.0, 0.0], hi: [1.0, 1.0, 1.0] };
+        let hit = |a: [f64; 3], b: [f64; 3]| segment_hits_interior(&P3::from(a), &P3::from(b), &bx);
+        assert!(hit([-1.0, 0.5, 0.5], [2.0, 0.5, 0.5]));
+        assert!(!hit([-1.0, 0.5, 1.0], [2.0, 0.5, 1.0]), "along the top face");
+        assert!(!hit([-1.0, 0.0, 0.0], [2.0, 0.0, 0.0]), "along an edge");
+        assert!(hit([-1.0, -1.0, 0.5], [1.0, 1.0, 0.5]), "diagonally through the box");
+        assert!(!hit([-1.0, 0.0, 0.5], [1.0, 2.0, 0.5]), "touching only the vertical edge at (0, 1)");
+        assert!(!hit([0.5, 0.5, 1.0], [0.5, 5.0, 3.0]), "leaving from the top face upwards");
+        assert!(hit([0.5, 0.5, 0.5], [5.0, 5.0, 5.0]), "starting inside");
+        assert!(!hit([2.0, 2.0, 0.5], [3.0, 3.0, 0.5]), "far away");
+    }
+
+    #[test]
+    fn no_irs_gain_is_the_direct_path_gain() {
+        let s = small();
+        let m = ChannelModel::new(&s);
+        let mut w = vec![C64::new(0.0, 0.0); m.subsurfaces()];
+        let q = [1.0, 1.0, 1.0];
+        let d = m.evaluate(q, false, &mut w);
+        let pl = path_loss_db((P3::from(q) - P3::from(s.ap.position)).norm(), 2.0, true);
+        assert!(((d.h.norm_sqr() + d.tau) / 10f64.powf(-pl / 10.0) - 1.0).abs() < 1e-12);
+        assert!(w.iter().all(|x| x.norm() == 0.0));
+    }
+
+    /// Lemma 1: λ(θ) equals the Monte Carlo mean of |c|² for random θ, with the direct link LoS
+    /// and NLoS, in both groupings. The sample mean must lie within 4 standard errors.
+    #[test]
+    fn expected_gain_matches_monte_carlo_mean() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        for grouping in ["coherent", "elements"] {
+            let mut v: serde_json::Value =
+                serde_json::from_str(include_str!("../scenarios/small-test.json")).unwrap();
+            v["irs"]["grouping"] = grouping.into();
+            let s = Scenario::from_json(&v.to_string()).unwrap();
+            let m = ChannelModel::new(&s);
+            // (1, 1) sees the AP; the other two are behind the 1.5 m box.
+            let points = [[1.0, 1.0, 1.0], [3.6, 2.0, 1.0], [4.0, 3.0, 0.5]];
+            let mut saw_nlos = false;
+            for q in points {
+                saw_nlos |= m.is_blocked(s.ap.position, q);
+                let theta: Vec<f64> = (0..m.subsurfaces()).map(|_| rng.random::<f64>() * TAU).collect();
+                let mut w = vec![C64::new(0.0, 0.0); m.subsurfaces()];
+                let d = m.evaluate(q, true, &mut w);
+                let closed = expected_gain(&d, &w, &theta);
+                let draws = 200_000;
+                let (mut sum, mut sum_sq) = (0.0, 0.0);
+                m.sample_channels(&[q], Some(&theta), draws, &mut rng, |c| {
+                    let p = c[0].norm_sqr();
+                    sum += p;
+                    sum_sq += p * p;
+                });
+                let mean = sum / draws as f64;
+                let se = ((sum_sq / draws as f64 - mean * mean) / draws as f64).sqrt();
+                assert!(
+                    (mean - closed).abs() < 4.0 * se,
+                    "{grouping} at {q:?}: Monte Carlo {mean:e} ± {se:e} vs closed form {closed:e}"
+                );
+            }
+            assert!(saw_nlos, "the test points must include a blocked direct link");
+        }
+    }
+
+    #[test]
+    fn irs_does_not_serve_users_behind_it() {
+        let s = small();
+        let m = ChannelModel::new(&s);
+        let irs = m.irs.as_ref().unwrap();
+        assert!(m.irs_user_link(irs, &P3::new(3.0, -0.5, 1.0)).is_none());
+        assert!(m.irs_user_link(irs, &P3::new(3.0, 0.5, 1.0)).is_some());
+    }
+}

@@ -1,0 +1,188 @@
+//! The command line (SPEC §4): `serve` (the default), `map` and `plan`. `map` and `plan` print
+//! exactly the JSON bodies the API returns. Bad input exits with code 2 and a message naming the
+//! offending field; an infeasible path is an answer (exit 0), not an error.
+
+use crate::montecarlo::{self, MAX_DRAWS, MonteCarloReport};
+use crate::planner::{self, PathAnswer, Threshold};
+use crate::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, RadioMap, SolverKind};
+use crate::scenario::Scenario;
+use clap::{Args, Parser, Subcommand};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+#[derive(Debug, Parser)]
+#[command(name = "irs-planner", version, about = "IRS-enhanced indoor robot path planning: radio maps and communication-aware paths")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Compute a radio map and print its JSON body.
+    Map(MapArgs),
+    /// Plan a path on a radio map and print the path JSON body.
+    Plan(PlanArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct MapArgs {
+    /// Scenario JSON file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Map kind.
+    #[arg(long, value_enum)]
+    pub kind: MapKind,
+    /// IRS phases: continuous, none, or a number of bits (1–16).
+    #[arg(long, value_parser = parse_phases)]
+    pub phases: Option<PhaseMode>,
+    /// Multiple access (rate maps; default noma).
+    #[arg(long, value_enum)]
+    pub access: Option<Access>,
+    /// Rate-map solver (default fast).
+    #[arg(long, value_enum)]
+    pub solver: Option<SolverKind>,
+    /// No progress bar on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    #[command(flatten)]
+    pub map: MapArgs,
+    /// Start point "X,Y" (m); snapped to the nearest cell centre.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub start: [f64; 2],
+    /// Goal point "X,Y" (m); snapped to the nearest cell centre.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub goal: [f64; 2],
+    /// QoS threshold in the map's unit (dB or bit/s/Hz).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "max_threshold", required_unless_present = "max_threshold")]
+    pub threshold: Option<f64>,
+    /// Use the largest threshold for which a path exists.
+    #[arg(long)]
+    pub max_threshold: bool,
+    /// Check the path by Monte Carlo with this many Rician draws per waypoint (paper Fig. 10).
+    #[arg(long, value_name = "DRAWS")]
+    pub monte_carlo: Option<usize>,
+    /// Seed of the Monte Carlo check.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+fn parse_phases(s: &str) -> Result<PhaseMode, String> {
+    s.parse()
+}
+
+fn parse_point(s: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [x, y] = parts.as_slice() else {
+        return Err(format!("expected X,Y, got {s:?}"));
+    };
+    let num = |t: &str| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(format!("{t:?} is not a finite number"));
+    Ok([num(x)?, num(y)?])
+}
+
+/// A CLI failure: the message and whether it was the user's input (exit 2) or not (exit 1).
+pub struct Failure {
+    pub message: String,
+    pub bad_input: bool,
+}
+
+impl Failure {
+    fn input(message: impl Into<String>) -> Self {
+        Failure { message: message.into(), bad_input: true }
+    }
+}
+
+impl From<Failure> for ExitCode {
+    fn from(f: Failure) -> ExitCode {
+        eprintln!("error: {}", f.message);
+        ExitCode::from(if f.bad_input { 2 } else { 1 })
+    }
+}
+
+pub fn load_scenario(path: &Path) -> Result<Scenario, Failure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))?;
+    Scenario::from_json(&text).map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))
+}
+
+fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
+    let id = scenario.content_hash();
+    let key = MapKey::new(&id, scenario, args.kind, args.phases, args.access, args.solver)
+        .map_err(|e| Failure::input(format!("--{}", e)))?;
+    let progress = Progress::default();
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let result = std::thread::scope(|scope| {
+        let bar_thread = (!args.quiet).then(|| {
+            let (progress, done) = (&progress, &done);
+            scope.spawn(move || {
+                let bar = indicatif::ProgressBar::new(0);
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template("{spinner} map {bar:40} {pos}/{len} cells ({eta})")
+                        .expect("valid template"),
+                );
+                while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                    bar.set_length(progress.cells_total() as u64);
+                    bar.set_position(progress.cells_done() as u64);
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+                bar.finish_and_clear();
+            })
+        });
+        let result = radiomap::build(scenario, &key, &progress);
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = bar_thread {
+            let _ = t.join();
+        }
+        result
+    });
+    result.map_err(|e| Failure { message: e.to_string(), bad_input: false })
+}
+
+fn print_json(value: &impl Serialize) -> Result<(), Failure> {
+    let text = serde_json::to_string(value).map_err(|e| Failure { message: e.to_string(), bad_input: false })?;
+    println!("{text}");
+    Ok(())
+}
+
+/// `irs-planner map …`
+pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
+    let scenario = load_scenario(&args.scenario)?;
+    let map = build_map(args, &scenario)?;
+    print_json(&map.body())
+}
+
+#[derive(Serialize)]
+struct PlanOutput {
+    #[serde(flatten)]
+    path: PathAnswer,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    monte_carlo: Option<MonteCarloReport>,
+}
+
+/// `irs-planner plan …`
+pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
+    if let Some(draws) = args.monte_carlo {
+        if draws == 0 || draws > MAX_DRAWS {
+            return Err(Failure::input(format!("--monte-carlo: must lie in 1..={MAX_DRAWS}")));
+        }
+    }
+    let scenario = load_scenario(&args.map.scenario)?;
+    let map = build_map(&args.map, &scenario)?;
+    let threshold = match args.threshold {
+        Some(t) => Threshold::Value(t),
+        None => Threshold::Max,
+    };
+    let path = planner::plan(&map, args.start, args.goal, threshold, scenario.mru.v_max_mps)
+        .map_err(|e| Failure::input(format!("--{e}")))?;
+    let monte_carlo = match args.monte_carlo {
+        Some(draws) if path.feasible => Some(montecarlo::check_path(&scenario, &map, &path, draws, args.seed)),
+        _ => None,
+    };
+    print_json(&PlanOutput { path, monte_carlo })
+}

@@ -1,0 +1,142 @@
+//! Monte Carlo check of a planned path (paper Section IV-B4, Fig. 10).
+//!
+//! The maps use Jensen upper bounds of the expected rates (eqs. 18 and 20) and the closed-form
+//! expected gain (Lemma 1). Here, for each waypoint, the exact instantaneous rates (eqs. 17/19)
+//! — or, on gain maps, the instantaneous power gain |c|² — are averaged over Rician draws of the
+//! per-element channel (paper eqs. 1–4) with the waypoint's θ, power split and decoding order,
+//! and compared with the bound. The draws are independent of the closed forms: they reuse only
+//! the geometry and the LoS phases.
+
+use crate::channel::ChannelModel;
+use crate::planner::PathAnswer;
+use crate::radiomap::{CellSolutions, RadioMap};
+use crate::rate::user_label;
+use crate::scenario::Scenario;
+use crate::solver::{cell_problem, sru_part};
+use rand::SeedableRng;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Largest number of draws per waypoint accepted.
+pub const MAX_DRAWS: usize = 1_000_000;
+
+/// One user at one waypoint.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UserCheck {
+    pub user: String,
+    /// Rate maps: the Jensen-bound rate (bit/s/Hz); gain maps: λ = E|c|² (dB).
+    pub bound: f64,
+    /// The Monte Carlo mean of the same quantity (rate, or |c|² in dB of the mean).
+    pub monte_carlo_mean: f64,
+    /// Standard error of the Monte Carlo mean (same unit; for dB, of the linear mean, in dB).
+    pub std_error: f64,
+    /// bound − mean: the Jensen gap (≥ 0 up to sampling noise for rates, ≈ 0 for gains).
+    pub gap: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WaypointCheck {
+    pub i: usize,
+    pub j: usize,
+    pub users: Vec<UserCheck>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MonteCarloReport {
+    pub draws: usize,
+    pub seed: u64,
+    /// Largest gap per user over the path.
+    pub max_gap: Vec<UserCheck>,
+    pub waypoints: Vec<WaypointCheck>,
+}
+
+/// Runs the check for every waypoint of a feasible path (waypoints in parallel, each with its
+/// own seeded generator, so the report is reproducible).
+pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws: usize, seed: u64) -> MonteCarloReport {
+    let channel = ChannelModel::new(scenario);
+    let height = scenario.mru.antenna_height_m;
+    let waypoints: Vec<WaypointCheck> = path
+        .waypoints
+        .par_iter()
+        .enumerate()
+        .map(|(k, wp)| {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed.wrapping_add(k as u64));
+            let mru = [wp.x, wp.y, height];
+            let theta = &wp.config.irs_phases_rad;
+            let theta_opt = (!theta.is_empty()).then_some(theta.as_slice());
+            let users = match &map.cells {
+                CellSolutions::Gain { .. } => {
+                    let (mut sum, mut sum_sq) = (0.0, 0.0);
+                    channel.sample_channels(&[mru], theta_opt, draws, &mut rng, |c| {
+                        let p = c[0].norm_sqr();
+                        sum += p;
+                        sum_sq += p * p;
+                    });
+                    let mean = sum / draws as f64;
+                    let se = ((sum_sq / draws as f64 - mean * mean).max(0.0) / draws as f64).sqrt();
+                    let mean_db = 10.0 * mean.log10();
+                    vec![UserCheck {
+                        user: user_label(0),
+                        bound: wp.value,
+                        monte_carlo_mean: mean_db,
+                        std_error: 10.0 * (1.0 + se / mean).log10(),
+                        gap: wp.value - mean_db,
+                    }]
+                }
+                CellSolutions::Rate(rate) => {
+                    let model = rate.rate_model();
+                    let cell = map.grid.index(wp.i, wp.j);
+                    let order = rate.order(cell);
+                    let power = wp.config.power_w.as_ref().expect("rate waypoints carry powers");
+                    let with_irs = theta_opt.is_some();
+                    let srus = sru_part(&channel, scenario, with_irs);
+                    let problem = cell_problem(&channel, mru, &srus, with_irs);
+                    let mut v: Vec<_> = theta.iter().map(|&t| crate::channel::C64::from_polar(1.0, t)).collect();
+                    v.push(crate::channel::C64::new(1.0, 0.0));
+                    let mut lambdas = vec![0.0; model.users()];
+                    problem.lambdas(&v, &mut lambdas);
+                    let bounds = model.rates(&lambdas, power, order);
+                    let mut positions = vec![mru];
+                    positions.extend(scenario.srus.iter().map(|s| s.position));
+                    let mut sums = vec![0.0; model.users()];
+                    let mut sums_sq = vec![0.0; model.users()];
+                    let mut gains = vec![0.0; model.users()];
+                    channel.sample_channels(&positions, theta_opt, draws, &mut rng, |c| {
+                        for (g, x) in gains.iter_mut().zip(c) {
+                            *g = x.norm_sqr();
+                        }
+                        for (l, r) in model.rates(&gains, power, order).into_iter().enumerate() {
+                            sums[l] += r;
+                            sums_sq[l] += r * r;
+                        }
+                    });
+                    (0..model.users())
+                        .map(|l| {
+                            let mean = sums[l] / draws as f64;
+                            let se = ((sums_sq[l] / draws as f64 - mean * mean).max(0.0) / draws as f64).sqrt();
+                            UserCheck {
+                                user: user_label(l),
+                                bound: bounds[l],
+                                monte_carlo_mean: mean,
+                                std_error: se,
+                                gap: bounds[l] - mean,
+                            }
+                        })
+                        .collect()
+                }
+            };
+            WaypointCheck { i: wp.i, j: wp.j, users }
+        })
+        .collect();
+    let mut max_gap: Vec<UserCheck> = Vec::new();
+    for wp in &waypoints {
+        for u in &wp.users {
+            match max_gap.iter_mut().find(|m| m.user == u.user) {
+                Some(m) if m.gap >= u.gap => {}
+                Some(m) => *m = u.clone(),
+                None => max_gap.push(u.clone()),
+            }
+        }
+    }
+    MonteCarloReport { draws, seed, max_gap, waypoints }
+}

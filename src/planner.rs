@@ -1,0 +1,539 @@
+//! Communication-aware paths over a radio map (SPEC §3, paper Section II-D).
+//!
+//! The feasible map Π (paper eq. 17) marks the free cells whose value meets the threshold; the
+//! graph joins each feasible cell to its feasible 8-neighbours with the Euclidean distance between
+//! centres as weight (paper eqs. 18–19). The shortest path is found by A* with the octile
+//! heuristic, which is admissible and consistent on this graph, so it returns Dijkstra's distance.
+//!
+//! One choice beyond the paper: a diagonal step may not cut the corner of an *occupied* cell (both
+//! orthogonal neighbours must be free), because the segment between the two centres would graze
+//! an obstacle. Cells that are merely below the threshold may be cut, as in the paper's Fig. 3.
+//!
+//! Beyond the paper, [`widest_path_threshold`] returns the largest threshold for which any path
+//! exists (a bottleneck path: one Dijkstra-like pass maximising the minimum value along the path).
+
+use crate::radiomap::{CellConfig, RadioMap};
+use crate::scenario::Grid;
+use serde::{Deserialize, Serialize};
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// Why no path exists.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Infeasible {
+    StartOccupied,
+    GoalOccupied,
+    StartBelowThreshold,
+    GoalBelowThreshold,
+    Disconnected,
+}
+
+/// A shortest path: the visited cells (flat indices, start first) and its length in metres.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Path {
+    pub cells: Vec<usize>,
+    pub distance_m: f64,
+}
+
+/// The 8 neighbour offsets (di, dj) with their length in units of Δ.
+const NEIGHBOURS: [(isize, isize, f64); 8] = [
+    (1, 0, 1.0),
+    (-1, 0, 1.0),
+    (0, 1, 1.0),
+    (0, -1, 1.0),
+    (1, 1, std::f64::consts::SQRT_2),
+    (1, -1, std::f64::consts::SQRT_2),
+    (-1, 1, std::f64::consts::SQRT_2),
+    (-1, -1, std::f64::consts::SQRT_2),
+];
+
+/// A map's values seen as a graph: NaN marks an occupied (or unserviceable) cell.
+#[derive(Debug, Clone, Copy)]
+pub struct CellGraph<'a> {
+    pub grid: &'a Grid,
+    pub values: &'a [f64],
+    pub occupied: &'a [bool],
+}
+
+impl<'a> CellGraph<'a> {
+    /// Calls `visit(neighbour, step_length_in_cells)` for every neighbour of `cell` that is free
+    /// and reachable without cutting an occupied corner.
+    #[inline]
+    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, f64)) {
+        let (i, j) = self.grid.cell_of(cell);
+        let (nx, ny) = (self.grid.nx as isize, self.grid.ny as isize);
+        for &(di, dj, len) in &NEIGHBOURS {
+            let (a, b) = (i as isize + di, j as isize + dj);
+            if a < 0 || b < 0 || a >= nx || b >= ny {
+                continue;
+            }
+            let n = self.grid.index(a as usize, b as usize);
+            if self.occupied[n] {
+                continue;
+            }
+            if di != 0 && dj != 0 {
+                let side1 = self.grid.index(a as usize, j);
+                let side2 = self.grid.index(i, b as usize);
+                if self.occupied[side1] || self.occupied[side2] {
+                    continue;
+                }
+            }
+            visit(n, len);
+        }
+    }
+
+    /// Π_{i,j} of paper eq. 17.
+    #[inline]
+    pub fn is_feasible(&self, cell: usize, threshold: f64) -> bool {
+        !self.occupied[cell] && self.values[cell] >= threshold
+    }
+
+    /// The feasible map Π (paper eq. 17) for a threshold.
+    pub fn feasible_mask(&self, threshold: f64) -> Vec<bool> {
+        (0..self.values.len()).map(|c| self.is_feasible(c, threshold)).collect()
+    }
+
+    /// Shortest feasible path from `start` to `goal` (paper problem 16), or why there is none.
+    pub fn shortest_path(&self, start: usize, goal: usize, threshold: f64) -> Result<Path, Infeasible> {
+        self.check_ends(start, goal, threshold)?;
+        let cells = self.values.len();
+        let (gi, gj) = self.grid.cell_of(goal);
+        // Octile distance to the goal, in units of Δ: admissible and consistent.
+        let heuristic = |c: usize| {
+            let (i, j) = self.grid.cell_of(c);
+            let (dx, dy) = ((i as f64 - gi as f64).abs(), (j as f64 - gj as f64).abs());
+            dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)
+        };
+        let mut dist = vec![f64::INFINITY; cells];
+        let mut prev = vec![u32::MAX; cells];
+        let mut heap = BinaryHeap::new();
+        dist[start] = 0.0;
+        heap.push(Reverse((OrdF64(heuristic(start)), start)));
+        while let Some(Reverse((OrdF64(f), cell))) = heap.pop() {
+            if cell == goal {
+                break;
+            }
+            let g = dist[cell];
+            if f > g + heuristic(cell) + 1e-9 {
+                continue; // stale entry
+            }
+            self.for_each_neighbour(cell, |n, len| {
+                if !self.is_feasible(n, threshold) {
+                    return;
+                }
+                let candidate = g + len;
+                if candidate < dist[n] {
+                    dist[n] = candidate;
+                    prev[n] = cell as u32;
+                    heap.push(Reverse((OrdF64(candidate + heuristic(n)), n)));
+                }
+            });
+        }
+        if !dist[goal].is_finite() {
+            return Err(Infeasible::Disconnected);
+        }
+        let mut path = vec![goal];
+        while *path.last().unwrap() != start {
+            path.push(prev[*path.last().unwrap()] as usize);
+        }
+        path.reverse();
+        Ok(Path { cells: path, distance_m: dist[goal] * self.grid.resolution_m })
+    }
+
+    /// The largest threshold γ for which a feasible path from `start` to `goal` exists: the
+    /// maximum over paths of the minimum value along the path. `None` if either end is occupied
+    /// or no path of free cells joins them.
+    pub fn widest_path_threshold(&self, start: usize, goal: usize) -> Option<f64> {
+        if self.occupied[start] || self.occupied[goal] {
+            return None;
+        }
+        let value = |c: usize| if self.values[c].is_nan() { f64::NEG_INFINITY } else { self.values[c] };
+        let mut best = vec![f64::NEG_INFINITY; self.values.len()];
+        let mut done = vec![false; self.values.len()];
+        let mut heap = BinaryHeap::new();
+        best[start] = value(start);
+        heap.push((OrdF64(best[start]), start));
+        while let Some((OrdF64(b), cell)) = heap.pop() {
+            if done[cell] {
+                continue;
+            }
+            done[cell] = true;
+            if cell == goal {
+                break;
+            }
+            self.for_each_neighbour(cell, |n, _| {
+                let through = b.min(value(n));
+                if !done[n] && through > best[n] {
+                    best[n] = through;
+                    heap.push((OrdF64(through), n));
+                }
+            });
+        }
+        best[goal].is_finite().then_some(best[goal])
+    }
+
+    fn check_ends(&self, start: usize, goal: usize, threshold: f64) -> Result<(), Infeasible> {
+        if self.occupied[start] {
+            return Err(Infeasible::StartOccupied);
+        }
+        if self.occupied[goal] {
+            return Err(Infeasible::GoalOccupied);
+        }
+        if !self.is_feasible(start, threshold) {
+            return Err(Infeasible::StartBelowThreshold);
+        }
+        if !self.is_feasible(goal, threshold) {
+            return Err(Infeasible::GoalBelowThreshold);
+        }
+        Ok(())
+    }
+}
+
+/// The QoS threshold of a path query: a value in the map's unit, or the largest feasible one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Threshold {
+    Value(f64),
+    Max,
+}
+
+impl Serialize for Threshold {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Threshold::Value(v) => s.serialize_f64(*v),
+            Threshold::Max => s.serialize_str("max"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Threshold {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        match serde_json::Value::deserialize(d)? {
+            serde_json::Value::String(s) if s == "max" => Ok(Threshold::Max),
+            serde_json::Value::Number(n) => n
+                .as_f64()
+                .filter(|v| v.is_finite())
+                .map(Threshold::Value)
+                .ok_or_else(|| serde::de::Error::custom("threshold must be a finite number")),
+            other => Err(serde::de::Error::custom(format!("expected a number or \"max\", got {other}"))),
+        }
+    }
+}
+
+/// A path query endpoint that cannot be placed on the map.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {reason}")]
+pub struct PlanError {
+    pub field: &'static str,
+    pub reason: String,
+}
+
+/// Where a requested point landed on the grid.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Endpoint {
+    pub requested: [f64; 2],
+    pub x: f64,
+    pub y: f64,
+    pub i: usize,
+    pub j: usize,
+    /// True when the requested point was not itself a cell centre.
+    pub snapped: bool,
+}
+
+/// One waypoint of a path and the configuration to apply there.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Waypoint {
+    pub x: f64,
+    pub y: f64,
+    pub i: usize,
+    pub j: usize,
+    /// The map's value at this cell.
+    pub value: f64,
+    #[serde(flatten)]
+    pub config: CellConfig,
+}
+
+/// The answer to a path query (SPEC §3); the same body from the CLI and the API.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PathAnswer {
+    pub map_id: String,
+    pub unit: &'static str,
+    /// The threshold applied (for `"max"`, the largest feasible one).
+    pub threshold: Option<f64>,
+    pub feasible: bool,
+    pub reason: Option<Infeasible>,
+    pub distance_m: Option<f64>,
+    pub travel_time_s: Option<f64>,
+    /// The largest threshold for which any path joins start and goal.
+    pub max_feasible_threshold: Option<f64>,
+    pub start: Endpoint,
+    pub goal: Endpoint,
+    pub waypoints: Vec<Waypoint>,
+}
+
+/// One point of a threshold sweep (paper Figs. 7 and 9).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepPoint {
+    pub threshold: f64,
+    pub feasible: bool,
+    pub reason: Option<Infeasible>,
+    pub distance_m: Option<f64>,
+    pub travel_time_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepAnswer {
+    pub map_id: String,
+    pub unit: &'static str,
+    pub max_feasible_threshold: Option<f64>,
+    pub start: Endpoint,
+    pub goal: Endpoint,
+    pub points: Vec<SweepPoint>,
+}
+
+fn endpoint(grid: &Grid, field: &'static str, p: [f64; 2]) -> Result<(usize, Endpoint), PlanError> {
+    let (i, j) = grid.snap(p[0], p[1]).ok_or_else(|| PlanError {
+        field,
+        reason: format!("({}, {}) lies outside the room", p[0], p[1]),
+    })?;
+    let [x, y] = grid.centre(i, j);
+    let snapped = (x - p[0]).abs() > 1e-9 || (y - p[1]).abs() > 1e-9;
+    Ok((grid.index(i, j), Endpoint { requested: p, x, y, i, j, snapped }))
+}
+
+fn graph(map: &RadioMap) -> CellGraph<'_> {
+    CellGraph { grid: &map.grid, values: &map.values, occupied: &map.occupied }
+}
+
+/// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre).
+pub fn plan(map: &RadioMap, start: [f64; 2], goal: [f64; 2], threshold: Threshold, v_max_mps: f64) -> Result<PathAnswer, PlanError> {
+    let (s, start) = endpoint(&map.grid, "start", start)?;
+    let (g, goal) = endpoint(&map.grid, "goal", goal)?;
+    let graph = graph(map);
+    let widest = graph.widest_path_threshold(s, g);
+    let applied = match threshold {
+        Threshold::Value(v) => Some(v),
+        Threshold::Max => widest,
+    };
+    let result = match applied {
+        Some(t) => graph.shortest_path(s, g, t),
+        None => Err(if map.occupied[s] {
+            Infeasible::StartOccupied
+        } else if map.occupied[g] {
+            Infeasible::GoalOccupied
+        } else {
+            Infeasible::Disconnected
+        }),
+    };
+    let mut answer = PathAnswer {
+        map_id: map.key.id(),
+        unit: map.key.unit(),
+        threshold: applied,
+        feasible: result.is_ok(),
+        reason: result.as_ref().err().copied(),
+        distance_m: None,
+        travel_time_s: None,
+        max_feasible_threshold: widest,
+        start,
+        goal,
+        waypoints: Vec::new(),
+    };
+    if let Ok(path) = result {
+        answer.distance_m = Some(path.distance_m);
+        answer.travel_time_s = Some(path.distance_m / v_max_mps);
+        answer.waypoints = path
+            .cells
+            .iter()
+            .map(|&c| {
+                let (i, j) = map.grid.cell_of(c);
+                let [x, y] = map.grid.centre(i, j);
+                Waypoint { x, y, i, j, value: map.values[c], config: map.cell_config(c) }
+            })
+            .collect();
+    }
+    Ok(answer)
+}
+
+/// Distance versus threshold for a list of thresholds, in one request.
+pub fn sweep(map: &RadioMap, start: [f64; 2], goal: [f64; 2], thresholds: &[f64], v_max_mps: f64) -> Result<SweepAnswer, PlanError> {
+    let (s, start) = endpoint(&map.grid, "start", start)?;
+    let (g, goal) = endpoint(&map.grid, "goal", goal)?;
+    let graph = graph(map);
+    let points = thresholds
+        .iter()
+        .map(|&t| {
+            let r = graph.shortest_path(s, g, t);
+            SweepPoint {
+                threshold: t,
+                feasible: r.is_ok(),
+                reason: r.as_ref().err().copied(),
+                distance_m: r.as_ref().ok().map(|p| p.distance_m),
+                travel_time_s: r.as_ref().ok().map(|p| p.distance_m / v_max_mps),
+            }
+        })
+        .collect();
+    Ok(SweepAnswer {
+        map_id: map.key.id(),
+        unit: map.key.unit(),
+        max_feasible_threshold: graph.widest_path_threshold(s, g),
+        start,
+        goal,
+        points,
+    })
+}
+
+/// An f64 with a total order, for the priority queues (values are never NaN there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OrdF64(f64);
+impl Eq for OrdF64 {}
+impl PartialOrd for OrdF64 {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for OrdF64 {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn grid(nx: usize, ny: usize) -> Grid {
+        Grid { nx, ny, x_min: 0.0, y_min: 0.0, resolution_m: 0.5 }
+    }
+
+    /// Bellman–Ford style relaxation over every cell until nothing changes: the brute force.
+    fn brute_force_distance(g: &CellGraph, start: usize, goal: usize, threshold: f64) -> Option<f64> {
+        if !g.is_feasible(start, threshold) || !g.is_feasible(goal, threshold) {
+            return None;
+        }
+        let mut dist = vec![f64::INFINITY; g.values.len()];
+        dist[start] = 0.0;
+        loop {
+            let mut changed = false;
+            for c in 0..g.values.len() {
+                if !dist[c].is_finite() {
+                    continue;
+                }
+                g.for_each_neighbour(c, |n, len| {
+                    if g.is_feasible(n, threshold) && dist[c] + len < dist[n] - 1e-12 {
+                        dist[n] = dist[c] + len;
+                        changed = true;
+                    }
+                });
+            }
+            if !changed {
+                break;
+            }
+        }
+        dist[goal].is_finite().then(|| dist[goal] * g.grid.resolution_m)
+    }
+
+    fn arb_map() -> impl Strategy<Value = (usize, usize, Vec<f64>, Vec<bool>, usize, usize)> {
+        (2usize..9, 2usize..9).prop_flat_map(|(nx, ny)| {
+            let n = nx * ny;
+            (
+                Just(nx),
+                Just(ny),
+                proptest::collection::vec(0.0f64..10.0, n),
+                proptest::collection::vec(proptest::bool::weighted(0.15), n),
+                0..n,
+                0..n,
+            )
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        #[test]
+        fn astar_equals_brute_force((nx, ny, mut values, occupied, s, t) in arb_map(), threshold in 0.0f64..8.0) {
+            for (v, o) in values.iter_mut().zip(&occupied) { if *o { *v = f64::NAN; } }
+            let gr = grid(nx, ny);
+            let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+            let expected = brute_force_distance(&g, s, t, threshold);
+            match g.shortest_path(s, t, threshold) {
+                Ok(p) => {
+                    let d = expected.expect("A* found a path the brute force did not");
+                    prop_assert!((p.distance_m - d).abs() < 1e-9, "A* {} vs brute force {}", p.distance_m, d);
+                    // The path itself is valid: feasible cells, adjacent steps summing to its length.
+                    let mut len = 0.0;
+                    for w in p.cells.windows(2) {
+                        let mut step = None;
+                        g.for_each_neighbour(w[0], |n, l| if n == w[1] { step = Some(l) });
+                        len += step.expect("consecutive waypoints are neighbours");
+                    }
+                    prop_assert!(p.cells.iter().all(|&c| g.is_feasible(c, threshold)));
+                    prop_assert!((len * gr.resolution_m - p.distance_m).abs() < 1e-9);
+                }
+                Err(_) => prop_assert!(expected.is_none()),
+            }
+        }
+
+        #[test]
+        fn widest_path_equals_bisection_with_dijkstra((nx, ny, mut values, occupied, s, t) in arb_map()) {
+            for (v, o) in values.iter_mut().zip(&occupied) { if *o { *v = f64::NAN; } }
+            let gr = grid(nx, ny);
+            let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+            let widest = g.widest_path_threshold(s, t);
+            // The answer is one of the cell values; bisect over the sorted distinct values with
+            // the shortest-path planner as the feasibility oracle.
+            let mut candidates: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+            candidates.sort_by(f64::total_cmp);
+            candidates.dedup();
+            let feasible = |gamma: f64| g.shortest_path(s, t, gamma).is_ok();
+            let bisected = if candidates.is_empty() || !feasible(candidates[0]) { None } else {
+                let (mut lo, mut hi) = (0usize, candidates.len()); // feasible(lo), !feasible(hi)
+                while hi - lo > 1 {
+                    let mid = (lo + hi) / 2;
+                    if feasible(candidates[mid]) { lo = mid } else { hi = mid }
+                }
+                Some(candidates[lo])
+            };
+            prop_assert_eq!(widest, bisected);
+        }
+    }
+
+    #[test]
+    fn start_equal_to_goal_is_a_zero_length_path() {
+        let gr = grid(3, 3);
+        let values = vec![1.0; 9];
+        let occupied = vec![false; 9];
+        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let p = g.shortest_path(4, 4, 0.5).unwrap();
+        assert_eq!(p, Path { cells: vec![4], distance_m: 0.0 });
+    }
+
+    #[test]
+    fn reasons_are_reported_in_order() {
+        let gr = grid(3, 1);
+        let values = vec![1.0, f64::NAN, 0.2];
+        let occupied = vec![false, true, false];
+        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        assert_eq!(g.shortest_path(1, 0, 0.0), Err(Infeasible::StartOccupied));
+        assert_eq!(g.shortest_path(0, 1, 0.0), Err(Infeasible::GoalOccupied));
+        assert_eq!(g.shortest_path(2, 0, 0.5), Err(Infeasible::StartBelowThreshold));
+        assert_eq!(g.shortest_path(0, 2, 0.5), Err(Infeasible::GoalBelowThreshold));
+        assert_eq!(g.shortest_path(0, 2, 0.1), Err(Infeasible::Disconnected));
+    }
+
+    #[test]
+    fn diagonals_do_not_cut_occupied_corners() {
+        // 2×2: (0,0) and (1,1) free, the other two occupied.
+        let gr = grid(2, 2);
+        let occupied = vec![false, true, true, false];
+        let values = vec![1.0, f64::NAN, f64::NAN, 1.0];
+        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        assert_eq!(g.shortest_path(0, 3, 0.0), Err(Infeasible::Disconnected));
+        // Below-threshold corners may be cut.
+        let occupied = vec![false; 4];
+        let values = vec![1.0, 0.0, 0.0, 1.0];
+        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let p = g.shortest_path(0, 3, 0.5).unwrap();
+        assert!((p.distance_m - 0.5 * std::f64::consts::SQRT_2).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,349 @@
+//! Expected rates of the MRU sharing the AP with K static robots (paper Section III, SPEC §2),
+//! and the closed-form power split that maximises the MRU's rate for given expected gains.
+//!
+//! Users are indexed 0 = MRU, 1..=K = SRUs in scenario order. Rates are the Jensen upper bounds
+//! of the paper (eqs. 18 and 20), written with the expected gains λ_l:
+//!
+//! * NOMA, decoding order π (π[0] decoded first): the user at position t sees the users decoded
+//!   after it as interference, R_t = log2(1 + p_t / (Σ_{u>t} p_u + σ²/λ_t)) (eq. 18); SIC
+//!   requires the channel ordering λ_{π[0]} ≤ λ_{π[1]} ≤ … (eq. 22e, generalised).
+//! * OMA, K+1 equal bands: R_l = log2(1 + (K+1) λ_l p_l / σ²) / (K+1) (eq. 20, generalised).
+//!
+//! **Closed-form power split (NOMA).** Write S_t = Σ_{u≥t} p_u for the power of the users from
+//! position t on (S_0 ≤ P_max, S_{K+1} = 0) and a_t = 2^{r̄_t} − 1. User t's rate constraint is
+//! affine in the tail powers:  S_t ≥ 2^{r̄_t} S_{t+1} + a_t σ²/λ_t.  With the MRU at position k,
+//! its rate log2((S_k + σ²/λ_m)/(S_{k+1} + σ²/λ_m)) increases with S_k and decreases with
+//! S_{k+1}, and the two are constrained by disjoint sets of users. Hence:
+//! 1. the users after the MRU (stronger SRUs) get exactly their targets: run the recursion with
+//!    equality from S_{K+1} = 0 down to the smallest feasible S_{k+1};
+//! 2. the users before it (weaker SRUs) get exactly their targets out of the full budget: run it
+//!    backwards from S_0 = P_max, S_{t+1} = (S_t − a_t σ²/λ_t)/2^{r̄_t}, up to the largest S_k;
+//! 3. the MRU takes p_m = S_k − S_{k+1}, feasible iff this is ≥ 0.
+//!
+//! Unrolling the recursion gives the equivalent feasibility test for an MRU rate r:
+//! Σ_t c_t/λ_t ≤ P_max with c_t = σ² a_t Π_{u<t} 2^{r̄_u} (MRU's target r̄ = r), a sum of convex
+//! terms in λ, so every superlevel set of the MRU rate is convex: the rate is quasi-concave and
+//! increasing in the gains. The certificate relies on this.
+//!
+//! **OMA** decouples: SRU k needs p_k = (2^{(K+1) r̄_k} − 1) σ² / ((K+1) λ_k), the MRU takes the rest.
+
+use serde::Serialize;
+
+/// Multiple access scheme, re-exported for the solver's convenience.
+pub use crate::radiomap::Access;
+
+/// The users' fixed data for one map: power budget, noise and the SRUs' targets.
+#[derive(Debug, Clone)]
+pub struct RateModel {
+    pub access: Access,
+    /// P_max (W).
+    pub p_max_w: f64,
+    /// σ² (W).
+    pub noise_w: f64,
+    /// r̄ per user; entry 0 (the MRU) is unused.
+    pub targets: Vec<f64>,
+    /// Candidate decoding orders (NOMA: all (K+1)! permutations; OMA: the identity only).
+    orders: Vec<Vec<u8>>,
+}
+
+/// The best configuration of the AP for given gains.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PowerSplit {
+    /// The MRU's rate (bit/s/Hz).
+    pub mru_rate: f64,
+    /// Power per user (W), MRU first.
+    pub power_w: Vec<f64>,
+    /// Index into [`RateModel::orders`] (NOMA) or 0 (OMA).
+    pub order: u8,
+}
+
+impl RateModel {
+    pub fn new(access: Access, p_max_w: f64, noise_w: f64, sru_targets: &[f64]) -> RateModel {
+        let users = sru_targets.len() + 1;
+        let mut targets = vec![0.0];
+        targets.extend_from_slice(sru_targets);
+        let orders = match access {
+            Access::Noma => permutations(users),
+            Access::Oma => vec![(0..users as u8).collect()],
+        };
+        RateModel { access, p_max_w, noise_w, targets, orders }
+    }
+
+    /// K + 1.
+    pub fn users(&self) -> usize {
+        self.targets.len()
+    }
+
+    /// The decoding orders searched; order `k` lists user indices, decoded first first.
+    pub fn orders(&self) -> &[Vec<u8>] {
+        &self.orders
+    }
+
+    /// The MRU's best rate over the power split (and, for NOMA, the decoding orders whose channel
+    /// ordering the gains satisfy), or `None` if some SRU cannot meet its rate.
+    /// `lambdas[l]` is user l's expected gain λ_l (linear).
+    pub fn best(&self, lambdas: &[f64]) -> Option<PowerSplit> {
+        let mut best: Option<(f64, u8)> = None;
+        for k in 0..self.orders.len() {
+            if let Some(r) = self.mru_rate(lambdas, k) {
+                if best.is_none_or(|(b, _)| r > b) {
+                    best = Some((r, k as u8));
+                }
+            }
+        }
+        best.map(|(_, k)| self.split(lambdas, k as usize).expect("feasible order"))
+    }
+
+    /// The MRU's best rate for one decoding order (NOMA) or for OMA, without allocating.
+    /// `None` if the gains violate the order's channel ordering or an SRU cannot be served.
+    #[inline]
+    pub fn mru_rate(&self, lambdas: &[f64], order: usize) -> Option<f64> {
+        if self.access == Access::Noma
+            && self.orders[order].windows(2).any(|w| lambdas[w[0] as usize] > lambdas[w[1] as usize])
+        {
+            return None;
+        }
+        self.mru_rate_ignoring_ordering(lambdas, order)
+    }
+
+    /// [`Self::mru_rate`] without the SIC channel-ordering check. It increases in every λ_l
+    /// (the tail powers shrink and the head powers grow as gains rise), which is what lets the
+    /// certificate bound it at an upper corner of the gains.
+    #[inline]
+    pub fn mru_rate_ignoring_ordering(&self, lambdas: &[f64], order: usize) -> Option<f64> {
+        let noise = self.noise_w;
+        match self.access {
+            Access::Oma => {
+                let bands = self.users() as f64;
+                let mut left = self.p_max_w;
+                for (l, &lam) in lambdas.iter().enumerate().skip(1) {
+                    left -= ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lam);
+                }
+                (left >= 0.0).then(|| (bands * lambdas[0] * left / noise).ln_1p() / bands / std::f64::consts::LN_2)
+            }
+            Access::Noma => {
+                let pi = &self.orders[order];
+                let k = pi.iter().position(|&u| u == 0).expect("the MRU is in every order");
+                let mut tail = 0.0; // S_{t} for t > k, from the strongest user down
+                for &u in pi[k + 1..].iter().rev() {
+                    let r = self.targets[u as usize];
+                    tail = r.exp2() * tail + (r.exp2() - 1.0) * noise / lambdas[u as usize];
+                }
+                let mut head = self.p_max_w; // S_t for t ≤ k, from the full budget up
+                for &u in &pi[..k] {
+                    let r = self.targets[u as usize];
+                    head = (head - (r.exp2() - 1.0) * noise / lambdas[u as usize]) / r.exp2();
+                }
+                if head < tail {
+                    return None;
+                }
+                let n_m = noise / lambdas[0];
+                Some(((head + n_m) / (tail + n_m)).log2())
+            }
+        }
+    }
+
+    /// The power per user achieving [`Self::mru_rate`] for an order.
+    pub fn split(&self, lambdas: &[f64], order: usize) -> Option<PowerSplit> {
+        let mru_rate = self.mru_rate(lambdas, order)?;
+        let noise = self.noise_w;
+        let users = self.users();
+        let mut power = vec![0.0; users];
+        match self.access {
+            Access::Oma => {
+                let bands = users as f64;
+                let mut left = self.p_max_w;
+                for l in 1..users {
+                    power[l] = ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lambdas[l]);
+                    left -= power[l];
+                }
+                power[0] = left.max(0.0);
+            }
+            Access::Noma => {
+                let pi = &self.orders[order];
+                let k = pi.iter().position(|&u| u == 0).unwrap();
+                let mut tail = 0.0;
+                for &u in pi[k + 1..].iter().rev() {
+                    let r = self.targets[u as usize];
+                    let next = r.exp2() * tail + (r.exp2() - 1.0) * noise / lambdas[u as usize];
+                    power[u as usize] = next - tail;
+                    tail = next;
+                }
+                let mut head = self.p_max_w;
+                for &u in &pi[..k] {
+                    let r = self.targets[u as usize];
+                    let next = (head - (r.exp2() - 1.0) * noise / lambdas[u as usize]) / r.exp2();
+                    power[u as usize] = head - next;
+                    head = next;
+                }
+                power[0] = (head - tail).max(0.0);
+            }
+        }
+        Some(PowerSplit { mru_rate, power_w: power, order: order as u8 })
+    }
+
+    /// Every user's rate for given channel power gains, powers and order. With the expected
+    /// gains λ_l these are the Jensen bounds (eqs. 18/20); with instantaneous gains |c_l|² they are
+    /// the exact rates (eqs. 17/19) whose mean the bounds over-estimate.
+    pub fn rates(&self, gains: &[f64], power_w: &[f64], order: usize) -> Vec<f64> {
+        let users = self.users();
+        let noise = self.noise_w;
+        match self.access {
+            Access::Oma => {
+                let bands = users as f64;
+                (0..users).map(|l| (1.0 + bands * gains[l] * power_w[l] / noise).log2() / bands).collect()
+            }
+            Access::Noma => {
+                let pi = &self.orders[order];
+                let mut rates = vec![0.0; users];
+                let mut later = 0.0;
+                for &u in pi.iter().rev() {
+                    let u = u as usize;
+                    rates[u] = (1.0 + gains[u] * power_w[u] / (gains[u] * later + noise)).log2();
+                    later += power_w[u];
+                }
+                rates
+            }
+        }
+    }
+
+    /// Total power needed for the MRU to reach `r` with every SRU at its target, for one order:
+    /// Σ_t c_t/λ_t (see the module doc); feasible iff ≤ P_max.
+    pub fn required_power(&self, lambdas: &[f64], order: usize, r: f64) -> f64 {
+        let noise = self.noise_w;
+        let target = |u: usize| if u == 0 { r } else { self.targets[u] };
+        match self.access {
+            Access::Oma => {
+                let bands = self.users() as f64;
+                (0..self.users()).map(|l| ((bands * target(l)).exp2() - 1.0) * noise / (bands * lambdas[l])).sum()
+            }
+            Access::Noma => {
+                let mut scale = 1.0;
+                let mut total = 0.0;
+                for &u in &self.orders[order] {
+                    let r = target(u as usize);
+                    total += scale * (r.exp2() - 1.0) * noise / lambdas[u as usize];
+                    scale *= r.exp2();
+                }
+                total
+            }
+        }
+    }
+
+    /// Human-readable labels of an order's users: "mru", "sru0", …
+    pub fn order_labels(&self, order: usize) -> Vec<String> {
+        self.orders[order].iter().map(|&u| user_label(u as usize)).collect()
+    }
+}
+
+/// "mru" for user 0, "sru{k}" for SRU k (0-based, scenario order).
+pub fn user_label(user: usize) -> String {
+    if user == 0 { "mru".to_string() } else { format!("sru{}", user - 1) }
+}
+
+fn permutations(n: usize) -> Vec<Vec<u8>> {
+    fn extend(prefix: &mut Vec<u8>, n: usize, out: &mut Vec<Vec<u8>>) {
+        if prefix.len() == n {
+            out.push(prefix.clone());
+            return;
+        }
+        for u in 0..n as u8 {
+            if !prefix.contains(&u) {
+                prefix.push(u);
+                extend(prefix, n, out);
+                prefix.pop();
+            }
+        }
+    }
+    let mut out = Vec::new();
+    extend(&mut Vec::new(), n, &mut out);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Brute force over the power split (K = 1): the SRU's share of P_max on logarithmic grids
+    /// towards 0 and towards P_max (10⁻¹⁴ … 1 either way): the closed form must match it.
+    fn brute_force_k1(model: &RateModel, lambdas: &[f64]) -> Option<f64> {
+        let mut best: Option<f64> = None;
+        let steps = 20_000;
+        let shares = (0..=steps).flat_map(|s| {
+            let t = 10f64.powf(-14.0 * (1.0 - s as f64 / steps as f64));
+            [t, 1.0 - t]
+        });
+        let shares: Vec<f64> = shares.collect();
+        for k in 0..model.orders().len() {
+            for &share in &shares {
+                let ps = model.p_max_w * share;
+                let power = [model.p_max_w - ps, ps];
+                let pi = &model.orders()[k];
+                if model.access == Access::Noma && lambdas[pi[0] as usize] > lambdas[pi[1] as usize] {
+                    continue;
+                }
+                let rates = model.rates(lambdas, &power, k);
+                if rates[1] >= model.targets[1] - 1e-12 && best.is_none_or(|b| rates[0] > b) {
+                    best = Some(rates[0]);
+                }
+            }
+        }
+        best
+    }
+
+    proptest! {
+        #[test]
+        fn closed_form_split_matches_brute_force(
+            lm in -90.0f64..-50.0, ls in -90.0f64..-50.0, target in 0.2f64..4.0, noma in any::<bool>()
+        ) {
+            let access = if noma { Access::Noma } else { Access::Oma };
+            let model = RateModel::new(access, 0.1, 1e-12, &[target]);
+            let lambdas = [10f64.powf(lm / 10.0), 10f64.powf(ls / 10.0)];
+            let best = model.best(&lambdas);
+            let brute = brute_force_k1(&model, &lambdas);
+            match (best, brute) {
+                (Some(b), Some(r)) => {
+                    // The grid can only do worse than the optimum, by at most one grid step.
+                    prop_assert!(b.mru_rate >= r - 1e-9, "closed form {} < brute force {}", b.mru_rate, r);
+                    prop_assert!(b.mru_rate - r < 0.01, "closed form {} ≫ brute force {}", b.mru_rate, r);
+                    let rates = model.rates(&lambdas, &b.power_w, b.order as usize);
+                    prop_assert!((rates[0] - b.mru_rate).abs() < 1e-9);
+                    prop_assert!(rates[1] >= target - 1e-9);
+                    prop_assert!(b.power_w.iter().sum::<f64>() <= model.p_max_w * (1.0 + 1e-12));
+                }
+                (None, None) => {}
+                (b, r) => prop_assert!(false, "closed form {:?} vs brute force {:?}", b, r),
+            }
+        }
+
+        /// K = 2: the split meets every SRU exactly, sums to P_max, and the unrolled feasibility
+        /// test Σ c_t/λ_t ≤ P_max agrees with the rate.
+        #[test]
+        fn k2_split_is_consistent(
+            l in proptest::collection::vec(-85.0f64..-55.0, 3), t1 in 0.1f64..2.0, t2 in 0.1f64..2.0, noma in any::<bool>()
+        ) {
+            let access = if noma { Access::Noma } else { Access::Oma };
+            let model = RateModel::new(access, 0.1, 1e-12, &[t1, t2]);
+            let lambdas: Vec<f64> = l.iter().map(|d| 10f64.powf(d / 10.0)).collect();
+            for k in 0..model.orders().len() {
+                if let Some(split) = model.split(&lambdas, k) {
+                    let rates = model.rates(&lambdas, &split.power_w, k);
+                    prop_assert!((rates[0] - split.mru_rate).abs() < 1e-9);
+                    prop_assert!((rates[1] - t1).abs() < 1e-9 && (rates[2] - t2).abs() < 1e-9);
+                    prop_assert!((split.power_w.iter().sum::<f64>() - 0.1).abs() < 1e-12);
+                    let need = model.required_power(&lambdas, k, split.mru_rate);
+                    prop_assert!((need / 0.1 - 1.0).abs() < 1e-9, "required power {need}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn orders_cover_all_permutations() {
+        let m = RateModel::new(Access::Noma, 1.0, 1.0, &[1.0, 1.0, 1.0]);
+        assert_eq!(m.orders().len(), 24);
+        assert_eq!(RateModel::new(Access::Oma, 1.0, 1.0, &[1.0, 1.0]).orders().len(), 1);
+        assert_eq!(m.order_labels(0), vec!["mru", "sru0", "sru1", "sru2"]);
+    }
+}

@@ -1,0 +1,661 @@
+//! The scenario: one JSON document describing a floor, its obstacles, the AP, the optional IRS,
+//! the mobile robot (MRU) and the static robots (SRUs) — SPEC §1.
+//!
+//! Parsing is strict (unknown fields are an error) and every check names the offending field by
+//! its JSON path, so a fleet manager can fix a document without reading code. Defaults the spec
+//! fixes (`sub_pitch_m = λ/2`, `grouping = coherent`, `rician_k_db = 3`) are resolved at parse
+//! time, so the canonical form — and therefore the content hash — is the same whether a default
+//! was written out or omitted.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::fmt;
+
+/// Speed of light (m/s), for λ = c / f_c.
+pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
+/// Largest grid a scenario may define: a 1001 × 1001 map (≈ 8 MB of values).
+pub const MAX_GRID_CELLS: usize = 1001 * 1001;
+/// Largest number of IRS sub-surfaces N (phase vector length).
+pub const MAX_SUBSURFACES: usize = 1024;
+/// Largest number of IRS elements M = N · N̄.
+pub const MAX_ELEMENTS: usize = 200_000;
+/// Largest number of static robots K; NOMA searches all (K+1)! decoding orders.
+pub const MAX_SRUS: usize = 4;
+/// Largest number of obstacles.
+pub const MAX_OBSTACLES: usize = 1000;
+/// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit".
+const TOL: f64 = 1e-6;
+
+/// A scenario that has passed [`Scenario::from_json`]: every field finite and consistent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Free-text label; part of the document (and so of its hash).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    pub room: Room,
+    pub grid: GridSpec,
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+    pub ap: AccessPoint,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub irs: Option<Irs>,
+    pub mru: Mru,
+    #[serde(default)]
+    pub srus: Vec<Sru>,
+    #[serde(default)]
+    pub channel: ChannelSpec,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Room {
+    pub x_min: f64,
+    pub x_max: f64,
+    pub y_min: f64,
+    pub y_max: f64,
+    pub ceiling_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    /// Δ = Δx = Δy (m).
+    pub resolution_m: f64,
+}
+
+/// An axis-aligned box standing on the floor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Obstacle {
+    pub center: [f64; 2],
+    pub size: [f64; 2],
+    pub height_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccessPoint {
+    pub position: [f64; 3],
+    /// P_max (dBm).
+    pub tx_power_dbm: f64,
+    /// σ², the receiver noise power of every robot (dBm).
+    pub noise_dbm: f64,
+    /// f_c (GHz).
+    pub carrier_ghz: f64,
+}
+
+/// How the N̄ elements of a sub-surface combine (SPEC §1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Grouping {
+    /// w̃_n = N̄ × the cascaded LoS coefficient at the sub-surface centre.
+    #[default]
+    Coherent,
+    /// Each element at its own position; w̃_n sums the N̄ element coefficients.
+    Elements,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Irs {
+    pub center: [f64; 3],
+    /// Unit vector pointing into the room.
+    pub normal: [f64; 3],
+    /// Sub-surfaces along the wall's horizontal axis.
+    pub nx_sub: usize,
+    /// Sub-surfaces along the wall's vertical axis.
+    pub nz_sub: usize,
+    /// N̄, elements per sub-surface (M = N·N̄).
+    pub elements_per_sub: usize,
+    /// Centre-to-centre spacing of sub-surfaces (m); default λ/2.
+    #[serde(default)]
+    pub sub_pitch_m: Option<f64>,
+    #[serde(default)]
+    pub grouping: Grouping,
+    /// Spacing of the elements of one sub-surface, laid out in a row along the wall's horizontal
+    /// axis (`elements` grouping only); default `sub_pitch_m / N̄`, so the row tiles the
+    /// sub-surface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub element_pitch_m: Option<f64>,
+}
+
+impl Irs {
+    /// N, the number of independently phased sub-surfaces.
+    pub fn subsurfaces(&self) -> usize {
+        self.nx_sub * self.nz_sub
+    }
+    /// M = N · N̄, the number of reflecting elements.
+    pub fn elements(&self) -> usize {
+        self.subsurfaces() * self.elements_per_sub
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mru {
+    /// H_0 (m).
+    pub antenna_height_m: f64,
+    /// V_max (m/s).
+    pub v_max_mps: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sru {
+    pub position: [f64; 3],
+    /// r̄_s (bit/s/Hz).
+    pub min_rate_bps_hz: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum PathLossModel {
+    /// 3GPP TR 38.901 indoor factory, sparse clutter, high BS (paper Section IV).
+    #[default]
+    #[serde(rename = "3gpp_inf_sh")]
+    ThreeGppInfSh,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelSpec {
+    /// κ (dB), the Rician factor of every LoS link.
+    #[serde(default = "default_rician_k_db")]
+    pub rician_k_db: f64,
+    #[serde(default)]
+    pub path_loss: PathLossModel,
+}
+
+fn default_rician_k_db() -> f64 {
+    3.0
+}
+
+impl Default for ChannelSpec {
+    fn default() -> Self {
+        ChannelSpec { rician_k_db: default_rician_k_db(), path_loss: PathLossModel::default() }
+    }
+}
+
+/// A rejected scenario: the JSON path of the offending field and why.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {reason}")]
+pub struct ScenarioError {
+    pub field: String,
+    pub reason: String,
+}
+
+impl ScenarioError {
+    pub fn new(field: impl Into<String>, reason: impl fmt::Display) -> Self {
+        ScenarioError { field: field.into(), reason: reason.to_string() }
+    }
+}
+
+/// The cell lattice of SPEC §1: centres at `x_min + i·Δ`, both walls included.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Grid {
+    pub nx: usize,
+    pub ny: usize,
+    pub x_min: f64,
+    pub y_min: f64,
+    pub resolution_m: f64,
+}
+
+impl Grid {
+    pub fn cells(&self) -> usize {
+        self.nx * self.ny
+    }
+    /// Flat index of cell (i, j); i runs along x, j along y (the paper's C_{i,j}).
+    #[inline]
+    pub fn index(&self, i: usize, j: usize) -> usize {
+        i * self.ny + j
+    }
+    #[inline]
+    pub fn cell_of(&self, index: usize) -> (usize, usize) {
+        (index / self.ny, index % self.ny)
+    }
+    /// q^Δ_{i,j}, the horizontal centre of cell (i, j) (paper eq. 10).
+    #[inline]
+    pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
+        [self.x_min + i as f64 * self.resolution_m, self.y_min + j as f64 * self.resolution_m]
+    }
+    fn x_max(&self) -> f64 {
+        self.x_min + (self.nx - 1) as f64 * self.resolution_m
+    }
+    fn y_max(&self) -> f64 {
+        self.y_min + (self.ny - 1) as f64 * self.resolution_m
+    }
+    /// The cell whose centre is nearest to (x, y), or `None` outside the room.
+    pub fn snap(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let slack = 1e-9 * self.resolution_m.max(1.0);
+        if !x.is_finite() || !y.is_finite() {
+            return None;
+        }
+        if x < self.x_min - slack || x > self.x_max() + slack {
+            return None;
+        }
+        if y < self.y_min - slack || y > self.y_max() + slack {
+            return None;
+        }
+        let i = ((x - self.x_min) / self.resolution_m).round() as usize;
+        let j = ((y - self.y_min) / self.resolution_m).round() as usize;
+        Some((i.min(self.nx - 1), j.min(self.ny - 1)))
+    }
+}
+
+impl Scenario {
+    /// Parses and validates a scenario document.
+    pub fn from_json(text: &str) -> Result<Scenario, ScenarioError> {
+        let mut scenario = deserialize_tracking_path(text)?;
+        scenario.resolve_defaults();
+        scenario.validate()?;
+        Ok(scenario)
+    }
+
+    /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
+    pub fn from_value(value: serde_json::Value) -> Result<Scenario, ScenarioError> {
+        Scenario::from_json(&value.to_string())
+    }
+
+    /// λ = c / f_c (m).
+    pub fn wavelength_m(&self) -> f64 {
+        SPEED_OF_LIGHT / (self.ap.carrier_ghz * 1e9)
+    }
+
+    fn resolve_defaults(&mut self) {
+        let lambda = self.wavelength_m();
+        if let Some(irs) = &mut self.irs {
+            if irs.sub_pitch_m.is_none() && lambda.is_finite() {
+                irs.sub_pitch_m = Some(lambda / 2.0);
+            }
+            if irs.grouping == Grouping::Elements && irs.element_pitch_m.is_none() {
+                irs.element_pitch_m =
+                    irs.sub_pitch_m.map(|p| p / irs.elements_per_sub.max(1) as f64);
+            }
+        }
+    }
+
+    /// The cell lattice; valid only on a validated scenario.
+    pub fn grid(&self) -> Grid {
+        let r = &self.room;
+        let d = self.grid.resolution_m;
+        Grid {
+            nx: ((r.x_max - r.x_min) / d).round() as usize + 1,
+            ny: ((r.y_max - r.y_min) / d).round() as usize + 1,
+            x_min: r.x_min,
+            y_min: r.y_min,
+            resolution_m: d,
+        }
+    }
+
+    /// True when (x, y) lies inside or on the boundary of an obstacle footprint (SPEC §1:
+    /// such a cell is occupied).
+    pub fn is_occupied(&self, x: f64, y: f64) -> bool {
+        const EPS: f64 = 1e-9;
+        self.obstacles.iter().any(|o| {
+            (x - o.center[0]).abs() <= o.size[0] / 2.0 + EPS
+                && (y - o.center[1]).abs() <= o.size[1] / 2.0 + EPS
+        })
+    }
+
+    /// True when a 3D point lies strictly inside an obstacle box.
+    pub fn is_inside_obstacle(&self, p: [f64; 3]) -> bool {
+        self.obstacles.iter().any(|o| {
+            (p[0] - o.center[0]).abs() < o.size[0] / 2.0
+                && (p[1] - o.center[1]).abs() < o.size[1] / 2.0
+                && p[2] > 0.0
+                && p[2] < o.height_m
+        })
+    }
+
+    fn validate(&self) -> Result<(), ScenarioError> {
+        let err = |field: &str, reason: &str| Err(ScenarioError::new(field, reason));
+        let r = &self.room;
+        for (field, v) in [
+            ("room.x_min", r.x_min),
+            ("room.x_max", r.x_max),
+            ("room.y_min", r.y_min),
+            ("room.y_max", r.y_max),
+            ("room.ceiling_m", r.ceiling_m),
+            ("grid.resolution_m", self.grid.resolution_m),
+        ] {
+            finite(field, v)?;
+        }
+        if r.x_max <= r.x_min {
+            return err("room.x_max", "must be greater than room.x_min");
+        }
+        if r.y_max <= r.y_min {
+            return err("room.y_max", "must be greater than room.y_min");
+        }
+        if r.ceiling_m <= 0.0 {
+            return err("room.ceiling_m", "must be positive");
+        }
+        let d = self.grid.resolution_m;
+        if d <= 0.0 {
+            return err("grid.resolution_m", "must be positive");
+        }
+        for (field, span) in [("room.x_max", r.x_max - r.x_min), ("room.y_max", r.y_max - r.y_min)] {
+            let cells = span / d;
+            if cells > MAX_GRID_CELLS as f64 {
+                return Err(ScenarioError::new(
+                    "grid.resolution_m",
+                    format!("grid larger than the limit of {MAX_GRID_CELLS} cells"),
+                ));
+            }
+            if (cells - cells.round()).abs() > TOL * cells.max(1.0) {
+                return Err(ScenarioError::new(
+                    field,
+                    format!(
+                        "the room span {span} m is not a whole multiple of grid.resolution_m = {d} m, \
+                         so the far wall would not be a cell centre"
+                    ),
+                ));
+            }
+        }
+        let grid = self.grid();
+        if grid.cells() > MAX_GRID_CELLS {
+            return Err(ScenarioError::new(
+                "grid.resolution_m",
+                format!(
+                    "grid of {} × {} = {} cells exceeds the limit of {MAX_GRID_CELLS} cells",
+                    grid.nx,
+                    grid.ny,
+                    grid.cells()
+                ),
+            ));
+        }
+
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(ScenarioError::new("obstacles", format!("more than {MAX_OBSTACLES} obstacles")));
+        }
+        for (k, o) in self.obstacles.iter().enumerate() {
+            let f = |s: &str| format!("obstacles[{k}].{s}");
+            finite_all(&f("center"), &o.center)?;
+            finite_all(&f("size"), &o.size)?;
+            finite(&f("height_m"), o.height_m)?;
+            if o.size.iter().any(|&s| s <= 0.0) {
+                return Err(ScenarioError::new(f("size"), "both sides must be positive"));
+            }
+            if o.height_m <= 0.0 {
+                return Err(ScenarioError::new(f("height_m"), "must be positive"));
+            }
+        }
+
+        let ap = &self.ap;
+        finite_all("ap.position", &ap.position)?;
+        finite("ap.tx_power_dbm", ap.tx_power_dbm)?;
+        finite("ap.noise_dbm", ap.noise_dbm)?;
+        finite("ap.carrier_ghz", ap.carrier_ghz)?;
+        if !(ap.carrier_ghz > 0.0 && ap.carrier_ghz <= 100.0) {
+            return err("ap.carrier_ghz", "must lie in (0, 100] GHz, the 3GPP InF model's range");
+        }
+        self.inside_room("ap.position", ap.position)?;
+        if self.is_inside_obstacle(ap.position) {
+            return err("ap.position", "lies inside an obstacle");
+        }
+
+        if let Some(irs) = &self.irs {
+            finite_all("irs.center", &irs.center)?;
+            finite_all("irs.normal", &irs.normal)?;
+            self.inside_room("irs.center", irs.center)?;
+            let n = irs.normal;
+            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if (norm - 1.0).abs() > TOL {
+                return Err(ScenarioError::new(
+                    "irs.normal",
+                    format!("must be a unit vector (its length is {norm})"),
+                ));
+            }
+            if n[2].abs() > 1.0 - 1e-6 {
+                return err("irs.normal", "must not be vertical: the IRS hangs on a wall");
+            }
+            if irs.nx_sub == 0 {
+                return err("irs.nx_sub", "must be at least 1");
+            }
+            if irs.nz_sub == 0 {
+                return err("irs.nz_sub", "must be at least 1");
+            }
+            if irs.elements_per_sub == 0 {
+                return err("irs.elements_per_sub", "must be at least 1");
+            }
+            if irs.subsurfaces() > MAX_SUBSURFACES {
+                return Err(ScenarioError::new(
+                    "irs.nx_sub",
+                    format!("N = nx_sub·nz_sub = {} exceeds the limit of {MAX_SUBSURFACES}", irs.subsurfaces()),
+                ));
+            }
+            if irs.elements() > MAX_ELEMENTS {
+                return Err(ScenarioError::new(
+                    "irs.elements_per_sub",
+                    format!("M = N·N̄ = {} exceeds the limit of {MAX_ELEMENTS}", irs.elements()),
+                ));
+            }
+            let pitch = irs.sub_pitch_m.unwrap_or(f64::NAN);
+            finite("irs.sub_pitch_m", pitch)?;
+            if pitch <= 0.0 {
+                return err("irs.sub_pitch_m", "must be positive");
+            }
+            match (irs.grouping, irs.element_pitch_m) {
+                (Grouping::Coherent, Some(_)) => {
+                    return err("irs.element_pitch_m", "applies only to grouping \"elements\"");
+                }
+                (Grouping::Elements, Some(e)) => {
+                    finite("irs.element_pitch_m", e)?;
+                    if e <= 0.0 {
+                        return err("irs.element_pitch_m", "must be positive");
+                    }
+                    if e * irs.elements_per_sub as f64 > pitch * (1.0 + TOL) {
+                        return err(
+                            "irs.element_pitch_m",
+                            "a row of elements_per_sub elements at this pitch is wider than sub_pitch_m: sub-surfaces would overlap",
+                        );
+                    }
+                }
+                _ => {}
+            }
+            let ahead = |p: [f64; 3]| {
+                (p[0] - irs.center[0]) * n[0] + (p[1] - irs.center[1]) * n[1] + (p[2] - irs.center[2]) * n[2]
+            };
+            if ahead(ap.position) <= 0.0 {
+                return err("irs.normal", "the AP lies behind the IRS surface, so the IRS cannot reflect its signal");
+            }
+        }
+
+        finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
+        finite("mru.v_max_mps", self.mru.v_max_mps)?;
+        if !(self.mru.antenna_height_m > 0.0 && self.mru.antenna_height_m < r.ceiling_m) {
+            return err("mru.antenna_height_m", "must lie strictly between the floor and the ceiling");
+        }
+        if self.mru.v_max_mps <= 0.0 {
+            return err("mru.v_max_mps", "must be positive");
+        }
+
+        if self.srus.len() > MAX_SRUS {
+            return Err(ScenarioError::new(
+                "srus",
+                format!("{} static robots exceed the limit of {MAX_SRUS}", self.srus.len()),
+            ));
+        }
+        for (k, s) in self.srus.iter().enumerate() {
+            let f = |x: &str| format!("srus[{k}].{x}");
+            finite_all(&f("position"), &s.position)?;
+            finite(&f("min_rate_bps_hz"), s.min_rate_bps_hz)?;
+            self.inside_room(&f("position"), s.position)?;
+            if self.is_inside_obstacle(s.position) {
+                return Err(ScenarioError::new(f("position"), "lies inside an obstacle"));
+            }
+            if s.min_rate_bps_hz < 0.0 || s.min_rate_bps_hz > 30.0 {
+                return Err(ScenarioError::new(f("min_rate_bps_hz"), "must lie in [0, 30] bit/s/Hz"));
+            }
+        }
+
+        finite("channel.rician_k_db", self.channel.rician_k_db)?;
+        if self.channel.rician_k_db.abs() > 60.0 {
+            return err("channel.rician_k_db", "must lie in [-60, 60] dB");
+        }
+        Ok(())
+    }
+
+    fn inside_room(&self, field: &str, p: [f64; 3]) -> Result<(), ScenarioError> {
+        let r = &self.room;
+        let inside = p[0] >= r.x_min && p[0] <= r.x_max && p[1] >= r.y_min && p[1] <= r.y_max;
+        if !inside {
+            return Err(ScenarioError::new(field, "lies outside the room's floor plan"));
+        }
+        if p[2] < 0.0 || p[2] > r.ceiling_m {
+            return Err(ScenarioError::new(field, "height must lie between the floor and room.ceiling_m"));
+        }
+        Ok(())
+    }
+
+    /// The canonical form: keys sorted, no white space, defaults resolved, -0 written as 0.
+    pub fn canonical_json(&self) -> String {
+        let value = serde_json::to_value(self).expect("a scenario always serialises");
+        let mut out = String::new();
+        write_canonical(&value, &mut out);
+        out
+    }
+
+    /// The scenario id: the first 128 bits of SHA-256 over the canonical form, in hex.
+    pub fn content_hash(&self) -> String {
+        hash_hex(self.canonical_json().as_bytes())
+    }
+}
+
+/// First 128 bits of SHA-256 of `bytes`, as 32 lowercase hex digits.
+pub fn hash_hex(bytes: &[u8]) -> String {
+    let digest = Sha256::digest(bytes);
+    digest[..16].iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn write_canonical(value: &serde_json::Value, out: &mut String) {
+    use serde_json::Value;
+    match value {
+        Value::Object(map) => {
+            let mut keys: Vec<&String> = map.keys().collect();
+            keys.sort();
+            out.push('{');
+            for (k, key) in keys.into_iter().enumerate() {
+                if k > 0 {
+                    out.push(',');
+                }
+                out.push_str(&Value::String(key.clone()).to_string());
+                out.push(':');
+                write_canonical(&map[key], out);
+            }
+            out.push('}');
+        }
+        Value::Array(items) => {
+            out.push('[');
+            for (k, item) in items.iter().enumerate() {
+                if k > 0 {
+                    out.push(',');
+                }
+                write_canonical(item, out);
+            }
+            out.push(']');
+        }
+        Value::Number(n) => match n.as_f64() {
+            Some(f) if f == 0.0 => out.push('0'),
+            Some(f) if n.is_f64() && f.fract() == 0.0 && f.abs() < 1e15 => {
+                out.push_str(&format!("{}", f as i64))
+            }
+            _ => out.push_str(&n.to_string()),
+        },
+        other => out.push_str(&other.to_string()),
+    }
+}
+
+fn finite(field: &str, v: f64) -> Result<(), ScenarioError> {
+    if v.is_finite() { Ok(()) } else { Err(ScenarioError::new(field, "must be a finite number")) }
+}
+
+fn finite_all(field: &str, v: &[f64]) -> Result<(), ScenarioError> {
+    v.iter().try_for_each(|&x| finite(field, x))
+}
+
+/// Deserialises while tracking the JSON path, so serde's own errors (unknown or missing fields,
+/// wrong types) name the field too.
+fn deserialize_tracking_path(text: &str) -> Result<Scenario, ScenarioError> {
+    let mut deserializer = serde_json::Deserializer::from_str(text);
+    let scenario: Scenario = serde_path_to_error::deserialize(&mut deserializer).map_err(|e| {
+        let path = e.path().to_string();
+        let field = if path == "." || path.is_empty() { "$".to_string() } else { path };
+        ScenarioError::new(field, e.into_inner())
+    })?;
+    deserializer
+        .end()
+        .map_err(|e| ScenarioError::new("$", format!("trailing characters after the document: {e}")))?;
+    Ok(scenario)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMALL: &str = include_str!("../scenarios/small-test.json");
+
+    #[test]
+    fn small_scenario_parses_and_grid_includes_both_walls() {
+        let s = Scenario::from_json(SMALL).unwrap();
+        let g = s.grid();
+        assert_eq!(g.centre(0, 0), [s.room.x_min, s.room.y_min]);
+        assert_eq!(g.centre(g.nx - 1, g.ny - 1), [s.room.x_max, s.room.y_max]);
+    }
+
+    #[test]
+    fn hash_ignores_key_order_formatting_and_written_defaults() {
+        let a = Scenario::from_json(SMALL).unwrap();
+        let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+        // Spell out a default and reformat.
+        v["channel"] = serde_json::json!({"path_loss": "3gpp_inf_sh", "rician_k_db": 3.0});
+        let b = Scenario::from_json(&serde_json::to_string_pretty(&v).unwrap()).unwrap();
+        assert_eq!(a.content_hash(), b.content_hash());
+        assert_eq!(a.content_hash().len(), 32);
+        v["ap"]["tx_power_dbm"] = serde_json::json!(21.0);
+        let c = Scenario::from_json(&v.to_string()).unwrap();
+        assert_ne!(a.content_hash(), c.content_hash());
+    }
+
+    fn mutated(f: impl FnOnce(&mut serde_json::Value)) -> ScenarioError {
+        let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+        f(&mut v);
+        Scenario::from_json(&v.to_string()).unwrap_err()
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let cases: Vec<(Box<dyn FnOnce(&mut serde_json::Value)>, &str)> = vec![
+            (Box::new(|v| v["room"]["bogus"] = 1.into()), "room.bogus"),
+            (Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])), "obstacles[0].size"),
+            (Box::new(|v| v["ap"]["position"] = v["obstacles"][0]["center"].clone()), "ap.position"),
+            (Box::new(|v| v["grid"]["resolution_m"] = 0.001.into()), "grid.resolution_m"),
+            (Box::new(|v| v["grid"]["resolution_m"] = 0.35.into()), "room.x_max"),
+            (Box::new(|v| v["irs"]["normal"] = serde_json::json!([0.0, 0.9, 0.0])), "irs.normal"),
+            (Box::new(|v| v["irs"]["nx_sub"] = 0.into()), "irs.nx_sub"),
+            (Box::new(|v| v["mru"]["v_max_mps"] = 0.into()), "mru.v_max_mps"),
+            (Box::new(|v| v["ap"]["carrier_ghz"] = (-2.0).into()), "ap.carrier_ghz"),
+            (Box::new(|v| v["srus"][0]["position"] = serde_json::json!([0.0, 0.0, -1.0])), "srus[0].position"),
+            (Box::new(|v| v["channel"]["path_loss"] = "free_space".into()), "channel.path_loss"),
+        ];
+        for (mutate, field) in cases {
+            let e = mutated(mutate);
+            assert_eq!(e.field, field, "{e}");
+        }
+    }
+
+    #[test]
+    fn ap_position_must_be_a_triple() {
+        let e = mutated(|v| v["ap"]["position"] = serde_json::json!([0.0, 1.0]));
+        assert_eq!(e.field, "ap.position");
+        assert!(e.reason.contains("invalid length"), "{e}");
+    }
+
+    #[test]
+    fn snap_rejects_points_outside_the_room() {
+        let s = Scenario::from_json(SMALL).unwrap();
+        let g = s.grid();
+        assert_eq!(g.snap(s.room.x_min, s.room.y_min), Some((0, 0)));
+        assert_eq!(g.snap(s.room.x_max + 1.0, 0.0), None);
+        assert_eq!(g.snap(f64::NAN, 0.0), None);
+    }
+}

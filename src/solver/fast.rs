@@ -1,0 +1,265 @@
+//! The `fast` rate solver (SPEC §2).
+//!
+//! The objective depends on θ only through the K+1 numbers a_lᵀv (v = [θ; 1]). For K = 1, a
+//! stationary point of any weighted sum μ_m|a_mᵀv|² + μ_s|a_sᵀv|² — and the optimum of the rate,
+//! including on the SIC boundary where the Lagrangian is such a sum with real, possibly negative,
+//! weights — satisfies, element by element, v_n ∥ μ_m conj(a_mn)(a_mᵀv) + μ_s conj(a_sn)(a_sᵀv).
+//! So it lies in the one-complex-parameter family
+//!
+//! v_n(z) = exp(j∠(conj(a_mn) + z·conj(a_sn))), scaled so that v_{N+1} = 1,
+//!
+//! plus its limit z → ∞. We evaluate the true objective on a log-polar grid of z, refine the best
+//! z by pattern search, then polish with element-wise coordinate ascent on the true objective
+//! (each element's phase on a grid, then golden-section refined).
+//!
+//! For K > 1 the family has K complex parameters; rather than a K-dimensional grid we search
+//! the one-parameter family of every (MRU, SRU k) pair — the directions in which the SRUs pull
+//! apart — and polish the best two starts by the same coordinate ascent on the full objective.
+//! Either way the certificate ([`super::certificate`]) reports how far from optimal the result can be.
+
+use super::{CellProblem, objective};
+use crate::channel::C64;
+use crate::rate::RateModel;
+use std::f64::consts::TAU;
+
+/// Log10 span of |z| around the balancing scale ‖a_m‖₁/‖a_s‖₁.
+const Z_DECADES: f64 = 3.0;
+const Z_MAGNITUDES: usize = 25;
+const Z_ANGLES: usize = 16;
+/// Phase grid per element in the coordinate ascent.
+const ELEMENT_GRID: usize = 24;
+const MAX_SWEEPS: usize = 6;
+
+/// Returns v = [e^{jθ}; 1] maximising the MRU's rate (continuous phases).
+pub fn solve(problem: &CellProblem, model: &RateModel) -> Vec<C64> {
+    let mut eval = Evaluator::new(problem, model);
+    let mut starts: Vec<(f64, Vec<C64>)> = Vec::new();
+    for k in 1..problem.users() {
+        let (value, v) = search_pair(&mut eval, problem, k);
+        starts.push((value, v));
+    }
+    // The MRU's own optimum (z = 0) is in every pair's family; add each SRU's own (z → ∞).
+    for k in 1..problem.users() {
+        let mut v = vec![C64::new(0.0, 0.0); problem.dim];
+        family(problem, 0, k, None, &mut v);
+        starts.push((eval.value(&v), v));
+    }
+    starts.sort_by(|a, b| b.0.total_cmp(&a.0));
+    starts.truncate(2);
+    let mut best = (f64::NEG_INFINITY, starts[0].1.clone());
+    for (_, mut v) in starts {
+        let value = coordinate_ascent(&mut eval, problem, &mut v);
+        if value > best.0 {
+            best = (value, v);
+        }
+    }
+    best.1
+}
+
+/// v_n(z) for the pair (MRU = user `m`, SRU `k`); `z = None` is the limit z → ∞.
+fn family(problem: &CellProblem, m: usize, k: usize, z: Option<C64>, v: &mut [C64]) {
+    let (am, ak) = (problem.user(m), problem.user(k));
+    for n in 0..problem.dim {
+        let c = match z {
+            Some(z) => am[n].conj() + z * ak[n].conj(),
+            None => ak[n].conj(),
+        };
+        let r = c.norm();
+        v[n] = if r > 0.0 { c / r } else { C64::new(1.0, 0.0) };
+    }
+    let reference = v[problem.dim - 1].conj();
+    v.iter_mut().for_each(|x| *x *= reference);
+}
+
+/// Grid search and pattern-search refinement of z for one (MRU, SRU) pair.
+fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, Vec<C64>) {
+    let l1 = |l: usize| problem.user(l).iter().map(|x| x.norm()).sum::<f64>();
+    let scale = (l1(0) / l1(k).max(f64::MIN_POSITIVE)).max(f64::MIN_POSITIVE);
+    let mut v = vec![C64::new(0.0, 0.0); problem.dim];
+    let mut at = |log_mag: f64, angle: f64, v: &mut Vec<C64>| {
+        family(problem, 0, k, Some(C64::from_polar(scale * 10f64.powf(log_mag), angle)), v);
+        eval.value(v)
+    };
+    let mut best = (f64::NEG_INFINITY, -Z_DECADES - 1.0, 0.0);
+    for mi in 0..Z_MAGNITUDES {
+        let log_mag = -Z_DECADES + 2.0 * Z_DECADES * mi as f64 / (Z_MAGNITUDES - 1) as f64;
+        for ai in 0..Z_ANGLES {
+            let angle = TAU * ai as f64 / Z_ANGLES as f64;
+            let value = at(log_mag, angle, &mut v);
+            if value > best.0 {
+                best = (value, log_mag, angle);
+            }
+        }
+    }
+    // z = 0 (the MRU's own optimum, eq. 14's analogue) always competes.
+    let at_zero = at(f64::NEG_INFINITY, 0.0, &mut v);
+    if at_zero >= best.0 || !best.0.is_finite() {
+        return (at_zero, v);
+    }
+    let (mut step_mag, mut step_angle) = (2.0 * Z_DECADES / (Z_MAGNITUDES - 1) as f64, TAU / Z_ANGLES as f64);
+    for _ in 0..12 {
+        let mut moved = false;
+        for (dm, da) in [(step_mag, 0.0), (-step_mag, 0.0), (0.0, step_angle), (0.0, -step_angle)] {
+            let value = at(best.1 + dm, best.2 + da, &mut v);
+            if value > best.0 {
+                best = (value, best.1 + dm, best.2 + da);
+                moved = true;
+            }
+        }
+        if !moved {
+            step_mag /= 2.0;
+            step_angle /= 2.0;
+        }
+    }
+    let value = at(best.1, best.2, &mut v);
+    (value, v)
+}
+
+/// Reusable buffers for evaluating the objective without allocating.
+struct Evaluator<'a> {
+    model: &'a RateModel,
+    problem: &'a CellProblem,
+    lambdas: Vec<f64>,
+    sums: Vec<C64>,
+    base: Vec<C64>,
+}
+
+impl<'a> Evaluator<'a> {
+    fn new(problem: &'a CellProblem, model: &'a RateModel) -> Self {
+        let users = problem.users();
+        Evaluator {
+            model,
+            problem,
+            lambdas: vec![0.0; users],
+            sums: vec![C64::new(0.0, 0.0); users],
+            base: vec![C64::new(0.0, 0.0); users],
+        }
+    }
+
+    fn value(&mut self, v: &[C64]) -> f64 {
+        self.problem.lambdas(v, &mut self.lambdas);
+        objective(self.model, &self.lambdas)
+    }
+
+    /// Objective with element n set to e^{jφ}, given `base_l = a_lᵀv − a_ln v_n` in `self.base`.
+    #[inline]
+    fn value_with(&mut self, n: usize, phasor: C64) -> f64 {
+        for l in 0..self.problem.users() {
+            let s = self.base[l] + self.problem.user(l)[n] * phasor;
+            self.lambdas[l] = s.norm_sqr() + self.problem.tau[l];
+        }
+        objective(self.model, &self.lambdas)
+    }
+
+    fn load_sums(&mut self, v: &[C64]) {
+        for l in 0..self.problem.users() {
+            self.sums[l] = self.problem.user(l).iter().zip(v).map(|(a, x)| a * x).sum();
+        }
+    }
+
+    fn exclude(&mut self, n: usize, vn: C64) {
+        for l in 0..self.problem.users() {
+            self.base[l] = self.sums[l] - self.problem.user(l)[n] * vn;
+        }
+    }
+
+    fn include(&mut self, n: usize, vn: C64) {
+        for l in 0..self.problem.users() {
+            self.sums[l] = self.base[l] + self.problem.user(l)[n] * vn;
+        }
+    }
+}
+
+/// Element-wise coordinate ascent on the true objective (continuous phases). Returns the value.
+fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64]) -> f64 {
+    eval.load_sums(v);
+    let mut current = eval.value(v);
+    for _ in 0..MAX_SWEEPS {
+        let before = current;
+        for n in 0..problem.dim - 1 {
+            eval.exclude(n, v[n]);
+            let mut best = (current, v[n].arg());
+            for g in 0..ELEMENT_GRID {
+                let phi = TAU * g as f64 / ELEMENT_GRID as f64;
+                let value = eval.value_with(n, C64::from_polar(1.0, phi));
+                if value > best.0 {
+                    best = (value, phi);
+                }
+            }
+            // Golden-section refinement around the best grid phase.
+            let half = TAU / ELEMENT_GRID as f64;
+            let (mut lo, mut hi) = (best.1 - half, best.1 + half);
+            let ratio = 0.5 * (5f64.sqrt() - 1.0);
+            let mut x1 = hi - ratio * (hi - lo);
+            let mut x2 = lo + ratio * (hi - lo);
+            let mut f1 = eval.value_with(n, C64::from_polar(1.0, x1));
+            let mut f2 = eval.value_with(n, C64::from_polar(1.0, x2));
+            for _ in 0..24 {
+                if f1 >= f2 {
+                    hi = x2;
+                    x2 = x1;
+                    f2 = f1;
+                    x1 = hi - ratio * (hi - lo);
+                    f1 = eval.value_with(n, C64::from_polar(1.0, x1));
+                } else {
+                    lo = x1;
+                    x1 = x2;
+                    f1 = f2;
+                    x2 = lo + ratio * (hi - lo);
+                    f2 = eval.value_with(n, C64::from_polar(1.0, x2));
+                }
+            }
+            for (value, phi) in [(f1, x1), (f2, x2)] {
+                if value > best.0 {
+                    best = (value, phi);
+                }
+            }
+            if best.0 > current {
+                v[n] = C64::from_polar(1.0, best.1);
+                current = best.0;
+            }
+            eval.include(n, v[n]);
+        }
+        if current - before <= 1e-10 * current.abs().max(1e-3) {
+            break;
+        }
+    }
+    current
+}
+
+/// Discrete phases (`bits: b`): project v onto the L = 2^b levels, then re-optimise element by
+/// element over the levels (all of them for L ≤ 64, else the 64 nearest the current phase) until
+/// no element improves.
+pub fn discrete_ascent(problem: &CellProblem, model: &RateModel, bits: u8, v: &mut [C64]) {
+    let levels = 1usize << bits;
+    let step = TAU / levels as f64;
+    let level_of = |x: C64| ((x.arg().rem_euclid(TAU) / step).round() as usize) % levels;
+    let phasor = |level: usize| C64::from_polar(1.0, level as f64 * step);
+    for x in v[..problem.dim - 1].iter_mut() {
+        *x = phasor(level_of(*x));
+    }
+    let mut eval = Evaluator::new(problem, model);
+    eval.load_sums(v);
+    let mut current = eval.value(v);
+    let window = levels.min(64);
+    for _ in 0..4 * MAX_SWEEPS {
+        let mut improved = false;
+        for n in 0..problem.dim - 1 {
+            eval.exclude(n, v[n]);
+            let here = level_of(v[n]);
+            for offset in 0..window {
+                let level = (here + levels + offset - window / 2) % levels;
+                let value = eval.value_with(n, phasor(level));
+                if value > current + 1e-12 * current.abs().max(1e-3) {
+                    current = value;
+                    v[n] = phasor(level);
+                    improved = true;
+                }
+            }
+            eval.include(n, v[n]);
+        }
+        if !improved {
+            break;
+        }
+    }
+}
