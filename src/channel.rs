@@ -55,7 +55,11 @@ pub fn path_loss_db(distance_m: f64, carrier_ghz: f64, los: bool) -> f64 {
     let d = distance_m.max(1.0).log10();
     let f = carrier_ghz.log10();
     let pl_los = 31.84 + 21.50 * d + 19.0 * f;
-    if los { pl_los } else { pl_los.max(32.4 + 23.0 * d + 20.0 * f) }
+    if los {
+        pl_los
+    } else {
+        pl_los.max(32.4 + 23.0 * d + 20.0 * f)
+    }
 }
 
 /// An obstacle as a 3D box [lo, hi].
@@ -141,8 +145,16 @@ impl ChannelModel {
             .obstacles
             .iter()
             .map(|o| Aabb {
-                lo: [o.center[0] - o.size[0] / 2.0, o.center[1] - o.size[1] / 2.0, 0.0],
-                hi: [o.center[0] + o.size[0] / 2.0, o.center[1] + o.size[1] / 2.0, o.height_m],
+                lo: [
+                    o.center[0] - o.size[0] / 2.0,
+                    o.center[1] - o.size[1] / 2.0,
+                    0.0,
+                ],
+                hi: [
+                    o.center[0] + o.size[0] / 2.0,
+                    o.center[1] + o.size[1] / 2.0,
+                    o.height_m,
+                ],
             })
             .collect();
         let mut model = ChannelModel {
@@ -207,13 +219,19 @@ impl ChannelModel {
     /// True when the segment between two points passes through an obstacle's interior.
     pub fn is_blocked(&self, a: [f64; 3], b: [f64; 3]) -> bool {
         let (a, b) = (P3::from(a), P3::from(b));
-        self.boxes.iter().any(|bx| segment_hits_interior(&a, &b, bx))
+        self.boxes
+            .iter()
+            .any(|bx| segment_hits_interior(&a, &b, bx))
     }
 
     fn link_budget(&self, a: &P3, b: &P3) -> LinkBudget {
         let los = !self.boxes.iter().any(|bx| segment_hits_interior(a, b, bx));
         let pl = path_loss_db((a - b).norm(), self.carrier_ghz, los);
-        LinkBudget { los, path_gain: 10f64.powf(-pl / 10.0), rician_k: if los { self.kappa } else { 0.0 } }
+        LinkBudget {
+            los,
+            path_gain: 10f64.powf(-pl / 10.0),
+            rician_k: if los { self.kappa } else { 0.0 },
+        }
     }
 
     /// e^{−j2π d/λ}, the LoS phase of a path of length d.
@@ -254,7 +272,10 @@ impl ChannelModel {
             for (n, wn) in w.iter_mut().enumerate() {
                 let range = n * irs.per_sub..(n + 1) * irs.per_sub;
                 let mut sum = C64::new(0.0, 0.0);
-                for (p, d_ap) in irs.points[range.clone()].iter().zip(&irs.ap_distance[range]) {
+                for (p, d_ap) in irs.points[range.clone()]
+                    .iter()
+                    .zip(&irs.ap_distance[range])
+                {
                     sum += self.los_phase(d_ap + (q - p).norm());
                 }
                 *wn = sum * amplitude;
@@ -286,7 +307,9 @@ impl ChannelModel {
             irs: bool,
         }
         let irs = self.irs.as_ref().filter(|_| theta.is_some());
-        let rot: Vec<C64> = theta.map_or(Vec::new(), |t| t.iter().map(|&p| C64::from_polar(1.0, p)).collect());
+        let rot: Vec<C64> = theta.map_or(Vec::new(), |t| {
+            t.iter().map(|&p| C64::from_polar(1.0, p)).collect()
+        });
         // Per element: which sub-surface it belongs to and which scattering point carries its
         // LoS phase (every element of a coherent sub-surface sits at the sub-surface centre).
         let element_point = |e: usize, irs: &IrsModel| -> usize {
@@ -390,14 +413,29 @@ mod tests {
 
     #[test]
     fn blockage_needs_the_interior_grazing_is_los() {
-        let bx = Aabb { lo: [0.0, 0.0, 0.0], hi: [1.0, 1.0, 1.0] };
+        let bx = Aabb {
+            lo: [0.0, 0.0, 0.0],
+            hi: [1.0, 1.0, 1.0],
+        };
         let hit = |a: [f64; 3], b: [f64; 3]| segment_hits_interior(&P3::from(a), &P3::from(b), &bx);
         assert!(hit([-1.0, 0.5, 0.5], [2.0, 0.5, 0.5]));
-        assert!(!hit([-1.0, 0.5, 1.0], [2.0, 0.5, 1.0]), "along the top face");
+        assert!(
+            !hit([-1.0, 0.5, 1.0], [2.0, 0.5, 1.0]),
+            "along the top face"
+        );
         assert!(!hit([-1.0, 0.0, 0.0], [2.0, 0.0, 0.0]), "along an edge");
-        assert!(hit([-1.0, -1.0, 0.5], [1.0, 1.0, 0.5]), "diagonally through the box");
-        assert!(!hit([-1.0, 0.0, 0.5], [1.0, 2.0, 0.5]), "touching only the vertical edge at (0, 1)");
-        assert!(!hit([0.5, 0.5, 1.0], [0.5, 5.0, 3.0]), "leaving from the top face upwards");
+        assert!(
+            hit([-1.0, -1.0, 0.5], [1.0, 1.0, 0.5]),
+            "diagonally through the box"
+        );
+        assert!(
+            !hit([-1.0, 0.0, 0.5], [1.0, 2.0, 0.5]),
+            "touching only the vertical edge at (0, 1)"
+        );
+        assert!(
+            !hit([0.5, 0.5, 1.0], [0.5, 5.0, 3.0]),
+            "leaving from the top face upwards"
+        );
         assert!(hit([0.5, 0.5, 0.5], [5.0, 5.0, 5.0]), "starting inside");
         assert!(!hit([2.0, 2.0, 0.5], [3.0, 3.0, 0.5]), "far away");
     }
@@ -430,7 +468,9 @@ mod tests {
             let mut saw_nlos = false;
             for q in points {
                 saw_nlos |= m.is_blocked(s.ap.position, q);
-                let theta: Vec<f64> = (0..m.subsurfaces()).map(|_| rng.random::<f64>() * TAU).collect();
+                let theta: Vec<f64> = (0..m.subsurfaces())
+                    .map(|_| rng.random::<f64>() * TAU)
+                    .collect();
                 let mut w = vec![C64::new(0.0, 0.0); m.subsurfaces()];
                 let d = m.evaluate(q, true, &mut w);
                 let closed = expected_gain(&d, &w, &theta);
@@ -448,7 +488,10 @@ mod tests {
                     "{grouping} at {q:?}: Monte Carlo {mean:e} ± {se:e} vs closed form {closed:e}"
                 );
             }
-            assert!(saw_nlos, "the test points must include a blocked direct link");
+            assert!(
+                saw_nlos,
+                "the test points must include a blocked direct link"
+            );
         }
     }
 

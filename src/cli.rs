@@ -13,7 +13,11 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 #[derive(Debug, Parser)]
-#[command(name = "irs-planner", version, about = "IRS-enhanced indoor robot path planning: radio maps and communication-aware paths")]
+#[command(
+    name = "irs-planner",
+    version,
+    about = "IRS-enhanced indoor robot path planning: radio maps and communication-aware paths"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -60,7 +64,12 @@ pub struct PlanArgs {
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub goal: [f64; 2],
     /// QoS threshold in the map's unit (dB or bit/s/Hz).
-    #[arg(long, allow_hyphen_values = true, conflicts_with = "max_threshold", required_unless_present = "max_threshold")]
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        conflicts_with = "max_threshold",
+        required_unless_present = "max_threshold"
+    )]
     pub threshold: Option<f64>,
     /// Use the largest threshold for which a path exists.
     #[arg(long)]
@@ -82,7 +91,13 @@ fn parse_point(s: &str) -> Result<[f64; 2], String> {
     let [x, y] = parts.as_slice() else {
         return Err(format!("expected X,Y, got {s:?}"));
     };
-    let num = |t: &str| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or(format!("{t:?} is not a finite number"));
+    let num = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or(format!("{t:?} is not a finite number"))
+    };
     Ok([num(x)?, num(y)?])
 }
 
@@ -94,7 +109,10 @@ pub struct Failure {
 
 impl Failure {
     fn input(message: impl Into<String>) -> Self {
-        Failure { message: message.into(), bad_input: true }
+        Failure {
+            message: message.into(),
+            bad_input: true,
+        }
     }
 }
 
@@ -108,13 +126,21 @@ impl From<Failure> for ExitCode {
 pub fn load_scenario(path: &Path) -> Result<Scenario, Failure> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))?;
-    Scenario::from_json(&text).map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))
+    Scenario::from_json(&text)
+        .map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))
 }
 
 fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
     let id = scenario.content_hash();
-    let key = MapKey::new(&id, scenario, args.kind, args.phases, args.access, args.solver)
-        .map_err(|e| Failure::input(format!("--{}", e)))?;
+    let key = MapKey::new(
+        &id,
+        scenario,
+        args.kind,
+        args.phases,
+        args.access,
+        args.solver,
+    )
+    .map_err(|e| Failure::input(format!("--{}", e)))?;
     let progress = Progress::default();
     let done = std::sync::atomic::AtomicBool::new(false);
     let result = std::thread::scope(|scope| {
@@ -123,8 +149,10 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
             scope.spawn(move || {
                 let bar = indicatif::ProgressBar::new(0);
                 bar.set_style(
-                    indicatif::ProgressStyle::with_template("{spinner} map {bar:40} {pos}/{len} cells ({eta})")
-                        .expect("valid template"),
+                    indicatif::ProgressStyle::with_template(
+                        "{spinner} map {bar:40} {pos}/{len} cells ({eta})",
+                    )
+                    .expect("valid template"),
                 );
                 while !done.load(std::sync::atomic::Ordering::Relaxed) {
                     bar.set_length(progress.cells_total() as u64);
@@ -141,11 +169,17 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
         }
         result
     });
-    result.map_err(|e| Failure { message: e.to_string(), bad_input: false })
+    result.map_err(|e| Failure {
+        message: e.to_string(),
+        bad_input: false,
+    })
 }
 
 fn print_json(value: &impl Serialize) -> Result<(), Failure> {
-    let text = serde_json::to_string(value).map_err(|e| Failure { message: e.to_string(), bad_input: false })?;
+    let text = serde_json::to_string(value).map_err(|e| Failure {
+        message: e.to_string(),
+        bad_input: false,
+    })?;
     println!("{text}");
     Ok(())
 }
@@ -169,7 +203,9 @@ struct PlanOutput {
 pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     if let Some(draws) = args.monte_carlo {
         if draws == 0 || draws > MAX_DRAWS {
-            return Err(Failure::input(format!("--monte-carlo: must lie in 1..={MAX_DRAWS}")));
+            return Err(Failure::input(format!(
+                "--monte-carlo: must lie in 1..={MAX_DRAWS}"
+            )));
         }
     }
     let scenario = load_scenario(&args.map.scenario)?;
@@ -178,10 +214,18 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         Some(t) => Threshold::Value(t),
         None => Threshold::Max,
     };
-    let path = planner::plan(&map, args.start, args.goal, threshold, scenario.mru.v_max_mps)
-        .map_err(|e| Failure::input(format!("--{e}")))?;
+    let path = planner::plan(
+        &map,
+        args.start,
+        args.goal,
+        threshold,
+        scenario.mru.v_max_mps,
+    )
+    .map_err(|e| Failure::input(format!("--{e}")))?;
     let monte_carlo = match args.monte_carlo {
-        Some(draws) if path.feasible => Some(montecarlo::check_path(&scenario, &map, &path, draws, args.seed)),
+        Some(draws) if path.feasible => Some(montecarlo::check_path(
+            &scenario, &map, &path, draws, args.seed,
+        )),
         _ => None,
     };
     print_json(&PlanOutput { path, monte_carlo })

@@ -52,7 +52,13 @@ pub struct MonteCarloReport {
 
 /// Runs the check for every waypoint of a feasible path (waypoints in parallel, each with its
 /// own seeded generator, so the report is reproducible).
-pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws: usize, seed: u64) -> MonteCarloReport {
+pub fn check_path(
+    scenario: &Scenario,
+    map: &RadioMap,
+    path: &PathAnswer,
+    draws: usize,
+    seed: u64,
+) -> MonteCarloReport {
     let channel = ChannelModel::new(scenario);
     let height = scenario.mru.antenna_height_m;
     let waypoints: Vec<WaypointCheck> = path
@@ -87,11 +93,18 @@ pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws:
                     let model = rate.rate_model();
                     let cell = map.grid.index(wp.i, wp.j);
                     let order = rate.order(cell);
-                    let power = wp.config.power_w.as_ref().expect("rate waypoints carry powers");
+                    let power = wp
+                        .config
+                        .power_w
+                        .as_ref()
+                        .expect("rate waypoints carry powers");
                     let with_irs = theta_opt.is_some();
                     let srus = sru_part(&channel, scenario, with_irs);
                     let problem = cell_problem(&channel, mru, &srus, with_irs);
-                    let mut v: Vec<_> = theta.iter().map(|&t| crate::channel::C64::from_polar(1.0, t)).collect();
+                    let mut v: Vec<_> = theta
+                        .iter()
+                        .map(|&t| crate::channel::C64::from_polar(1.0, t))
+                        .collect();
                     v.push(crate::channel::C64::new(1.0, 0.0));
                     let mut lambdas = vec![0.0; model.users()];
                     problem.lambdas(&v, &mut lambdas);
@@ -113,7 +126,9 @@ pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws:
                     (0..model.users())
                         .map(|l| {
                             let mean = sums[l] / draws as f64;
-                            let se = ((sums_sq[l] / draws as f64 - mean * mean).max(0.0) / draws as f64).sqrt();
+                            let se = ((sums_sq[l] / draws as f64 - mean * mean).max(0.0)
+                                / draws as f64)
+                                .sqrt();
                             UserCheck {
                                 user: user_label(l),
                                 bound: bounds[l],
@@ -125,7 +140,11 @@ pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws:
                         .collect()
                 }
             };
-            WaypointCheck { i: wp.i, j: wp.j, users }
+            WaypointCheck {
+                i: wp.i,
+                j: wp.j,
+                users,
+            }
         })
         .collect();
     let mut max_gap: Vec<UserCheck> = Vec::new();
@@ -138,5 +157,10 @@ pub fn check_path(scenario: &Scenario, map: &RadioMap, path: &PathAnswer, draws:
             }
         }
     }
-    MonteCarloReport { draws, seed, max_gap, waypoints }
+    MonteCarloReport {
+        draws,
+        seed,
+        max_gap,
+        waypoints,
+    }
 }

@@ -91,11 +91,18 @@ impl<'a> CellGraph<'a> {
 
     /// The feasible map Π (paper eq. 17) for a threshold.
     pub fn feasible_mask(&self, threshold: f64) -> Vec<bool> {
-        (0..self.values.len()).map(|c| self.is_feasible(c, threshold)).collect()
+        (0..self.values.len())
+            .map(|c| self.is_feasible(c, threshold))
+            .collect()
     }
 
     /// Shortest feasible path from `start` to `goal` (paper problem 16), or why there is none.
-    pub fn shortest_path(&self, start: usize, goal: usize, threshold: f64) -> Result<Path, Infeasible> {
+    pub fn shortest_path(
+        &self,
+        start: usize,
+        goal: usize,
+        threshold: f64,
+    ) -> Result<Path, Infeasible> {
         self.check_ends(start, goal, threshold)?;
         let cells = self.values.len();
         let (gi, gj) = self.grid.cell_of(goal);
@@ -138,7 +145,10 @@ impl<'a> CellGraph<'a> {
             path.push(prev[*path.last().unwrap()] as usize);
         }
         path.reverse();
-        Ok(Path { cells: path, distance_m: dist[goal] * self.grid.resolution_m })
+        Ok(Path {
+            cells: path,
+            distance_m: dist[goal] * self.grid.resolution_m,
+        })
     }
 
     /// The largest threshold γ for which a feasible path from `start` to `goal` exists: the
@@ -148,7 +158,13 @@ impl<'a> CellGraph<'a> {
         if self.occupied[start] || self.occupied[goal] {
             return None;
         }
-        let value = |c: usize| if self.values[c].is_nan() { f64::NEG_INFINITY } else { self.values[c] };
+        let value = |c: usize| {
+            if self.values[c].is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                self.values[c]
+            }
+        };
         let mut best = vec![f64::NEG_INFINITY; self.values.len()];
         let mut done = vec![false; self.values.len()];
         let mut heap = BinaryHeap::new();
@@ -215,7 +231,9 @@ impl<'de> Deserialize<'de> for Threshold {
                 .filter(|v| v.is_finite())
                 .map(Threshold::Value)
                 .ok_or_else(|| serde::de::Error::custom("threshold must be a finite number")),
-            other => Err(serde::de::Error::custom(format!("expected a number or \"max\", got {other}"))),
+            other => Err(serde::de::Error::custom(format!(
+                "expected a number or \"max\", got {other}"
+            ))),
         }
     }
 }
@@ -298,15 +316,35 @@ fn endpoint(grid: &Grid, field: &'static str, p: [f64; 2]) -> Result<(usize, End
     })?;
     let [x, y] = grid.centre(i, j);
     let snapped = (x - p[0]).abs() > 1e-9 || (y - p[1]).abs() > 1e-9;
-    Ok((grid.index(i, j), Endpoint { requested: p, x, y, i, j, snapped }))
+    Ok((
+        grid.index(i, j),
+        Endpoint {
+            requested: p,
+            x,
+            y,
+            i,
+            j,
+            snapped,
+        },
+    ))
 }
 
 fn graph(map: &RadioMap) -> CellGraph<'_> {
-    CellGraph { grid: &map.grid, values: &map.values, occupied: &map.occupied }
+    CellGraph {
+        grid: &map.grid,
+        values: &map.values,
+        occupied: &map.occupied,
+    }
 }
 
 /// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre).
-pub fn plan(map: &RadioMap, start: [f64; 2], goal: [f64; 2], threshold: Threshold, v_max_mps: f64) -> Result<PathAnswer, PlanError> {
+pub fn plan(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    v_max_mps: f64,
+) -> Result<PathAnswer, PlanError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
     let graph = graph(map);
@@ -347,7 +385,14 @@ pub fn plan(map: &RadioMap, start: [f64; 2], goal: [f64; 2], threshold: Threshol
             .map(|&c| {
                 let (i, j) = map.grid.cell_of(c);
                 let [x, y] = map.grid.centre(i, j);
-                Waypoint { x, y, i, j, value: map.values[c], config: map.cell_config(c) }
+                Waypoint {
+                    x,
+                    y,
+                    i,
+                    j,
+                    value: map.values[c],
+                    config: map.cell_config(c),
+                }
             })
             .collect();
     }
@@ -355,7 +400,13 @@ pub fn plan(map: &RadioMap, start: [f64; 2], goal: [f64; 2], threshold: Threshol
 }
 
 /// Distance versus threshold for a list of thresholds, in one request.
-pub fn sweep(map: &RadioMap, start: [f64; 2], goal: [f64; 2], thresholds: &[f64], v_max_mps: f64) -> Result<SweepAnswer, PlanError> {
+pub fn sweep(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    thresholds: &[f64],
+    v_max_mps: f64,
+) -> Result<SweepAnswer, PlanError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
     let graph = graph(map);
@@ -403,11 +454,22 @@ mod tests {
     use proptest::prelude::*;
 
     fn grid(nx: usize, ny: usize) -> Grid {
-        Grid { nx, ny, x_min: 0.0, y_min: 0.0, resolution_m: 0.5 }
+        Grid {
+            nx,
+            ny,
+            x_min: 0.0,
+            y_min: 0.0,
+            resolution_m: 0.5,
+        }
     }
 
     /// Bellman–Ford style relaxation over every cell until nothing changes: the brute force.
-    fn brute_force_distance(g: &CellGraph, start: usize, goal: usize, threshold: f64) -> Option<f64> {
+    fn brute_force_distance(
+        g: &CellGraph,
+        start: usize,
+        goal: usize,
+        threshold: f64,
+    ) -> Option<f64> {
         if !g.is_feasible(start, threshold) || !g.is_feasible(goal, threshold) {
             return None;
         }
@@ -430,7 +492,9 @@ mod tests {
                 break;
             }
         }
-        dist[goal].is_finite().then(|| dist[goal] * g.grid.resolution_m)
+        dist[goal]
+            .is_finite()
+            .then(|| dist[goal] * g.grid.resolution_m)
     }
 
     fn arb_map() -> impl Strategy<Value = (usize, usize, Vec<f64>, Vec<bool>, usize, usize)> {
@@ -503,9 +567,19 @@ mod tests {
         let gr = grid(3, 3);
         let values = vec![1.0; 9];
         let occupied = vec![false; 9];
-        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let g = CellGraph {
+            grid: &gr,
+            values: &values,
+            occupied: &occupied,
+        };
         let p = g.shortest_path(4, 4, 0.5).unwrap();
-        assert_eq!(p, Path { cells: vec![4], distance_m: 0.0 });
+        assert_eq!(
+            p,
+            Path {
+                cells: vec![4],
+                distance_m: 0.0
+            }
+        );
     }
 
     #[test]
@@ -513,11 +587,21 @@ mod tests {
         let gr = grid(3, 1);
         let values = vec![1.0, f64::NAN, 0.2];
         let occupied = vec![false, true, false];
-        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let g = CellGraph {
+            grid: &gr,
+            values: &values,
+            occupied: &occupied,
+        };
         assert_eq!(g.shortest_path(1, 0, 0.0), Err(Infeasible::StartOccupied));
         assert_eq!(g.shortest_path(0, 1, 0.0), Err(Infeasible::GoalOccupied));
-        assert_eq!(g.shortest_path(2, 0, 0.5), Err(Infeasible::StartBelowThreshold));
-        assert_eq!(g.shortest_path(0, 2, 0.5), Err(Infeasible::GoalBelowThreshold));
+        assert_eq!(
+            g.shortest_path(2, 0, 0.5),
+            Err(Infeasible::StartBelowThreshold)
+        );
+        assert_eq!(
+            g.shortest_path(0, 2, 0.5),
+            Err(Infeasible::GoalBelowThreshold)
+        );
         assert_eq!(g.shortest_path(0, 2, 0.1), Err(Infeasible::Disconnected));
     }
 
@@ -527,12 +611,20 @@ mod tests {
         let gr = grid(2, 2);
         let occupied = vec![false, true, true, false];
         let values = vec![1.0, f64::NAN, f64::NAN, 1.0];
-        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let g = CellGraph {
+            grid: &gr,
+            values: &values,
+            occupied: &occupied,
+        };
         assert_eq!(g.shortest_path(0, 3, 0.0), Err(Infeasible::Disconnected));
         // Below-threshold corners may be cut.
         let occupied = vec![false; 4];
         let values = vec![1.0, 0.0, 0.0, 1.0];
-        let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+        let g = CellGraph {
+            grid: &gr,
+            values: &values,
+            occupied: &occupied,
+        };
         let p = g.shortest_path(0, 3, 0.5).unwrap();
         assert!((p.distance_m - 0.5 * std::f64::consts::SQRT_2).abs() < 1e-12);
     }

@@ -138,7 +138,12 @@ impl MapKey {
         access: Option<Access>,
         solver: Option<SolverKind>,
     ) -> Result<MapKey, KeyError> {
-        let err = |field, reason: &str| Err(KeyError { field, reason: reason.to_string() });
+        let err = |field, reason: &str| {
+            Err(KeyError {
+                field,
+                reason: reason.to_string(),
+            })
+        };
         let phases = phases.unwrap_or(PhaseMode::Continuous);
         if scenario.irs.is_none() && phases != PhaseMode::None {
             return err("phases", "the scenario has no IRS: only \"none\" applies");
@@ -155,7 +160,10 @@ impl MapKey {
             }
             MapKind::Rate => {
                 if scenario.srus.is_empty() {
-                    return err("kind", "a rate map needs at least one static robot (srus is empty)");
+                    return err(
+                        "kind",
+                        "a rate map needs at least one static robot (srus is empty)",
+                    );
                 }
                 let solver = solver.unwrap_or(SolverKind::Fast);
                 if solver == SolverKind::SdrSca && !solver::SDR_SCA_AVAILABLE {
@@ -167,12 +175,22 @@ impl MapKey {
                 (Some(access.unwrap_or(Access::Noma)), Some(solver))
             }
         };
-        Ok(MapKey { scenario_id: scenario_id.to_string(), kind, phases, access, solver })
+        Ok(MapKey {
+            scenario_id: scenario_id.to_string(),
+            kind,
+            phases,
+            access,
+            solver,
+        })
     }
 
     /// The map id: hash of the key's canonical JSON.
     pub fn id(&self) -> String {
-        hash_hex(serde_json::to_string(self).expect("keys serialise").as_bytes())
+        hash_hex(
+            serde_json::to_string(self)
+                .expect("keys serialise")
+                .as_bytes(),
+        )
     }
 
     pub fn unit(&self) -> &'static str {
@@ -227,7 +245,10 @@ pub enum CellSolutions {
     /// Gain maps: θ* is the closed form of eq. 14 (quantised for `bits`), recomputed per waypoint
     /// in O(N) from the channel model rather than stored as N floats per cell (a 1001² map at
     /// N = 60 would otherwise hold 480 MB of phases).
-    Gain { model: Arc<ChannelModel>, antenna_height_m: f64 },
+    Gain {
+        model: Arc<ChannelModel>,
+        antenna_height_m: f64,
+    },
     /// Rate maps: the solver's argmax per cell (phases, power split, order, certificate).
     Rate(RateCells),
 }
@@ -264,16 +285,30 @@ impl RadioMap {
     /// The configuration achieving `values[index]`.
     pub fn cell_config(&self, index: usize) -> CellConfig {
         match &self.cells {
-            CellSolutions::Gain { model, antenna_height_m } => {
+            CellSolutions::Gain {
+                model,
+                antenna_height_m,
+            } => {
                 let (i, j) = self.grid.cell_of(index);
                 let [x, y] = self.grid.centre(i, j);
                 let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
-                let mut phases = vec![0.0; if self.key.phases == PhaseMode::None { 0 } else { w.len() }];
+                let mut phases = vec![
+                    0.0;
+                    if self.key.phases == PhaseMode::None {
+                        0
+                    } else {
+                        w.len()
+                    }
+                ];
                 if !phases.is_empty() {
                     let direct = model.evaluate([x, y, *antenna_height_m], true, &mut w);
                     optimal_phases(&direct, &w, self.key.phases, &mut phases);
                 }
-                CellConfig { irs_phases_rad: phases, power_w: None, decoding_order: None }
+                CellConfig {
+                    irs_phases_rad: phases,
+                    power_w: None,
+                    decoding_order: None,
+                }
             }
             CellSolutions::Rate(rate) => rate.config(index),
         }
@@ -290,10 +325,19 @@ impl RadioMap {
 
     /// Summary statistics over the free cells with a finite value.
     pub fn stats(&self) -> MapStats {
-        let mut finite: Vec<f64> = self.values.iter().copied().filter(|v| v.is_finite()).collect();
+        let mut finite: Vec<f64> = self
+            .values
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
         finite.sort_by(f64::total_cmp);
         let free = self.occupied.iter().filter(|o| !**o).count();
-        let pick = |q: f64| finite.get(((finite.len() - 1) as f64 * q).round() as usize).copied();
+        let pick = |q: f64| {
+            finite
+                .get(((finite.len() - 1) as f64 * q).round() as usize)
+                .copied()
+        };
         MapStats {
             cells: self.values.len(),
             free_cells: free,
@@ -338,7 +382,9 @@ pub struct MapBody {
 
 impl RadioMap {
     fn as_rows(&self, data: &[f64]) -> Vec<Vec<Option<f64>>> {
-        data.chunks(self.grid.ny).map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect()).collect()
+        data.chunks(self.grid.ny)
+            .map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect())
+            .collect()
     }
 
     /// The map's JSON body.
@@ -351,7 +397,8 @@ impl RadioMap {
                 let summary = CertificateSummary {
                     cells: gaps.len(),
                     median_gap: (!gaps.is_empty()).then(|| gaps[gaps.len() / 2]),
-                    mean_gap: (!gaps.is_empty()).then(|| gaps.iter().sum::<f64>() / gaps.len() as f64),
+                    mean_gap: (!gaps.is_empty())
+                        .then(|| gaps.iter().sum::<f64>() / gaps.len() as f64),
                     max_gap: gaps.last().copied(),
                 };
                 (Some(summary), Some(self.as_rows(&rate.upper_bound)))
@@ -436,7 +483,11 @@ pub fn best_gain(direct: &DirectAndScattered, w: &[C64], mode: PhaseMode) -> f64
 
 /// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress
 /// advances and cancellation is checked once per row.
-pub fn build(scenario: &Scenario, key: &MapKey, progress: &Progress) -> Result<RadioMap, BuildError> {
+pub fn build(
+    scenario: &Scenario,
+    key: &MapKey,
+    progress: &Progress,
+) -> Result<RadioMap, BuildError> {
     let started = std::time::Instant::now();
     let grid = scenario.grid();
     let model = Arc::new(ChannelModel::new(scenario));
@@ -450,8 +501,21 @@ pub fn build(scenario: &Scenario, key: &MapKey, progress: &Progress) -> Result<R
     progress.start(grid.cells());
     let (values, cells) = match key.kind {
         MapKind::Gain => {
-            let values = gain_values(&model, &grid, &occupied, scenario.mru.antenna_height_m, key.phases, progress)?;
-            (values, CellSolutions::Gain { model, antenna_height_m: scenario.mru.antenna_height_m })
+            let values = gain_values(
+                &model,
+                &grid,
+                &occupied,
+                scenario.mru.antenna_height_m,
+                key.phases,
+                progress,
+            )?;
+            (
+                values,
+                CellSolutions::Gain {
+                    model,
+                    antenna_height_m: scenario.mru.antenna_height_m,
+                },
+            )
         }
         MapKind::Rate => {
             let rate = solver::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
@@ -551,7 +615,10 @@ mod tests {
         for b in 1..=3 {
             let q = build(&s, &gain_key(&s, PhaseMode::Bits(b)), &progress).unwrap();
             for (a, c) in q.values.iter().zip(&cont.values) {
-                assert!(a.is_nan() && c.is_nan() || a <= &(c + 1e-9), "{b} bits: {a} > {c}");
+                assert!(
+                    a.is_nan() && c.is_nan() || a <= &(c + 1e-9),
+                    "{b} bits: {a} > {c}"
+                );
             }
         }
         let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
@@ -583,7 +650,10 @@ mod tests {
         let e = MapKey::new("x", &s, MapKind::Gain, None, Some(Access::Oma), None).unwrap_err();
         assert_eq!(e.field, "access");
         let rate = MapKey::new("x", &s, MapKind::Rate, None, None, None).unwrap();
-        assert_eq!((rate.access, rate.solver), (Some(Access::Noma), Some(SolverKind::Fast)));
+        assert_eq!(
+            (rate.access, rate.solver),
+            (Some(Access::Noma), Some(SolverKind::Fast))
+        );
         assert_ne!(rate.id(), gain_key(&s, PhaseMode::Continuous).id());
         assert!("0".parse::<PhaseMode>().is_err());
         assert_eq!("3".parse::<PhaseMode>(), Ok(PhaseMode::Bits(3)));

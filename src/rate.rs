@@ -66,7 +66,13 @@ impl RateModel {
             Access::Noma => permutations(users),
             Access::Oma => vec![(0..users as u8).collect()],
         };
-        RateModel { access, p_max_w, noise_w, targets, orders }
+        RateModel {
+            access,
+            p_max_w,
+            noise_w,
+            targets,
+            orders,
+        }
     }
 
     /// K + 1.
@@ -99,7 +105,9 @@ impl RateModel {
     #[inline]
     pub fn mru_rate(&self, lambdas: &[f64], order: usize) -> Option<f64> {
         if self.access == Access::Noma
-            && self.orders[order].windows(2).any(|w| lambdas[w[0] as usize] > lambdas[w[1] as usize])
+            && self.orders[order]
+                .windows(2)
+                .any(|w| lambdas[w[0] as usize] > lambdas[w[1] as usize])
         {
             return None;
         }
@@ -119,11 +127,16 @@ impl RateModel {
                 for (l, &lam) in lambdas.iter().enumerate().skip(1) {
                     left -= ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lam);
                 }
-                (left >= 0.0).then(|| (bands * lambdas[0] * left / noise).ln_1p() / bands / std::f64::consts::LN_2)
+                (left >= 0.0).then(|| {
+                    (bands * lambdas[0] * left / noise).ln_1p() / bands / std::f64::consts::LN_2
+                })
             }
             Access::Noma => {
                 let pi = &self.orders[order];
-                let k = pi.iter().position(|&u| u == 0).expect("the MRU is in every order");
+                let k = pi
+                    .iter()
+                    .position(|&u| u == 0)
+                    .expect("the MRU is in every order");
                 let mut tail = 0.0; // S_{t} for t > k, from the strongest user down
                 for &u in pi[k + 1..].iter().rev() {
                     let r = self.targets[u as usize];
@@ -154,7 +167,8 @@ impl RateModel {
                 let bands = users as f64;
                 let mut left = self.p_max_w;
                 for l in 1..users {
-                    power[l] = ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lambdas[l]);
+                    power[l] =
+                        ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lambdas[l]);
                     left -= power[l];
                 }
                 power[0] = left.max(0.0);
@@ -179,7 +193,11 @@ impl RateModel {
                 power[0] = (head - tail).max(0.0);
             }
         }
-        Some(PowerSplit { mru_rate, power_w: power, order: order as u8 })
+        Some(PowerSplit {
+            mru_rate,
+            power_w: power,
+            order: order as u8,
+        })
     }
 
     /// Every user's rate for given channel power gains, powers and order. With the expected
@@ -191,7 +209,9 @@ impl RateModel {
         match self.access {
             Access::Oma => {
                 let bands = users as f64;
-                (0..users).map(|l| (1.0 + bands * gains[l] * power_w[l] / noise).log2() / bands).collect()
+                (0..users)
+                    .map(|l| (1.0 + bands * gains[l] * power_w[l] / noise).log2() / bands)
+                    .collect()
             }
             Access::Noma => {
                 let pi = &self.orders[order];
@@ -215,7 +235,9 @@ impl RateModel {
         match self.access {
             Access::Oma => {
                 let bands = self.users() as f64;
-                (0..self.users()).map(|l| ((bands * target(l)).exp2() - 1.0) * noise / (bands * lambdas[l])).sum()
+                (0..self.users())
+                    .map(|l| ((bands * target(l)).exp2() - 1.0) * noise / (bands * lambdas[l]))
+                    .sum()
             }
             Access::Noma => {
                 let mut scale = 1.0;
@@ -232,13 +254,20 @@ impl RateModel {
 
     /// Human-readable labels of an order's users: "mru", "sru0", …
     pub fn order_labels(&self, order: usize) -> Vec<String> {
-        self.orders[order].iter().map(|&u| user_label(u as usize)).collect()
+        self.orders[order]
+            .iter()
+            .map(|&u| user_label(u as usize))
+            .collect()
     }
 }
 
 /// "mru" for user 0, "sru{k}" for SRU k (0-based, scenario order).
 pub fn user_label(user: usize) -> String {
-    if user == 0 { "mru".to_string() } else { format!("sru{}", user - 1) }
+    if user == 0 {
+        "mru".to_string()
+    } else {
+        format!("sru{}", user - 1)
+    }
 }
 
 fn permutations(n: usize) -> Vec<Vec<u8>> {
@@ -280,7 +309,8 @@ mod tests {
                 let ps = model.p_max_w * share;
                 let power = [model.p_max_w - ps, ps];
                 let pi = &model.orders()[k];
-                if model.access == Access::Noma && lambdas[pi[0] as usize] > lambdas[pi[1] as usize] {
+                if model.access == Access::Noma && lambdas[pi[0] as usize] > lambdas[pi[1] as usize]
+                {
                     continue;
                 }
                 let rates = model.rates(lambdas, &power, k);
@@ -343,7 +373,12 @@ mod tests {
     fn orders_cover_all_permutations() {
         let m = RateModel::new(Access::Noma, 1.0, 1.0, &[1.0, 1.0, 1.0]);
         assert_eq!(m.orders().len(), 24);
-        assert_eq!(RateModel::new(Access::Oma, 1.0, 1.0, &[1.0, 1.0]).orders().len(), 1);
+        assert_eq!(
+            RateModel::new(Access::Oma, 1.0, 1.0, &[1.0, 1.0])
+                .orders()
+                .len(),
+            1
+        );
         assert_eq!(m.order_labels(0), vec!["mru", "sru0", "sru1", "sru2"]);
     }
 }

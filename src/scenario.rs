@@ -172,7 +172,10 @@ fn default_rician_k_db() -> f64 {
 
 impl Default for ChannelSpec {
     fn default() -> Self {
-        ChannelSpec { rician_k_db: default_rician_k_db(), path_loss: PathLossModel::default() }
+        ChannelSpec {
+            rician_k_db: default_rician_k_db(),
+            path_loss: PathLossModel::default(),
+        }
     }
 }
 
@@ -186,7 +189,10 @@ pub struct ScenarioError {
 
 impl ScenarioError {
     pub fn new(field: impl Into<String>, reason: impl fmt::Display) -> Self {
-        ScenarioError { field: field.into(), reason: reason.to_string() }
+        ScenarioError {
+            field: field.into(),
+            reason: reason.to_string(),
+        }
     }
 }
 
@@ -216,7 +222,10 @@ impl Grid {
     /// q^Δ_{i,j}, the horizontal centre of cell (i, j) (paper eq. 10).
     #[inline]
     pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
-        [self.x_min + i as f64 * self.resolution_m, self.y_min + j as f64 * self.resolution_m]
+        [
+            self.x_min + i as f64 * self.resolution_m,
+            self.y_min + j as f64 * self.resolution_m,
+        ]
     }
     fn x_max(&self) -> f64 {
         self.x_min + (self.nx - 1) as f64 * self.resolution_m
@@ -268,8 +277,9 @@ impl Scenario {
                 irs.sub_pitch_m = Some(lambda / 2.0);
             }
             if irs.grouping == Grouping::Elements && irs.element_pitch_m.is_none() {
-                irs.element_pitch_m =
-                    irs.sub_pitch_m.map(|p| p / irs.elements_per_sub.max(1) as f64);
+                irs.element_pitch_m = irs
+                    .sub_pitch_m
+                    .map(|p| p / irs.elements_per_sub.max(1) as f64);
             }
         }
     }
@@ -333,7 +343,10 @@ impl Scenario {
         if d <= 0.0 {
             return err("grid.resolution_m", "must be positive");
         }
-        for (field, span) in [("room.x_max", r.x_max - r.x_min), ("room.y_max", r.y_max - r.y_min)] {
+        for (field, span) in [
+            ("room.x_max", r.x_max - r.x_min),
+            ("room.y_max", r.y_max - r.y_min),
+        ] {
             let cells = span / d;
             if cells > MAX_GRID_CELLS as f64 {
                 return Err(ScenarioError::new(
@@ -365,7 +378,10 @@ impl Scenario {
         }
 
         if self.obstacles.len() > MAX_OBSTACLES {
-            return Err(ScenarioError::new("obstacles", format!("more than {MAX_OBSTACLES} obstacles")));
+            return Err(ScenarioError::new(
+                "obstacles",
+                format!("more than {MAX_OBSTACLES} obstacles"),
+            ));
         }
         for (k, o) in self.obstacles.iter().enumerate() {
             let f = |s: &str| format!("obstacles[{k}].{s}");
@@ -386,7 +402,10 @@ impl Scenario {
         finite("ap.noise_dbm", ap.noise_dbm)?;
         finite("ap.carrier_ghz", ap.carrier_ghz)?;
         if !(ap.carrier_ghz > 0.0 && ap.carrier_ghz <= 100.0) {
-            return err("ap.carrier_ghz", "must lie in (0, 100] GHz, the 3GPP InF model's range");
+            return err(
+                "ap.carrier_ghz",
+                "must lie in (0, 100] GHz, the 3GPP InF model's range",
+            );
         }
         self.inside_room("ap.position", ap.position)?;
         if self.is_inside_obstacle(ap.position) {
@@ -406,7 +425,10 @@ impl Scenario {
                 ));
             }
             if n[2].abs() > 1.0 - 1e-6 {
-                return err("irs.normal", "must not be vertical: the IRS hangs on a wall");
+                return err(
+                    "irs.normal",
+                    "must not be vertical: the IRS hangs on a wall",
+                );
             }
             if irs.nx_sub == 0 {
                 return err("irs.nx_sub", "must be at least 1");
@@ -420,13 +442,19 @@ impl Scenario {
             if irs.subsurfaces() > MAX_SUBSURFACES {
                 return Err(ScenarioError::new(
                     "irs.nx_sub",
-                    format!("N = nx_sub·nz_sub = {} exceeds the limit of {MAX_SUBSURFACES}", irs.subsurfaces()),
+                    format!(
+                        "N = nx_sub·nz_sub = {} exceeds the limit of {MAX_SUBSURFACES}",
+                        irs.subsurfaces()
+                    ),
                 ));
             }
             if irs.elements() > MAX_ELEMENTS {
                 return Err(ScenarioError::new(
                     "irs.elements_per_sub",
-                    format!("M = N·N̄ = {} exceeds the limit of {MAX_ELEMENTS}", irs.elements()),
+                    format!(
+                        "M = N·N̄ = {} exceeds the limit of {MAX_ELEMENTS}",
+                        irs.elements()
+                    ),
                 ));
             }
             let pitch = irs.sub_pitch_m.unwrap_or(f64::NAN);
@@ -436,7 +464,10 @@ impl Scenario {
             }
             match (irs.grouping, irs.element_pitch_m) {
                 (Grouping::Coherent, Some(_)) => {
-                    return err("irs.element_pitch_m", "applies only to grouping \"elements\"");
+                    return err(
+                        "irs.element_pitch_m",
+                        "applies only to grouping \"elements\"",
+                    );
                 }
                 (Grouping::Elements, Some(e)) => {
                     finite("irs.element_pitch_m", e)?;
@@ -453,17 +484,25 @@ impl Scenario {
                 _ => {}
             }
             let ahead = |p: [f64; 3]| {
-                (p[0] - irs.center[0]) * n[0] + (p[1] - irs.center[1]) * n[1] + (p[2] - irs.center[2]) * n[2]
+                (p[0] - irs.center[0]) * n[0]
+                    + (p[1] - irs.center[1]) * n[1]
+                    + (p[2] - irs.center[2]) * n[2]
             };
             if ahead(ap.position) <= 0.0 {
-                return err("irs.normal", "the AP lies behind the IRS surface, so the IRS cannot reflect its signal");
+                return err(
+                    "irs.normal",
+                    "the AP lies behind the IRS surface, so the IRS cannot reflect its signal",
+                );
             }
         }
 
         finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
         finite("mru.v_max_mps", self.mru.v_max_mps)?;
         if !(self.mru.antenna_height_m > 0.0 && self.mru.antenna_height_m < r.ceiling_m) {
-            return err("mru.antenna_height_m", "must lie strictly between the floor and the ceiling");
+            return err(
+                "mru.antenna_height_m",
+                "must lie strictly between the floor and the ceiling",
+            );
         }
         if self.mru.v_max_mps <= 0.0 {
             return err("mru.v_max_mps", "must be positive");
@@ -472,7 +511,10 @@ impl Scenario {
         if self.srus.len() > MAX_SRUS {
             return Err(ScenarioError::new(
                 "srus",
-                format!("{} static robots exceed the limit of {MAX_SRUS}", self.srus.len()),
+                format!(
+                    "{} static robots exceed the limit of {MAX_SRUS}",
+                    self.srus.len()
+                ),
             ));
         }
         for (k, s) in self.srus.iter().enumerate() {
@@ -484,7 +526,10 @@ impl Scenario {
                 return Err(ScenarioError::new(f("position"), "lies inside an obstacle"));
             }
             if s.min_rate_bps_hz < 0.0 || s.min_rate_bps_hz > 30.0 {
-                return Err(ScenarioError::new(f("min_rate_bps_hz"), "must lie in [0, 30] bit/s/Hz"));
+                return Err(ScenarioError::new(
+                    f("min_rate_bps_hz"),
+                    "must lie in [0, 30] bit/s/Hz",
+                ));
             }
         }
 
@@ -499,10 +544,16 @@ impl Scenario {
         let r = &self.room;
         let inside = p[0] >= r.x_min && p[0] <= r.x_max && p[1] >= r.y_min && p[1] <= r.y_max;
         if !inside {
-            return Err(ScenarioError::new(field, "lies outside the room's floor plan"));
+            return Err(ScenarioError::new(
+                field,
+                "lies outside the room's floor plan",
+            ));
         }
         if p[2] < 0.0 || p[2] > r.ceiling_m {
-            return Err(ScenarioError::new(field, "height must lie between the floor and room.ceiling_m"));
+            return Err(ScenarioError::new(
+                field,
+                "height must lie between the floor and room.ceiling_m",
+            ));
         }
         Ok(())
     }
@@ -566,7 +617,11 @@ fn write_canonical(value: &serde_json::Value, out: &mut String) {
 }
 
 fn finite(field: &str, v: f64) -> Result<(), ScenarioError> {
-    if v.is_finite() { Ok(()) } else { Err(ScenarioError::new(field, "must be a finite number")) }
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(ScenarioError::new(field, "must be a finite number"))
+    }
 }
 
 fn finite_all(field: &str, v: &[f64]) -> Result<(), ScenarioError> {
@@ -579,12 +634,16 @@ fn deserialize_tracking_path(text: &str) -> Result<Scenario, ScenarioError> {
     let mut deserializer = serde_json::Deserializer::from_str(text);
     let scenario: Scenario = serde_path_to_error::deserialize(&mut deserializer).map_err(|e| {
         let path = e.path().to_string();
-        let field = if path == "." || path.is_empty() { "$".to_string() } else { path };
+        let field = if path == "." || path.is_empty() {
+            "$".to_string()
+        } else {
+            path
+        };
         ScenarioError::new(field, e.into_inner())
     })?;
-    deserializer
-        .end()
-        .map_err(|e| ScenarioError::new("$", format!("trailing characters after the document: {e}")))?;
+    deserializer.end().map_err(|e| {
+        ScenarioError::new("$", format!("trailing characters after the document: {e}"))
+    })?;
     Ok(scenario)
 }
 
@@ -626,16 +685,43 @@ mod tests {
     fn errors_name_the_field() {
         let cases: Vec<(Box<dyn FnOnce(&mut serde_json::Value)>, &str)> = vec![
             (Box::new(|v| v["room"]["bogus"] = 1.into()), "room.bogus"),
-            (Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])), "obstacles[0].size"),
-            (Box::new(|v| v["ap"]["position"] = v["obstacles"][0]["center"].clone()), "ap.position"),
-            (Box::new(|v| v["grid"]["resolution_m"] = 0.001.into()), "grid.resolution_m"),
-            (Box::new(|v| v["grid"]["resolution_m"] = 0.35.into()), "room.x_max"),
-            (Box::new(|v| v["irs"]["normal"] = serde_json::json!([0.0, 0.9, 0.0])), "irs.normal"),
+            (
+                Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])),
+                "obstacles[0].size",
+            ),
+            (
+                Box::new(|v| v["ap"]["position"] = v["obstacles"][0]["center"].clone()),
+                "ap.position",
+            ),
+            (
+                Box::new(|v| v["grid"]["resolution_m"] = 0.001.into()),
+                "grid.resolution_m",
+            ),
+            (
+                Box::new(|v| v["grid"]["resolution_m"] = 0.35.into()),
+                "room.x_max",
+            ),
+            (
+                Box::new(|v| v["irs"]["normal"] = serde_json::json!([0.0, 0.9, 0.0])),
+                "irs.normal",
+            ),
             (Box::new(|v| v["irs"]["nx_sub"] = 0.into()), "irs.nx_sub"),
-            (Box::new(|v| v["mru"]["v_max_mps"] = 0.into()), "mru.v_max_mps"),
-            (Box::new(|v| v["ap"]["carrier_ghz"] = (-2.0).into()), "ap.carrier_ghz"),
-            (Box::new(|v| v["srus"][0]["position"] = serde_json::json!([0.0, 0.0, -1.0])), "srus[0].position"),
-            (Box::new(|v| v["channel"]["path_loss"] = "free_space".into()), "channel.path_loss"),
+            (
+                Box::new(|v| v["mru"]["v_max_mps"] = 0.into()),
+                "mru.v_max_mps",
+            ),
+            (
+                Box::new(|v| v["ap"]["carrier_ghz"] = (-2.0).into()),
+                "ap.carrier_ghz",
+            ),
+            (
+                Box::new(|v| v["srus"][0]["position"] = serde_json::json!([0.0, 0.0, -1.0])),
+                "srus[0].position",
+            ),
+            (
+                Box::new(|v| v["channel"]["path_loss"] = "free_space".into()),
+                "channel.path_loss",
+            ),
         ];
         for (mutate, field) in cases {
             let e = mutated(mutate);

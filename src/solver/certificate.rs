@@ -12,7 +12,7 @@
 //!      = max_{Λ ⪰ 0, tr Λ = 1} ( Σ_n √(ρ_nᴴ Λ ρ_n) )².
 //!
 //! Writing Λ = (I + x·σ)/2 with x in the unit ball (σ the Pauli matrices) makes the inner sum a
-//! concave function of x ∈ R³, maximised here by a safeguarded projected Newton method. Any Λ
+//! concave function of x ∈ R³, maximised here by a barrier (interior-point) Newton method. Any Λ
 //! gives z_n = 1/√(ρ_nᴴ Λ ρ_n); scaling z by λ_max(Σ z_n ρ_n ρ_nᴴ) makes it feasible, so
 //! λ_max · Σ 1/z_n is a *valid* upper bound on h(w) however inexact the maximisation.
 //!
@@ -32,21 +32,36 @@ use crate::rate::RateModel;
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::FRAC_PI_2;
 
-const INITIAL_DIRECTIONS: usize = 7;
+const INITIAL_DIRECTIONS: usize = 5;
 const REFINEMENT_ROUNDS: usize = 5;
+/// A refinement round that lowers the rate bound by less than this (bit/s/Hz) ends refinement.
+const REFINEMENT_SETTLED: f64 = 1e-6;
 /// Relative duality gap at which the support-function maximisation stops.
-const GAP_TOLERANCE: f64 = 1e-7;
-const MAX_NEWTON_STEPS: usize = 40;
+const GAP_TOLERANCE: f64 = 1e-6;
+const MAX_NEWTON_STEPS: usize = 30;
+const MAX_BARRIER_STAGES: usize = 12;
 
 /// An upper bound on the MRU's rate over all phase vectors (−∞ if even the relaxation cannot
 /// serve every SRU).
 pub fn upper_bound(problem: &CellProblem, model: &RateModel) -> f64 {
-    if problem.users() == 2 { polygon_bound(problem, model) } else { per_user_bound(problem, model) }
+    if problem.users() == 2 {
+        polygon_bound(problem, model)
+    } else {
+        per_user_bound(problem, model)
+    }
 }
 
 fn per_user_bound(problem: &CellProblem, model: &RateModel) -> f64 {
     let lambdas: Vec<f64> = (0..problem.users())
-        .map(|l| problem.user(l).iter().map(|x| x.norm()).sum::<f64>().powi(2) + problem.tau[l])
+        .map(|l| {
+            problem
+                .user(l)
+                .iter()
+                .map(|x| x.norm())
+                .sum::<f64>()
+                .powi(2)
+                + problem.tau[l]
+        })
         .collect();
     (0..model.orders().len())
         .filter_map(|k| model.mru_rate_ignoring_ordering(&lambdas, k))
@@ -55,31 +70,51 @@ fn per_user_bound(problem: &CellProblem, model: &RateModel) -> f64 {
 
 /// A valid upper bound on h(w) = max{w₁ tr(ā āᴴ V) + w₂ tr(b̄ b̄ᴴ V) : V ⪰ 0, diag V = 1}.
 pub fn support_bound(a: &[C64], b: &[C64], w1: f64, w2: f64) -> f64 {
+    support_bound_from(a, b, w1, w2, None).0
+}
+
+/// [`support_bound`], warm-started from the dual point of a nearby direction; returns the bound
+/// and this direction's dual point (the Bloch vector x of Λ).
+fn support_bound_from(
+    a: &[C64],
+    b: &[C64],
+    w1: f64,
+    w2: f64,
+    start: Option<Vector3<f64>>,
+) -> (f64, Vector3<f64>) {
     let l1 = |v: &[C64]| v.iter().map(|x| x.norm()).sum::<f64>();
     if w2 <= 0.0 {
-        return w1 * l1(a).powi(2); // rank one: the relaxation is tight
+        return (w1 * l1(a).powi(2), Vector3::new(0.0, 0.0, 1.0)); // rank one: the relaxation is tight
     }
     if w1 <= 0.0 {
-        return w2 * l1(b).powi(2);
+        return (w2 * l1(b).powi(2), Vector3::new(0.0, 0.0, -1.0));
     }
     let rw = (w1 * w2).sqrt();
     // u_n(x) = 2 ρ_nᴴ Λ ρ_n = α_n + β_n·x, with |β_n| = α_n.
-    let alpha: Vec<f64> = a.iter().zip(b).map(|(p, q)| w1 * p.norm_sqr() + w2 * q.norm_sqr()).collect();
+    let alpha: Vec<f64> = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| w1 * p.norm_sqr() + w2 * q.norm_sqr())
+        .collect();
     let beta: Vec<Vector3<f64>> = a
         .iter()
         .zip(b)
         .map(|(p, q)| {
             let c = p.conj() * q * rw;
-            Vector3::new(2.0 * c.re, 2.0 * c.im, w1 * p.norm_sqr() - w2 * q.norm_sqr())
+            Vector3::new(
+                2.0 * c.re,
+                2.0 * c.im,
+                w1 * p.norm_sqr() - w2 * q.norm_sqr(),
+            )
         })
         .collect();
     let floor = |al: f64| 1e-14 * al + f64::MIN_POSITIVE;
     let value = |x: &Vector3<f64>| -> f64 {
-        alpha.iter().zip(&beta).map(|(al, be)| (al + be.dot(x)).max(0.0).sqrt()).sum()
-    };
-    let project = |x: Vector3<f64>| {
-        let r = x.norm();
-        if r > 1.0 { x / r } else { x }
+        alpha
+            .iter()
+            .zip(&beta)
+            .map(|(al, be)| (al + be.dot(x)).max(0.0).sqrt())
+            .sum()
     };
     // Any Λ (any x) yields the valid bound λ_max(M) · Σ 1/z_n, and (Σ √q_n)² ≤ h(w) is a lower
     // estimate: iterate until the two agree to `GAP_TOLERANCE`.
@@ -97,49 +132,76 @@ pub fn support_bound(a: &[C64], b: &[C64], w1: f64, w2: f64) -> f64 {
         let lambda_max = 0.5 * (m11 + m22) + (0.25 * (m11 - m22).powi(2) + m12.norm_sqr()).sqrt();
         (lambda_max * sqrt_sum, sqrt_sum * sqrt_sum)
     };
-    let mut x = Vector3::zeros();
-    let mut fx = value(&x);
+    // Maximise G(x) = Σ √(α_n + β_n·x) over the unit ball by a barrier method: Newton on
+    // G(x) + μ log(1 − |x|²) for μ → 0, which reaches optima on the sphere (rank-one Λ) and
+    // inside it alike. Stop once the certified gap closes.
+    let scale = value(&Vector3::zeros());
+    // A warm start sits just inside the ball with a small barrier weight.
+    let (mut x, mut mu) = match start {
+        Some(s) => (s * 0.98, 1e-4 * scale),
+        None => (Vector3::zeros(), 1e-2 * scale),
+    };
     let mut best_bound = f64::INFINITY;
-    for _ in 0..MAX_NEWTON_STEPS {
-        let (bound, lower) = certified(&x);
-        best_bound = best_bound.min(bound);
-        if best_bound <= lower * (1.0 + GAP_TOLERANCE) {
-            break;
-        }
-        let mut grad = Vector3::zeros();
-        let mut neg_hess = Matrix3::zeros();
-        for (al, be) in alpha.iter().zip(&beta) {
-            let u = (al + be.dot(&x)).max(floor(*al));
-            let su = u.sqrt();
-            grad += be / (2.0 * su);
-            neg_hess += be * be.transpose() / (4.0 * u * su);
-        }
-        let ridge = 1e-12 * neg_hess.trace() + f64::MIN_POSITIVE;
-        let newton = (neg_hess + Matrix3::identity() * ridge).cholesky().map(|c| c.solve(&grad));
-        let gradient_step = grad / (neg_hess.trace() + ridge);
-        let mut moved = false;
-        for direction in newton.into_iter().chain(std::iter::once(gradient_step)) {
+    let mut converged = false;
+    for _ in 0..MAX_BARRIER_STAGES {
+        let barrier_value = |x: &Vector3<f64>, mu: f64| {
+            let slack = 1.0 - x.norm_squared();
+            if slack <= 0.0 {
+                f64::NEG_INFINITY
+            } else {
+                value(x) + mu * slack.ln()
+            }
+        };
+        for _ in 0..MAX_NEWTON_STEPS {
+            let slack = 1.0 - x.norm_squared();
+            let mut grad = -x * (2.0 * mu / slack);
+            let mut neg_hess = Matrix3::identity() * (2.0 * mu / slack)
+                + x * x.transpose() * (4.0 * mu / (slack * slack));
+            for (al, be) in alpha.iter().zip(&beta) {
+                let u = (al + be.dot(&x)).max(floor(*al));
+                let su = u.sqrt();
+                grad += be / (2.0 * su);
+                neg_hess += be * be.transpose() / (4.0 * u * su);
+            }
+            let Some(step) = neg_hess.cholesky().map(|c| c.solve(&grad)) else {
+                break;
+            };
+            let decrement = grad.dot(&step);
+            if decrement <= 1e-16 * scale {
+                break;
+            }
+            let f0 = barrier_value(&x, mu);
             let mut t = 1.0;
-            for _ in 0..30 {
-                let candidate = project(x + direction * t);
-                let fc = value(&candidate);
-                if fc > fx {
+            let mut moved = false;
+            for _ in 0..50 {
+                let candidate = x + step * t;
+                if barrier_value(&candidate, mu) >= f0 + 0.25 * t * decrement {
                     x = candidate;
-                    fx = fc;
                     moved = true;
                     break;
                 }
                 t *= 0.5;
             }
-            if moved {
+            if !moved {
                 break;
             }
         }
-        if !moved {
+        let (bound, lower) = certified(&x);
+        best_bound = best_bound.min(bound);
+        if best_bound <= lower * (1.0 + GAP_TOLERANCE) {
+            converged = true;
             break;
         }
+        mu *= 0.02;
     }
-    best_bound.min(certified(&x).0)
+    if !converged && start.is_some() {
+        // A warm start that did not close the gap: start afresh from the ball's centre.
+        let (cold, cold_x) = support_bound_from(a, b, w1, w2, None);
+        if cold < best_bound {
+            return (cold, cold_x);
+        }
+    }
+    (best_bound, x)
 }
 
 type Point = [f64; 2];
@@ -168,56 +230,71 @@ fn clip(polygon: &[Point], n: Point, c: f64) -> Vec<Point> {
 fn polygon_bound(problem: &CellProblem, model: &RateModel) -> f64 {
     let (a, b) = (problem.user(0), problem.user(1));
     let tau = [problem.tau[0], problem.tau[1]];
-    let mut directions: Vec<(f64, f64)> = (0..INITIAL_DIRECTIONS)
-        .map(|k| {
-            let angle = FRAC_PI_2 * k as f64 / (INITIAL_DIRECTIONS - 1) as f64;
-            (angle, support_bound(a, b, angle.cos(), angle.sin()))
-        })
-        .collect();
-    let mut best = f64::NEG_INFINITY;
+    // (angle, bound, dual point), kept sorted by angle.
+    let mut directions: Vec<(f64, f64, Vector3<f64>)> = Vec::new();
+    let mut previous = None;
+    for k in 0..INITIAL_DIRECTIONS {
+        let angle = FRAC_PI_2 * k as f64 / (INITIAL_DIRECTIONS - 1) as f64;
+        let (h, x) = support_bound_from(a, b, angle.cos(), angle.sin(), previous);
+        previous = (k > 0).then_some(x);
+        directions.push((angle, h, x));
+    }
+    let mut best = f64::INFINITY;
     for round in 0..=REFINEMENT_ROUNDS {
-        directions.sort_by(|p, q| p.0.total_cmp(&q.0));
         let (value, argmax) = maximise_over_polygon(&directions, tau, model);
+        let settled = best - value < REFINEMENT_SETTLED;
         best = value;
         let Some(point) = argmax else { break };
-        if round == REFINEMENT_ROUNDS {
+        if round == REFINEMENT_ROUNDS || (settled && round >= 2) {
             break;
         }
         // Refine between each active direction and its neighbours.
         let mut new_angles = Vec::new();
-        for (k, &(angle, h)) in directions.iter().enumerate() {
+        for (k, &(angle, h, _)) in directions.iter().enumerate() {
             let residual = h - (angle.cos() * point[0] + angle.sin() * point[1]);
             if residual <= 1e-9 * h.max(f64::MIN_POSITIVE) {
                 if k > 0 {
-                    new_angles.push(0.5 * (angle + directions[k - 1].0));
+                    new_angles.push((0.5 * (angle + directions[k - 1].0), k - 1));
                 }
                 if k + 1 < directions.len() {
-                    new_angles.push(0.5 * (angle + directions[k + 1].0));
+                    new_angles.push((0.5 * (angle + directions[k + 1].0), k + 1));
                 }
             }
         }
-        new_angles.retain(|t| directions.iter().all(|d| (d.0 - t).abs() > 1e-6));
-        new_angles.dedup_by(|p, q| (*p - *q).abs() < 1e-9);
+        new_angles.retain(|t| directions.iter().all(|d| (d.0 - t.0).abs() > 1e-6));
+        new_angles.dedup_by(|p, q| (p.0 - q.0).abs() < 1e-9);
         if new_angles.is_empty() {
             break;
         }
-        for angle in new_angles {
-            directions.push((angle, support_bound(a, b, angle.cos(), angle.sin())));
+        for (angle, neighbour) in new_angles {
+            let warm = directions[neighbour].2;
+            let start = (directions[neighbour].0 > 0.0 && directions[neighbour].0 < FRAC_PI_2)
+                .then_some(warm);
+            let (h, x) = support_bound_from(a, b, angle.cos(), angle.sin(), start);
+            directions.push((angle, h, x));
         }
+        directions.sort_by(|p, q| p.0.total_cmp(&q.0));
     }
     best
 }
 
 /// Max of the MRU rate over the outer polygon (in gain coordinates without τ) and every order;
 /// returns the value and the maximiser (without τ), if any polygon is non-empty.
-fn maximise_over_polygon(directions: &[(f64, f64)], tau: [f64; 2], model: &RateModel) -> (f64, Option<Point>) {
+fn maximise_over_polygon(
+    directions: &[(f64, f64, Vector3<f64>)],
+    tau: [f64; 2],
+    model: &RateModel,
+) -> (f64, Option<Point>) {
     let x_max = directions.first().map_or(0.0, |d| d.1);
     let y_max = directions.last().map_or(0.0, |d| d.1);
     let mut polygon: Vec<Point> = vec![[0.0, 0.0], [x_max, 0.0], [x_max, y_max], [0.0, y_max]];
-    for &(angle, h) in &directions[1..directions.len() - 1] {
+    for &(angle, h, _) in &directions[1..directions.len() - 1] {
         polygon = clip(&polygon, [angle.cos(), angle.sin()], h);
     }
-    let polygon: Vec<Point> = polygon.iter().map(|p| [p[0] + tau[0], p[1] + tau[1]]).collect();
+    let polygon: Vec<Point> = polygon
+        .iter()
+        .map(|p| [p[0] + tau[0], p[1] + tau[1]])
+        .collect();
     let mut best = (f64::NEG_INFINITY, None);
     for k in 0..model.orders().len() {
         let mut region = polygon.clone();
@@ -235,7 +312,11 @@ fn maximise_over_polygon(directions: &[(f64, f64)], tau: [f64; 2], model: &RateM
         if region.is_empty() {
             continue;
         }
-        let rate = |p: &Point| model.mru_rate_ignoring_ordering(p, k).unwrap_or(f64::NEG_INFINITY);
+        let rate = |p: &Point| {
+            model
+                .mru_rate_ignoring_ordering(p, k)
+                .unwrap_or(f64::NEG_INFINITY)
+        };
         for e in 0..region.len() {
             let (p, q) = (region[e], region[(e + 1) % region.len()]);
             let at = |t: f64| [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])];
@@ -273,7 +354,9 @@ fn golden_max(f: impl Fn(f64) -> f64) -> (f64, f64) {
     }
     [(0.0, f(0.0)), (1.0, f(1.0)), (x1, f1), (x2, f2)]
         .into_iter()
-        .fold((0.0, f64::NEG_INFINITY), |best, c| if c.1 > best.1 { c } else { best })
+        .fold((0.0, f64::NEG_INFINITY), |best, c| {
+            if c.1 > best.1 { c } else { best }
+        })
 }
 
 #[cfg(test)]
@@ -282,7 +365,9 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     fn random_vector(rng: &mut impl RngExt, n: usize) -> Vec<C64> {
-        (0..n).map(|_| C64::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5)).collect()
+        (0..n)
+            .map(|_| C64::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5))
+            .collect()
     }
 
     /// The support bound is ≥ every rank-one value and ≥ the dual's lower estimate, and it is
@@ -297,7 +382,9 @@ mod tests {
             let (w1, w2) = (angle.cos(), angle.sin());
             let bound = support_bound(&a, &b, w1, w2);
             for _ in 0..2000 {
-                let v: Vec<C64> = (0..n).map(|_| C64::from_polar(1.0, rng.random::<f64>() * 6.3)).collect();
+                let v: Vec<C64> = (0..n)
+                    .map(|_| C64::from_polar(1.0, rng.random::<f64>() * 6.3))
+                    .collect();
                 let sa: C64 = a.iter().zip(&v).map(|(x, y)| x * y).sum();
                 let sb: C64 = b.iter().zip(&v).map(|(x, y)| x * y).sum();
                 assert!(w1 * sa.norm_sqr() + w2 * sb.norm_sqr() <= bound * (1.0 + 1e-12));
@@ -315,7 +402,10 @@ mod tests {
         let (w1, w2) = (0.6, 0.8);
         let exact = (w1 + w2 * c.norm_sqr()) * a.iter().map(|x| x.norm()).sum::<f64>().powi(2);
         let bound = support_bound(&a, &b, w1, w2);
-        assert!(bound >= exact * (1.0 - 1e-12) && bound <= exact * (1.0 + 1e-6), "{bound} vs {exact}");
+        assert!(
+            bound >= exact * (1.0 - 1e-12) && bound <= exact * (1.0 + 1e-6),
+            "{bound} vs {exact}"
+        );
     }
 
     #[test]

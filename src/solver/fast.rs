@@ -27,7 +27,7 @@ const Z_DECADES: f64 = 3.0;
 const Z_MAGNITUDES: usize = 25;
 const Z_ANGLES: usize = 16;
 /// Phase grid per element in the coordinate ascent.
-const ELEMENT_GRID: usize = 24;
+const ELEMENT_GRID: usize = 16;
 const MAX_SWEEPS: usize = 6;
 
 /// Returns v = [e^{jθ}; 1] maximising the MRU's rate (continuous phases).
@@ -77,7 +77,13 @@ fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, V
     let scale = (l1(0) / l1(k).max(f64::MIN_POSITIVE)).max(f64::MIN_POSITIVE);
     let mut v = vec![C64::new(0.0, 0.0); problem.dim];
     let mut at = |log_mag: f64, angle: f64, v: &mut Vec<C64>| {
-        family(problem, 0, k, Some(C64::from_polar(scale * 10f64.powf(log_mag), angle)), v);
+        family(
+            problem,
+            0,
+            k,
+            Some(C64::from_polar(scale * 10f64.powf(log_mag), angle)),
+            v,
+        );
         eval.value(v)
     };
     let mut best = (f64::NEG_INFINITY, -Z_DECADES - 1.0, 0.0);
@@ -96,10 +102,18 @@ fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, V
     if at_zero >= best.0 || !best.0.is_finite() {
         return (at_zero, v);
     }
-    let (mut step_mag, mut step_angle) = (2.0 * Z_DECADES / (Z_MAGNITUDES - 1) as f64, TAU / Z_ANGLES as f64);
+    let (mut step_mag, mut step_angle) = (
+        2.0 * Z_DECADES / (Z_MAGNITUDES - 1) as f64,
+        TAU / Z_ANGLES as f64,
+    );
     for _ in 0..12 {
         let mut moved = false;
-        for (dm, da) in [(step_mag, 0.0), (-step_mag, 0.0), (0.0, step_angle), (0.0, -step_angle)] {
+        for (dm, da) in [
+            (step_mag, 0.0),
+            (-step_mag, 0.0),
+            (0.0, step_angle),
+            (0.0, -step_angle),
+        ] {
             let value = at(best.1 + dm, best.2 + da, &mut v);
             if value > best.0 {
                 best = (value, best.1 + dm, best.2 + da);
@@ -194,7 +208,7 @@ fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64])
             let mut x2 = lo + ratio * (hi - lo);
             let mut f1 = eval.value_with(n, C64::from_polar(1.0, x1));
             let mut f2 = eval.value_with(n, C64::from_polar(1.0, x2));
-            for _ in 0..24 {
+            for _ in 0..16 {
                 if f1 >= f2 {
                     hi = x2;
                     x2 = x1;

@@ -59,7 +59,9 @@ impl CellProblem {
 /// served. Allocation-free: the inner objective of every solver.
 #[inline]
 pub fn objective(model: &RateModel, lambdas: &[f64]) -> f64 {
-    (0..model.orders().len()).filter_map(|k| model.mru_rate(lambdas, k)).fold(f64::NEG_INFINITY, f64::max)
+    (0..model.orders().len())
+        .filter_map(|k| model.mru_rate(lambdas, k))
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// A solved cell: the phases (v normalised so v_{N+1} = 1) and the certificate.
@@ -117,7 +119,7 @@ impl RateCells {
             .iter()
             .zip(&self.upper_bound)
             .filter(|(v, u)| v.is_finite() && u.is_finite())
-            .map(|(v, u)| (u - v).max(0.0))
+            .map(|(v, u)| u - v)
             .collect()
     }
 }
@@ -138,7 +140,12 @@ pub fn dbm_to_watts(dbm: f64) -> f64 {
 }
 
 /// The per-user vectors at one MRU location, sharing the SRUs' precomputed part.
-pub fn cell_problem(model: &ChannelModel, mru: [f64; 3], srus: &CellProblem, with_irs: bool) -> CellProblem {
+pub fn cell_problem(
+    model: &ChannelModel,
+    mru: [f64; 3],
+    srus: &CellProblem,
+    with_irs: bool,
+) -> CellProblem {
     let n = if with_irs { model.subsurfaces() } else { 0 };
     let dim = n + 1;
     let mut a = Vec::with_capacity(srus.a.len() + dim);
@@ -168,14 +175,23 @@ pub fn sru_part(model: &ChannelModel, scenario: &Scenario, with_irs: bool) -> Ce
 }
 
 /// Solves one cell with the chosen solver and phase mode, and certifies it.
-pub fn solve_cell(problem: &CellProblem, model: &RateModel, phases: PhaseMode, solver: SolverKind) -> CellSolution {
+pub fn solve_cell(
+    problem: &CellProblem,
+    model: &RateModel,
+    phases: PhaseMode,
+    solver: SolverKind,
+) -> CellSolution {
     let mut lambdas = vec![0.0; problem.users()];
     if problem.dim == 1 {
         // No IRS: the gains are fixed; only the power split and order remain.
         let v = vec![C64::new(1.0, 0.0)];
         problem.lambdas(&v, &mut lambdas);
         let rate = objective(model, &lambdas);
-        return CellSolution { v, rate, upper_bound: rate };
+        return CellSolution {
+            v,
+            rate,
+            upper_bound: rate,
+        };
     }
     let mut v = match solver {
         SolverKind::Fast => fast::solve(problem, model),
@@ -189,8 +205,12 @@ pub fn solve_cell(problem: &CellProblem, model: &RateModel, phases: PhaseMode, s
     }
     problem.lambdas(&v, &mut lambdas);
     let rate = objective(model, &lambdas);
-    let upper_bound = certificate::upper_bound(problem, model).max(rate);
-    CellSolution { v, rate, upper_bound }
+    let upper_bound = certificate::upper_bound(problem, model);
+    CellSolution {
+        v,
+        rate,
+        upper_bound,
+    }
 }
 
 /// θ_n = ∠v_n in [0, 2π) for n < N.
@@ -264,5 +284,13 @@ pub fn build_rate_cells(
             Ok(())
         })?;
     phases.truncate(cells * n);
-    Ok(RateCells { values, upper_bound: upper, subsurfaces: n, phases, power_w: power, order, model })
+    Ok(RateCells {
+        values,
+        upper_bound: upper,
+        subsurfaces: n,
+        phases,
+        power_w: power,
+        order,
+        model,
+    })
 }

@@ -1,0 +1,166 @@
+//! Every 4xx/5xx answer as RFC 9457 `application/problem+json`: a machine `type` and `code`, a
+//! `title`, the `status`, a human `detail`, and the offending `field` (and `limit`) where there
+//! is one. [`parse_json`] backs the API's JSON extractor so malformed bodies, unknown fields and
+//! oversized bodies get the same treatment.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Problem {
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub code: &'static str,
+    pub title: &'static str,
+    pub status: u16,
+    pub detail: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limit: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub job_id: Option<String>,
+}
+
+/// An error answer; build with the constructors below.
+#[derive(Debug, Clone)]
+pub struct ApiError {
+    pub problem: Problem,
+    pub retry_after_s: Option<u64>,
+}
+
+impl ApiError {
+    fn new(status: StatusCode, code: &'static str, title: &'static str, detail: impl Into<String>) -> Self {
+        ApiError {
+            problem: Problem {
+                kind: format!("https://irs-planner.dev/problems/{code}"),
+                code,
+                title,
+                status: status.as_u16(),
+                detail: detail.into(),
+                field: None,
+                limit: None,
+                job_id: None,
+            },
+            retry_after_s: None,
+        }
+    }
+    pub fn with_field(mut self, field: impl Into<String>) -> Self {
+        self.problem.field = Some(field.into());
+        self
+    }
+    pub fn with_limit(mut self, limit: u64) -> Self {
+        self.problem.limit = Some(limit);
+        self
+    }
+
+    pub fn malformed_json(detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::BAD_REQUEST, "malformed_json", "Malformed JSON body", detail)
+    }
+    pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_field", "Invalid field", detail).with_field(field)
+    }
+    pub fn invalid_scenario(field: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_scenario", "Invalid scenario", detail).with_field(field)
+    }
+    pub fn limit_exceeded(field: impl Into<String>, limit: u64, detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded", "Limit exceeded", detail)
+            .with_field(field)
+            .with_limit(limit)
+    }
+    pub fn body_too_large(limit: u64) -> Self {
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "body_too_large",
+            "Request body too large",
+            format!("the request body exceeds the limit of {limit} bytes"),
+        )
+        .with_limit(limit)
+    }
+    pub fn unsupported_media_type(detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type", "Unsupported media type", detail)
+    }
+    pub fn not_found(what: &'static str, id: &str) -> Self {
+        Self::new(StatusCode::NOT_FOUND, "not_found", "Not found", format!("no {what} with id {id:?}"))
+    }
+    pub fn route_not_found(path: &str) -> Self {
+        Self::new(StatusCode::NOT_FOUND, "route_not_found", "Route not found", format!("no route for {path}"))
+    }
+    pub fn method_not_allowed() -> Self {
+        Self::new(StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed", "Method not allowed", "this route does not take that method")
+    }
+    pub fn map_not_ready(map_id: &str, job_id: &str) -> Self {
+        let mut e = Self::new(
+            StatusCode::CONFLICT,
+            "map_not_ready",
+            "Map not ready",
+            format!("map {map_id} is being built by job {job_id}; poll /v1/jobs/{job_id}"),
+        );
+        e.problem.job_id = Some(job_id.to_string());
+        e
+    }
+    pub fn job_finished(job_id: &str, state: &str) -> Self {
+        Self::new(StatusCode::CONFLICT, "job_finished", "Job already finished", format!("job {job_id} is already {state}"))
+    }
+    pub fn build_failed(detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "build_failed", "Map build failed", detail)
+    }
+    pub fn queue_full(limit: usize) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "queue_full",
+            "Job queue full",
+            format!("{limit} map builds are already waiting for a worker; retry later"),
+        )
+        .with_limit(limit as u64);
+        e.retry_after_s = Some(5);
+        e
+    }
+    pub fn registry_full(limit: usize) -> Self {
+        Self::new(
+            StatusCode::INSUFFICIENT_STORAGE,
+            "registry_full",
+            "Scenario registry full",
+            format!("the registry already holds its limit of {limit} scenarios"),
+        )
+        .with_limit(limit as u64)
+    }
+    pub fn not_ready() -> Self {
+        Self::new(StatusCode::SERVICE_UNAVAILABLE, "not_ready", "Not ready", "the service is starting or shutting down")
+    }
+    pub fn status(&self) -> StatusCode {
+        StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let status = self.status();
+        let body = serde_json::to_vec(&self.problem).unwrap_or_default();
+        let mut response = (status, body).into_response();
+        let headers = response.headers_mut();
+        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/problem+json"));
+        if let Some(s) = self.retry_after_s {
+            headers.insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        response
+    }
+}
+
+/// Parses a JSON body strictly, mapping serde errors to problems that name the field.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        if inner.is_syntax() || inner.is_eof() {
+            ApiError::malformed_json(inner.to_string())
+        } else {
+            ApiError::invalid(if path == "." { "$".to_string() } else { path }, inner.to_string())
+        }
+    })?;
+    de.end().map_err(|e| ApiError::malformed_json(e.to_string()))?;
+    Ok(value)
+}
