@@ -74,7 +74,12 @@ fn family(problem: &CellProblem, m: usize, k: usize, z: Option<C64>, v: &mut [C6
 /// Grid search and pattern-search refinement of z for one (MRU, SRU) pair.
 fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, Vec<C64>) {
     let l1 = |l: usize| problem.user(l).iter().map(|x| x.norm()).sum::<f64>();
-    let scale = (l1(0) / l1(k).max(f64::MIN_POSITIVE)).max(f64::MIN_POSITIVE);
+    // Balance the two users' terms; if either has no IRS term the family does not depend on the
+    // scale, and a degenerate one (0 or ∞) would push z into subnormal arithmetic.
+    let scale = match (l1(0), l1(k)) {
+        (m, s) if m > 0.0 && s > 0.0 => m / s,
+        _ => 1.0,
+    };
     let mut v = vec![C64::new(0.0, 0.0); problem.dim];
     let mut at = |log_mag: f64, angle: f64, v: &mut Vec<C64>| {
         family(

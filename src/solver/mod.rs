@@ -203,6 +203,10 @@ pub fn solve_cell(
     if let PhaseMode::Bits(b) = phases {
         fast::discrete_ascent(problem, model, b, &mut v);
     }
+    // A reflection coefficient has unit modulus exactly (β_n = 1, paper Section II-A).
+    for x in v.iter_mut() {
+        *x /= x.norm();
+    }
     problem.lambdas(&v, &mut lambdas);
     let rate = objective(model, &lambdas);
     let upper_bound = certificate::upper_bound(problem, model);
