@@ -2,10 +2,11 @@
 //! exactly the JSON bodies the API returns. Bad input exits with code 2 and a message naming the
 //! offending field; an infeasible path is an answer (exit 0), not an error.
 
-use crate::montecarlo::{self, MAX_DRAWS, MonteCarloReport};
-use crate::planner::{self, PathAnswer, Threshold};
+use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
+use crate::planner::{self, Threshold};
 use crate::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, RadioMap, SolverKind};
 use crate::scenario::Scenario;
+use crate::service::config::ServeArgs;
 use clap::{Args, Parser, Subcommand};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -25,6 +26,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run the HTTP planning service (the default when no command is given).
+    Serve(ServeArgs),
     /// Compute a radio map and print its JSON body.
     Map(MapArgs),
     /// Plan a path on a radio map and print the path JSON body.
@@ -191,14 +194,6 @@ pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     print_json(&map.body())
 }
 
-#[derive(Serialize)]
-struct PlanOutput {
-    #[serde(flatten)]
-    path: PathAnswer,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    monte_carlo: Option<MonteCarloReport>,
-}
-
 /// `irs-planner plan …`
 pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     if let Some(draws) = args.monte_carlo {
@@ -228,5 +223,5 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         )),
         _ => None,
     };
-    print_json(&PlanOutput { path, monte_carlo })
+    print_json(&CheckedPath { path, monte_carlo })
 }

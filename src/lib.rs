@@ -3,7 +3,7 @@
 //! Path Planning: A Radio Map based Approach" (see SPEC.md and the README).
 //!
 //! Data flows one way: [`scenario`] → [`channel`] → [`radiomap`] (with [`rate`] and [`solver`]
-//! for rate maps) → [`planner`] → the CLI ([`cli`]) and the HTTP service.
+//! for rate maps) → [`planner`] → the CLI ([`cli`]) and the HTTP [`service`].
 
 pub mod channel;
 pub mod cli;
@@ -12,4 +12,5 @@ pub mod planner;
 pub mod radiomap;
 pub mod rate;
 pub mod scenario;
+pub mod service;
 pub mod solver;

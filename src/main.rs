@@ -1,7 +1,9 @@
-//! The `irs-planner` binary: see [`irs_planner::cli`].
+//! The `irs-planner` binary: see [`irs_planner::cli`]. Without a command it serves with the
+//! defaults (flags and `IRS_*` environment variables still apply through `serve`).
 
 use clap::Parser;
 use irs_planner::cli::{self, Cli, Command};
+use irs_planner::service::{self, config::ServeArgs};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -9,13 +11,18 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Map(args)) => cli::run_map(&args),
         Some(Command::Plan(args)) => cli::run_plan(&args),
-        None => Err(cli::Failure {
-            message: "no command given (try --help)".into(),
-            bad_input: true,
-        }),
+        Some(Command::Serve(args)) => serve(args),
+        None => serve(ServeArgs::default()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => f.into(),
     }
+}
+
+fn serve(args: ServeArgs) -> Result<(), cli::Failure> {
+    service::run(args).map_err(|message| cli::Failure {
+        message,
+        bad_input: true,
+    })
 }

@@ -606,7 +606,7 @@ fn write_canonical(value: &serde_json::Value, out: &mut String) {
             out.push(']');
         }
         Value::Number(n) => match n.as_f64() {
-            Some(f) if f == 0.0 => out.push('0'),
+            Some(0.0) => out.push('0'),
             Some(f) if n.is_f64() && f.fract() == 0.0 && f.abs() < 1e15 => {
                 out.push_str(&format!("{}", f as i64))
             }
@@ -683,7 +683,8 @@ mod tests {
 
     #[test]
     fn errors_name_the_field() {
-        let cases: Vec<(Box<dyn FnOnce(&mut serde_json::Value)>, &str)> = vec![
+        type Mutation = Box<dyn FnOnce(&mut serde_json::Value)>;
+        let cases: Vec<(Mutation, &str)> = vec![
             (Box::new(|v| v["room"]["bogus"] = 1.into()), "room.bogus"),
             (
                 Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])),

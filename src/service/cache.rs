@@ -44,11 +44,18 @@ pub struct ScenarioRegistry {
 
 impl ScenarioRegistry {
     pub fn new(limit: usize) -> Self {
-        ScenarioRegistry { limit, by_id: RwLock::new(HashMap::new()) }
+        ScenarioRegistry {
+            limit,
+            by_id: RwLock::new(HashMap::new()),
+        }
     }
 
     /// Registers a validated scenario; returns it and whether it was new.
-    pub fn register(&self, scenario: Scenario, source: &'static str) -> Result<(Arc<StoredScenario>, bool), ApiError> {
+    pub fn register(
+        &self,
+        scenario: Scenario,
+        source: &'static str,
+    ) -> Result<(Arc<StoredScenario>, bool), ApiError> {
         let id = scenario.content_hash();
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
@@ -57,7 +64,11 @@ impl ScenarioRegistry {
         if by_id.len() >= self.limit {
             return Err(ApiError::registry_full(self.limit));
         }
-        let stored = Arc::new(StoredScenario { id: id.clone(), scenario: Arc::new(scenario), source });
+        let stored = Arc::new(StoredScenario {
+            id: id.clone(),
+            scenario: Arc::new(scenario),
+            source,
+        });
         by_id.insert(id, stored.clone());
         metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
         Ok((stored, true))
@@ -68,8 +79,13 @@ impl ScenarioRegistry {
     }
 
     pub fn list(&self) -> Vec<ScenarioSummary> {
-        let mut all: Vec<ScenarioSummary> =
-            self.by_id.read().expect("registry lock").values().map(|s| s.summary()).collect();
+        let mut all: Vec<ScenarioSummary> = self
+            .by_id
+            .read()
+            .expect("registry lock")
+            .values()
+            .map(|s| s.summary())
+            .collect();
         all.sort_by(|a, b| (&a.name, &a.id).cmp(&(&b.name, &b.id)));
         all
     }
@@ -85,7 +101,9 @@ impl MapCache {
     pub fn new(budget_bytes: u64) -> Self {
         let maps = moka::future::Cache::builder()
             .max_capacity((budget_bytes / 1024).max(1))
-            .weigher(|_id: &String, map: &Arc<RadioMap>| (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32)
+            .weigher(|_id: &String, map: &Arc<RadioMap>| {
+                (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
+            })
             .build();
         MapCache { maps }
     }

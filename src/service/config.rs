@@ -40,6 +40,10 @@ pub struct ServeArgs {
     /// maps and every rate map are built as jobs (202).
     #[arg(long, env = "IRS_SYNC_CELLS", default_value_t = 250_000)]
     pub sync_cells: usize,
+    /// Largest grid (cells) for which rate maps are built: each free cell runs the solver and
+    /// its certificate (about 2 ms of CPU per cell at N = 60).
+    #[arg(long, env = "IRS_MAX_RATE_CELLS", default_value_t = 40_000)]
+    pub max_rate_cells: usize,
     /// Largest number of thresholds in one sweep.
     #[arg(long, env = "IRS_MAX_SWEEP", default_value_t = 1000)]
     pub max_sweep: usize,
@@ -53,7 +57,9 @@ pub struct ServeArgs {
 
 impl ServeArgs {
     pub fn workers(&self) -> usize {
-        self.workers.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get())).max(1)
+        self.workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()))
+            .max(1)
     }
 }
 

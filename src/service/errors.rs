@@ -27,14 +27,19 @@ pub struct Problem {
 /// An error answer; build with the constructors below.
 #[derive(Debug, Clone)]
 pub struct ApiError {
-    pub problem: Problem,
+    pub problem: Box<Problem>,
     pub retry_after_s: Option<u64>,
 }
 
 impl ApiError {
-    fn new(status: StatusCode, code: &'static str, title: &'static str, detail: impl Into<String>) -> Self {
+    fn new(
+        status: StatusCode,
+        code: &'static str,
+        title: &'static str,
+        detail: impl Into<String>,
+    ) -> Self {
         ApiError {
-            problem: Problem {
+            problem: Box::new(Problem {
                 kind: format!("https://irs-planner.dev/problems/{code}"),
                 code,
                 title,
@@ -43,7 +48,7 @@ impl ApiError {
                 field: None,
                 limit: None,
                 job_id: None,
-            },
+            }),
             retry_after_s: None,
         }
     }
@@ -57,18 +62,40 @@ impl ApiError {
     }
 
     pub fn malformed_json(detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::BAD_REQUEST, "malformed_json", "Malformed JSON body", detail)
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_json",
+            "Malformed JSON body",
+            detail,
+        )
     }
     pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_field", "Invalid field", detail).with_field(field)
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            "Invalid field",
+            detail,
+        )
+        .with_field(field)
     }
     pub fn invalid_scenario(field: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_scenario", "Invalid scenario", detail).with_field(field)
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_scenario",
+            "Invalid scenario",
+            detail,
+        )
+        .with_field(field)
     }
     pub fn limit_exceeded(field: impl Into<String>, limit: u64, detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded", "Limit exceeded", detail)
-            .with_field(field)
-            .with_limit(limit)
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "limit_exceeded",
+            "Limit exceeded",
+            detail,
+        )
+        .with_field(field)
+        .with_limit(limit)
     }
     pub fn body_too_large(limit: u64) -> Self {
         Self::new(
@@ -80,16 +107,36 @@ impl ApiError {
         .with_limit(limit)
     }
     pub fn unsupported_media_type(detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type", "Unsupported media type", detail)
+        Self::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            "Unsupported media type",
+            detail,
+        )
     }
     pub fn not_found(what: &'static str, id: &str) -> Self {
-        Self::new(StatusCode::NOT_FOUND, "not_found", "Not found", format!("no {what} with id {id:?}"))
+        Self::new(
+            StatusCode::NOT_FOUND,
+            "not_found",
+            "Not found",
+            format!("no {what} with id {id:?}"),
+        )
     }
     pub fn route_not_found(path: &str) -> Self {
-        Self::new(StatusCode::NOT_FOUND, "route_not_found", "Route not found", format!("no route for {path}"))
+        Self::new(
+            StatusCode::NOT_FOUND,
+            "route_not_found",
+            "Route not found",
+            format!("no route for {path}"),
+        )
     }
     pub fn method_not_allowed() -> Self {
-        Self::new(StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed", "Method not allowed", "this route does not take that method")
+        Self::new(
+            StatusCode::METHOD_NOT_ALLOWED,
+            "method_not_allowed",
+            "Method not allowed",
+            "this route does not take that method",
+        )
     }
     pub fn map_not_ready(map_id: &str, job_id: &str) -> Self {
         let mut e = Self::new(
@@ -102,10 +149,20 @@ impl ApiError {
         e
     }
     pub fn job_finished(job_id: &str, state: &str) -> Self {
-        Self::new(StatusCode::CONFLICT, "job_finished", "Job already finished", format!("job {job_id} is already {state}"))
+        Self::new(
+            StatusCode::CONFLICT,
+            "job_finished",
+            "Job already finished",
+            format!("job {job_id} is already {state}"),
+        )
     }
     pub fn build_failed(detail: impl Into<String>) -> Self {
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "build_failed", "Map build failed", detail)
+        Self::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "build_failed",
+            "Map build failed",
+            detail,
+        )
     }
     pub fn queue_full(limit: usize) -> Self {
         let mut e = Self::new(
@@ -128,7 +185,12 @@ impl ApiError {
         .with_limit(limit as u64)
     }
     pub fn not_ready() -> Self {
-        Self::new(StatusCode::SERVICE_UNAVAILABLE, "not_ready", "Not ready", "the service is starting or shutting down")
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "not_ready",
+            "Not ready",
+            "the service is starting or shutting down",
+        )
     }
     pub fn status(&self) -> StatusCode {
         StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
@@ -141,7 +203,10 @@ impl IntoResponse for ApiError {
         let body = serde_json::to_vec(&self.problem).unwrap_or_default();
         let mut response = (status, body).into_response();
         let headers = response.headers_mut();
-        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/problem+json"));
+        headers.insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/problem+json"),
+        );
         if let Some(s) = self.retry_after_s {
             headers.insert(header::RETRY_AFTER, HeaderValue::from(s));
         }
@@ -158,9 +223,13 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         if inner.is_syntax() || inner.is_eof() {
             ApiError::malformed_json(inner.to_string())
         } else {
-            ApiError::invalid(if path == "." { "$".to_string() } else { path }, inner.to_string())
+            ApiError::invalid(
+                if path == "." { "$".to_string() } else { path },
+                inner.to_string(),
+            )
         }
     })?;
-    de.end().map_err(|e| ApiError::malformed_json(e.to_string()))?;
+    de.end()
+        .map_err(|e| ApiError::malformed_json(e.to_string()))?;
     Ok(value)
 }

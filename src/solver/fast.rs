@@ -195,9 +195,9 @@ fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64])
     let mut current = eval.value(v);
     for _ in 0..MAX_SWEEPS {
         let before = current;
-        for n in 0..problem.dim - 1 {
-            eval.exclude(n, v[n]);
-            let mut best = (current, v[n].arg());
+        for (n, vn) in v[..problem.dim - 1].iter_mut().enumerate() {
+            eval.exclude(n, *vn);
+            let mut best = (current, vn.arg());
             for g in 0..ELEMENT_GRID {
                 let phi = TAU * g as f64 / ELEMENT_GRID as f64;
                 let value = eval.value_with(n, C64::from_polar(1.0, phi));
@@ -234,10 +234,10 @@ fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64])
                 }
             }
             if best.0 > current {
-                v[n] = C64::from_polar(1.0, best.1);
+                *vn = C64::from_polar(1.0, best.1);
                 current = best.0;
             }
-            eval.include(n, v[n]);
+            eval.include(n, *vn);
         }
         if current - before <= 1e-10 * current.abs().max(1e-3) {
             break;
@@ -263,19 +263,19 @@ pub fn discrete_ascent(problem: &CellProblem, model: &RateModel, bits: u8, v: &m
     let window = levels.min(64);
     for _ in 0..4 * MAX_SWEEPS {
         let mut improved = false;
-        for n in 0..problem.dim - 1 {
-            eval.exclude(n, v[n]);
-            let here = level_of(v[n]);
+        for (n, vn) in v[..problem.dim - 1].iter_mut().enumerate() {
+            eval.exclude(n, *vn);
+            let here = level_of(*vn);
             for offset in 0..window {
                 let level = (here + levels + offset - window / 2) % levels;
                 let value = eval.value_with(n, phasor(level));
                 if value > current + 1e-12 * current.abs().max(1e-3) {
                     current = value;
-                    v[n] = phasor(level);
+                    *vn = phasor(level);
                     improved = true;
                 }
             }
-            eval.include(n, v[n]);
+            eval.include(n, *vn);
         }
         if !improved {
             break;

@@ -196,10 +196,13 @@ impl<'a> Sdp<'a> {
             for w in self.model.orders()[self.order].windows(2) {
                 let (weak, strong) = (w[0] as usize, w[1] as usize);
                 b.push(self.lambda0[strong] - self.lambda0[weak]);
-                for k in 0..2 * pairs {
-                    let d = self.grad[strong][k] - self.grad[weak][k];
+                for (column, (gs, gw)) in columns
+                    .iter_mut()
+                    .zip(self.grad[strong].iter().zip(&self.grad[weak]))
+                {
+                    let d = gs - gw;
                     if d != 0.0 {
-                        columns[k].push((row, -d));
+                        column.push((row, -d));
                     }
                 }
                 row += 1;

@@ -1,0 +1,605 @@
+//! HTTP handlers and the route table (the contract is `openapi.yaml`). Handlers translate
+//! between JSON and the engine; all physics lives in the library modules.
+
+use super::AppState;
+use super::cache::ScenarioSummary;
+use super::errors::{ApiError, parse_json};
+use super::jobs::{JobView, MapRequestOutcome};
+use crate::montecarlo::{self, CheckedPath};
+use crate::planner::{self, SweepAnswer, Threshold};
+use crate::radiomap::{
+    Access, MapBody, MapKey, MapKind, MapStats, PhaseMode, RadioMap, SolverKind,
+};
+use crate::scenario::Scenario;
+use axum::extract::{FromRequest, Path, Query, Request, State};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{MethodRouter, delete, get, post};
+use axum::{Json, Router};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// Every route: path, methods, handler. The router is built from this table and a test checks
+/// it against `openapi.yaml`.
+pub fn route_table() -> Vec<(
+    &'static str,
+    &'static [&'static str],
+    MethodRouter<AppState>,
+)> {
+    vec![
+        ("/healthz", &["get"], get(healthz)),
+        ("/readyz", &["get"], get(readyz)),
+        ("/version", &["get"], get(version)),
+        ("/metrics", &["get"], get(metrics_text)),
+        (
+            "/v1/scenarios",
+            &["get", "post"],
+            get(list_scenarios).post(register_scenario),
+        ),
+        ("/v1/scenarios/{scenario_id}", &["get"], get(get_scenario)),
+        (
+            "/v1/maps",
+            &["get", "post"],
+            get(list_maps).post(request_map),
+        ),
+        ("/v1/maps/{map_id}", &["get"], get(get_map)),
+        ("/v1/maps/{map_id}/coverage", &["get"], get(coverage)),
+        ("/v1/jobs", &["get"], get(list_jobs)),
+        (
+            "/v1/jobs/{job_id}",
+            &["get", "delete"],
+            get(get_job).merge(delete(cancel_job)),
+        ),
+        ("/v1/paths", &["post"], post(plan_path)),
+        ("/v1/sweeps", &["post"], post(sweep)),
+    ]
+}
+
+pub fn router() -> Router<AppState> {
+    route_table()
+        .into_iter()
+        .fold(Router::new(), |r, (path, _, handler)| {
+            r.route(path, handler)
+        })
+}
+
+/// The JSON body extractor of this API: strict parsing, problem+json on every failure, and the
+/// configured body limit named in the 413.
+pub struct Body<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+        if let Some(ct) = req.headers().get(header::CONTENT_TYPE) {
+            let ct = ct.to_str().unwrap_or("");
+            let essence = ct
+                .split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase();
+            if essence != "application/json" && !essence.ends_with("+json") {
+                return Err(ApiError::unsupported_media_type(format!(
+                    "expected application/json, got {ct:?}"
+                )));
+            }
+        }
+        let limit = state.limits().max_body_bytes;
+        let bytes = axum::body::Bytes::from_request(req, state)
+            .await
+            .map_err(|rejection| {
+                if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::body_too_large(limit as u64)
+                } else {
+                    ApiError::malformed_json(rejection.body_text())
+                }
+            })?;
+        parse_json(&bytes).map(Body)
+    }
+}
+
+// ---------------------------------------------------------------- operations endpoints
+
+#[derive(Serialize)]
+struct Health {
+    status: &'static str,
+}
+
+async fn healthz() -> Json<Health> {
+    Json(Health { status: "ok" })
+}
+
+#[derive(Serialize)]
+struct Readiness {
+    status: &'static str,
+    scenarios: usize,
+}
+
+async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
+    if !state.is_ready() {
+        return Err(ApiError::not_ready());
+    }
+    Ok(Json(Readiness {
+        status: "ready",
+        scenarios: state.registry().list().len(),
+    }))
+}
+
+#[derive(Serialize)]
+struct Version {
+    name: &'static str,
+    version: &'static str,
+    sdr_sca_available: bool,
+}
+
+async fn version() -> Json<Version> {
+    Json(Version {
+        name: env!("CARGO_PKG_NAME"),
+        version: env!("CARGO_PKG_VERSION"),
+        sdr_sca_available: crate::solver::SDR_SCA_AVAILABLE,
+    })
+}
+
+async fn metrics_text(State(state): State<AppState>) -> Response {
+    state.cache().record_size();
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.render_metrics(),
+    )
+        .into_response()
+}
+
+// ---------------------------------------------------------------- scenarios
+
+#[derive(Serialize)]
+struct ScenarioList {
+    scenarios: Vec<ScenarioSummary>,
+}
+
+async fn list_scenarios(State(state): State<AppState>) -> Json<ScenarioList> {
+    Json(ScenarioList {
+        scenarios: state.registry().list(),
+    })
+}
+
+#[derive(Serialize)]
+struct ScenarioDocument {
+    #[serde(flatten)]
+    summary: ScenarioSummary,
+    scenario: Scenario,
+}
+
+fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, ApiError> {
+    Scenario::from_value(value).map_err(|e| {
+        let field = if e.field == "$" {
+            prefix.trim_end_matches('.').to_string()
+        } else {
+            format!("{prefix}{}", e.field)
+        };
+        ApiError::invalid_scenario(
+            if field.is_empty() {
+                "$".to_string()
+            } else {
+                field
+            },
+            e.to_string(),
+        )
+    })
+}
+
+async fn register_scenario(
+    State(state): State<AppState>,
+    Body(value): Body<serde_json::Value>,
+) -> Result<Response, ApiError> {
+    let scenario = parse_scenario(value, "")?;
+    let (stored, created) = state.registry().register(scenario, "api")?;
+    let status = if created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    let summary = stored.summary();
+    let location = summary.href.clone();
+    let body = ScenarioDocument {
+        summary,
+        scenario: (*stored.scenario).clone(),
+    };
+    Ok((status, [(header::LOCATION, location)], Json(body)).into_response())
+}
+
+async fn get_scenario(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<ScenarioDocument>, ApiError> {
+    let stored = state
+        .registry()
+        .get(&id)
+        .ok_or_else(|| ApiError::not_found("scenario", &id))?;
+    Ok(Json(ScenarioDocument {
+        summary: stored.summary(),
+        scenario: (*stored.scenario).clone(),
+    }))
+}
+
+// ---------------------------------------------------------------- maps
+
+/// What defines a map: a scenario (registered id or inline document) and the map parameters.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapRequest {
+    scenario_id: Option<String>,
+    scenario: Option<serde_json::Value>,
+    kind: MapKind,
+    phases: Option<PhaseMode>,
+    access: Option<Access>,
+    solver: Option<SolverKind>,
+}
+
+#[derive(Debug, Serialize)]
+struct MapSummary {
+    map_id: String,
+    state: &'static str,
+    key: MapKey,
+    unit: &'static str,
+    stats: MapStats,
+    build_seconds: f64,
+    href: String,
+}
+
+fn summary(map: &RadioMap) -> MapSummary {
+    let map_id = map.key.id();
+    MapSummary {
+        href: format!("/v1/maps/{map_id}"),
+        map_id,
+        state: "ready",
+        key: map.key.clone(),
+        unit: map.key.unit(),
+        stats: map.stats(),
+        build_seconds: map.build_seconds,
+    }
+}
+
+/// Resolves a map request to a scenario and a normalised key (registering inline scenarios).
+fn resolve(
+    state: &AppState,
+    request: MapRequest,
+    prefix: &str,
+) -> Result<(Arc<Scenario>, MapKey), ApiError> {
+    let stored = match (request.scenario_id, request.scenario) {
+        (Some(id), None) => state.registry().get(&id).ok_or_else(|| {
+            ApiError::invalid(
+                format!("{prefix}scenario_id"),
+                format!("no scenario with id {id:?}"),
+            )
+        })?,
+        (None, Some(doc)) => {
+            state
+                .registry()
+                .register(parse_scenario(doc, &format!("{prefix}scenario."))?, "api")?
+                .0
+        }
+        _ => {
+            return Err(ApiError::invalid(
+                format!("{prefix}scenario_id"),
+                "give exactly one of scenario_id (a registered scenario) and scenario (an inline document)",
+            ));
+        }
+    };
+    let scenario = &stored.scenario;
+    let grid_cells = scenario.grid().cells();
+    let key = MapKey::new(
+        &stored.id,
+        scenario,
+        request.kind,
+        request.phases,
+        request.access,
+        request.solver,
+    )
+    .map_err(|e| ApiError::invalid(format!("{prefix}{}", e.field), e.reason))?;
+    if key.kind == MapKind::Rate && grid_cells > state.limits().max_rate_cells {
+        return Err(ApiError::limit_exceeded(
+            format!("{prefix}kind"),
+            state.limits().max_rate_cells as u64,
+            format!(
+                "rate maps are limited to {} cells; this grid has {grid_cells}",
+                state.limits().max_rate_cells
+            ),
+        ));
+    }
+    Ok((stored.scenario.clone(), key))
+}
+
+/// The map, waiting for cheap builds; `Err(Response)` is the 202 job answer for long ones.
+async fn obtain(
+    state: &AppState,
+    scenario: Arc<Scenario>,
+    key: MapKey,
+) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
+    let cheap = key.kind == MapKind::Gain && scenario.grid().cells() <= state.limits().sync_cells;
+    match state.jobs().request(state.cache(), scenario, key).await? {
+        MapRequestOutcome::Ready(map) => Ok(Ok(map)),
+        MapRequestOutcome::Building(job) if cheap => {
+            job.finished().await;
+            match state.cache().peek(&job.map_id).await {
+                Some(map) => Ok(Ok(map)),
+                None => {
+                    Err(ApiError::build_failed(job.view().error.unwrap_or_else(
+                        || format!("job {} did not finish", job.id),
+                    )))
+                }
+            }
+        }
+        MapRequestOutcome::Building(job) => Ok(Err(accepted(job.view()))),
+    }
+}
+
+fn accepted(view: JobView) -> Response {
+    let location = view.href.clone();
+    (
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(view),
+    )
+        .into_response()
+}
+
+async fn request_map(
+    State(state): State<AppState>,
+    Body(request): Body<MapRequest>,
+) -> Result<Response, ApiError> {
+    let (scenario, key) = resolve(&state, request, "")?;
+    Ok(match obtain(&state, scenario, key).await? {
+        Ok(map) => Json(summary(&map)).into_response(),
+        Err(job) => job,
+    })
+}
+
+#[derive(Serialize)]
+struct MapList {
+    maps: Vec<MapSummary>,
+}
+
+async fn list_maps(State(state): State<AppState>) -> Json<MapList> {
+    let mut maps: Vec<MapSummary> = state
+        .cache()
+        .entries()
+        .iter()
+        .map(|(_, m)| summary(m))
+        .collect();
+    maps.sort_by(|a, b| a.map_id.cmp(&b.map_id));
+    Json(MapList { maps })
+}
+
+async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, ApiError> {
+    if let Some(map) = state.cache().get(map_id).await {
+        return Ok(map);
+    }
+    let building = state
+        .jobs()
+        .list()
+        .into_iter()
+        .find(|j| j.map_id == map_id && !j.state.is_terminal());
+    Err(match building {
+        Some(job) => ApiError::map_not_ready(map_id, &job.job_id),
+        None => ApiError::not_found("map", map_id),
+    })
+}
+
+async fn get_map(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+) -> Result<Json<MapBody>, ApiError> {
+    let map = cached_map(&state, &map_id).await?;
+    Ok(Json(map.body()))
+}
+
+#[derive(Serialize)]
+struct Coverage {
+    map_id: String,
+    unit: &'static str,
+    threshold: f64,
+    /// η(γ), paper eq. 29.
+    coverage: f64,
+    free_cells: usize,
+    covered_cells: usize,
+}
+
+async fn coverage(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<Coverage>, ApiError> {
+    if let Some(unknown) = query.keys().find(|k| k.as_str() != "threshold") {
+        return Err(ApiError::invalid(
+            unknown.clone(),
+            "unknown query parameter",
+        ));
+    }
+    let threshold = query
+        .get("threshold")
+        .ok_or_else(|| ApiError::invalid("threshold", "the threshold query parameter is required"))?
+        .parse::<f64>()
+        .ok()
+        .filter(|t| t.is_finite())
+        .ok_or_else(|| ApiError::invalid("threshold", "must be a finite number"))?;
+    let map = cached_map(&state, &map_id).await?;
+    let eta = crate::radiomap::coverage(&map, threshold);
+    let free = map.stats().free_cells;
+    Ok(Json(Coverage {
+        map_id,
+        unit: map.key.unit(),
+        threshold,
+        coverage: eta,
+        free_cells: free,
+        covered_cells: (eta * free as f64).round() as usize,
+    }))
+}
+
+// ---------------------------------------------------------------- jobs
+
+#[derive(Serialize)]
+struct JobList {
+    jobs: Vec<JobView>,
+}
+
+async fn list_jobs(State(state): State<AppState>) -> Json<JobList> {
+    Json(JobList {
+        jobs: state.jobs().list(),
+    })
+}
+
+async fn get_job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<JobView>, ApiError> {
+    let job = state
+        .jobs()
+        .get(&id)
+        .ok_or_else(|| ApiError::not_found("job", &id))?;
+    Ok(Json(job.view()))
+}
+
+async fn cancel_job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<(StatusCode, Json<JobView>), ApiError> {
+    let job = state.jobs().cancel(&id)?;
+    Ok((StatusCode::ACCEPTED, Json(job.view())))
+}
+
+// ---------------------------------------------------------------- paths and sweeps
+
+/// A path query names its map by `map_id` (a built map) or `map` (the request defining it).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PathRequest {
+    map_id: Option<String>,
+    map: Option<MapRequest>,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    /// Monte Carlo draws per waypoint for the Jensen-gap check (paper Fig. 10).
+    monte_carlo_draws: Option<usize>,
+    seed: Option<u64>,
+}
+
+/// The map a path or sweep query names, or the 202 answer while it is built.
+async fn map_for_query(
+    state: &AppState,
+    map_id: Option<String>,
+    map: Option<MapRequest>,
+) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, ApiError> {
+    match (map_id, map) {
+        (Some(id), None) => {
+            let built = cached_map(state, &id).await?;
+            let scenario = state
+                .registry()
+                .get(&built.key.scenario_id)
+                .ok_or_else(|| ApiError::not_found("scenario", &built.key.scenario_id))?;
+            Ok(Ok((built, scenario.scenario.clone())))
+        }
+        (None, Some(request)) => {
+            let (scenario, key) = resolve(state, request, "map.")?;
+            Ok(obtain(state, scenario.clone(), key)
+                .await?
+                .map(|m| (m, scenario)))
+        }
+        _ => Err(ApiError::invalid(
+            "map_id",
+            "give exactly one of map_id and map",
+        )),
+    }
+}
+
+fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], ApiError> {
+    if p.iter().all(|v| v.is_finite()) {
+        Ok(p)
+    } else {
+        Err(ApiError::invalid(field, "coordinates must be finite"))
+    }
+}
+
+async fn plan_path(
+    State(state): State<AppState>,
+    Body(request): Body<PathRequest>,
+) -> Result<Response, ApiError> {
+    let start = check_point("start", request.start)?;
+    let goal = check_point("goal", request.goal)?;
+    let limit = state.limits().max_draws;
+    if let Some(draws) = request.monte_carlo_draws {
+        if draws == 0 || draws > limit {
+            return Err(ApiError::limit_exceeded(
+                "monte_carlo_draws",
+                limit as u64,
+                format!("must lie in 1..={limit}"),
+            ));
+        }
+    }
+    let (map, scenario) = match map_for_query(&state, request.map_id, request.map).await? {
+        Ok(found) => found,
+        Err(accepted) => return Ok(accepted),
+    };
+    let path = planner::plan(&map, start, goal, request.threshold, scenario.mru.v_max_mps)
+        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    let monte_carlo = match request.monte_carlo_draws {
+        Some(draws) if path.feasible => {
+            let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
+            let seed = request.seed.unwrap_or(1);
+            let report = tokio::task::spawn_blocking(move || {
+                montecarlo::check_path(&scenario, &map, &path, draws, seed)
+            })
+            .await
+            .map_err(|e| ApiError::build_failed(format!("the Monte Carlo check failed: {e}")))?;
+            Some(report)
+        }
+        _ => None,
+    };
+    Ok(Json(CheckedPath { path, monte_carlo }).into_response())
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepRequest {
+    map_id: Option<String>,
+    map: Option<MapRequest>,
+    start: [f64; 2],
+    goal: [f64; 2],
+    thresholds: Vec<f64>,
+}
+
+async fn sweep(
+    State(state): State<AppState>,
+    Body(request): Body<SweepRequest>,
+) -> Result<Response, ApiError> {
+    let start = check_point("start", request.start)?;
+    let goal = check_point("goal", request.goal)?;
+    let limit = state.limits().max_sweep;
+    if request.thresholds.is_empty() || request.thresholds.len() > limit {
+        return Err(ApiError::limit_exceeded(
+            "thresholds",
+            limit as u64,
+            format!("give 1 to {limit} thresholds"),
+        ));
+    }
+    if let Some(k) = request.thresholds.iter().position(|t| !t.is_finite()) {
+        return Err(ApiError::invalid(
+            format!("thresholds[{k}]"),
+            "must be a finite number",
+        ));
+    }
+    let (map, scenario) = match map_for_query(&state, request.map_id, request.map).await? {
+        Ok(found) => found,
+        Err(accepted) => return Ok(accepted),
+    };
+    let answer: SweepAnswer = planner::sweep(
+        &map,
+        start,
+        goal,
+        &request.thresholds,
+        scenario.mru.v_max_mps,
+    )
+    .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    Ok(Json(answer).into_response())
+}
