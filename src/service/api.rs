@@ -261,24 +261,26 @@ fn summary(map: &RadioMap) -> MapSummary {
     }
 }
 
-/// Resolves a map request to a scenario and a normalised key (registering inline scenarios).
+/// Resolves a map request to a scenario and a normalised key. An inline scenario is registered
+/// only once the whole request has been validated, so a rejected request leaves no trace.
 fn resolve(
     state: &AppState,
     request: MapRequest,
     prefix: &str,
 ) -> Result<(Arc<Scenario>, MapKey), ApiError> {
-    let stored = match (request.scenario_id, request.scenario) {
-        (Some(id), None) => state.registry().get(&id).ok_or_else(|| {
-            ApiError::invalid(
-                format!("{prefix}scenario_id"),
-                format!("no scenario with id {id:?}"),
-            )
-        })?,
+    let (id, scenario, inline) = match (request.scenario_id, request.scenario) {
+        (Some(id), None) => {
+            let stored = state.registry().get(&id).ok_or_else(|| {
+                ApiError::invalid(
+                    format!("{prefix}scenario_id"),
+                    format!("no scenario with id {id:?}"),
+                )
+            })?;
+            (id, stored.scenario.clone(), false)
+        }
         (None, Some(doc)) => {
-            state
-                .registry()
-                .register(parse_scenario(doc, &format!("{prefix}scenario."))?, "api")?
-                .0
+            let scenario = parse_scenario(doc, &format!("{prefix}scenario."))?;
+            (scenario.content_hash(), Arc::new(scenario), true)
         }
         _ => {
             return Err(ApiError::invalid(
@@ -287,28 +289,29 @@ fn resolve(
             ));
         }
     };
-    let scenario = &stored.scenario;
-    let grid_cells = scenario.grid().cells();
     let key = MapKey::new(
-        &stored.id,
-        scenario,
+        &id,
+        &scenario,
         request.kind,
         request.phases,
         request.access,
         request.solver,
     )
     .map_err(|e| ApiError::invalid(format!("{prefix}{}", e.field), e.reason))?;
-    if key.kind == MapKind::Rate && grid_cells > state.limits().max_rate_cells {
+    let cells = scenario.grid().cells();
+    let limit = state.limits().max_rate_cells;
+    if key.kind == MapKind::Rate && cells > limit {
         return Err(ApiError::limit_exceeded(
             format!("{prefix}kind"),
-            state.limits().max_rate_cells as u64,
-            format!(
-                "rate maps are limited to {} cells; this grid has {grid_cells}",
-                state.limits().max_rate_cells
-            ),
+            limit as u64,
+            format!("rate maps are limited to {limit} cells; this grid has {cells}"),
         ));
     }
-    Ok((stored.scenario.clone(), key))
+    if inline {
+        let (stored, _) = state.registry().register((*scenario).clone(), "api")?;
+        return Ok((stored.scenario.clone(), key));
+    }
+    Ok((scenario, key))
 }
 
 /// The map, waiting for cheap builds; `Err(Response)` is the 202 job answer for long ones.

@@ -1,0 +1,714 @@
+//! The real server, started from the built binary on an ephemeral loopback port and driven over
+//! HTTP: the contract (openapi.yaml ↔ routes), the paper flow (register, build, plan — checked
+//! byte for byte against the CLI), jobs (progress, cancellation, single flight, queue limit) and
+//! every error path.
+
+use reqwest::{Client, StatusCode};
+use serde_json::{Value, json};
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Server {
+    child: Child,
+    base: String,
+    client: Client,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn root() -> &'static str {
+    env!("CARGO_MANIFEST_DIR")
+}
+
+/// Starts `irs-planner serve --bind 127.0.0.1:0` with extra flags and waits for its address.
+fn start(extra: &[&str]) -> Server {
+    let empty = std::env::temp_dir().join(format!("irs-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_irs-planner"))
+        .args([
+            "serve",
+            "--bind",
+            "127.0.0.1:0",
+            "--scenarios",
+            empty.to_str().unwrap(),
+        ])
+        .args(extra)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("the server starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let base = line
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("the server prints its address")
+        .to_string();
+    Server {
+        child,
+        base,
+        client: Client::builder()
+            .timeout(Duration::from_secs(60))
+            .build()
+            .unwrap(),
+    }
+}
+
+impl Server {
+    async fn send(&self, method: &str, path: &str, body: Option<Value>) -> (StatusCode, Value) {
+        let url = format!("{}{path}", self.base);
+        let req = match method {
+            "GET" => self.client.get(url),
+            "POST" => self.client.post(url),
+            "DELETE" => self.client.delete(url),
+            other => self.client.request(other.parse().unwrap(), url),
+        };
+        let req = match body {
+            Some(b) => req
+                .header("content-type", "application/json")
+                .body(b.to_string()),
+            None => req,
+        };
+        let resp = req.send().await.unwrap();
+        let status = resp.status();
+        let text = resp.text().await.unwrap();
+        (
+            status,
+            serde_json::from_str(&text).unwrap_or(Value::String(text)),
+        )
+    }
+    async fn get(&self, path: &str) -> (StatusCode, Value) {
+        self.send("GET", path, None).await
+    }
+    async fn post(&self, path: &str, body: Value) -> (StatusCode, Value) {
+        self.send("POST", path, Some(body)).await
+    }
+    async fn scenario_id(&self, name: &str) -> String {
+        let (_, list) = self.get("/v1/scenarios").await;
+        list["scenarios"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["name"] == name)
+            .unwrap()["id"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    }
+    async fn metric(&self, needle: &str) -> f64 {
+        let text = self
+            .client
+            .get(format!("{}/metrics", self.base))
+            .send()
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        text.lines()
+            .find(|l| l.starts_with(needle))
+            .and_then(|l| l.rsplit(' ').next())
+            .map_or(0.0, |v| v.parse().unwrap())
+    }
+    async fn wait_job(&self, job_id: &str) -> Value {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        loop {
+            let (_, job) = self.get(&format!("/v1/jobs/{job_id}")).await;
+            if ["done", "failed", "cancelled"].contains(&job["state"].as_str().unwrap()) {
+                return job;
+            }
+            assert!(Instant::now() < deadline, "job {job_id} did not finish");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+}
+
+/// A scenario document from scenarios/, optionally edited.
+fn scenario(file: &str, edit: impl FnOnce(&mut Value)) -> Value {
+    let mut v: Value = serde_json::from_str(
+        &std::fs::read_to_string(format!("{}/scenarios/{file}", root())).unwrap(),
+    )
+    .unwrap();
+    edit(&mut v);
+    v
+}
+
+fn problem(status: StatusCode, body: &Value, expected: StatusCode, code: &str) {
+    assert_eq!(status, expected, "{body}");
+    assert_eq!(body["code"], code, "{body}");
+    assert_eq!(body["status"], expected.as_u16(), "{body}");
+    assert!(body["type"].as_str().unwrap().ends_with(code));
+    assert!(!body["detail"].as_str().unwrap().is_empty());
+}
+
+/// The (method, path) pairs of openapi.yaml, read from its `paths:` section.
+fn documented_routes() -> Vec<(String, String)> {
+    let text = std::fs::read_to_string(format!("{}/openapi.yaml", root())).unwrap();
+    let mut in_paths = false;
+    let mut path = String::new();
+    let mut routes = Vec::new();
+    for line in text.lines() {
+        if !line.starts_with(' ') {
+            in_paths = line == "paths:";
+            continue;
+        }
+        if !in_paths {
+            continue;
+        }
+        if let Some(p) = line.strip_prefix("  /") {
+            path = format!("/{}", p.trim_end_matches(':'));
+        } else if let Some(m) = line.strip_prefix("    ") {
+            let m = m.trim_end_matches(':');
+            if ["get", "post", "put", "delete", "patch"].contains(&m) {
+                routes.push((m.to_string(), path.clone()));
+            }
+        }
+    }
+    routes.sort();
+    routes
+}
+
+#[tokio::test]
+async fn openapi_paths_are_exactly_the_served_routes() {
+    let mut served: Vec<(String, String)> = irs_planner::service::api::route_table()
+        .into_iter()
+        .flat_map(|(path, methods, _)| {
+            methods
+                .iter()
+                .map(move |m| (m.to_string(), path.to_string()))
+        })
+        .collect();
+    served.sort();
+    assert_eq!(served, documented_routes());
+    // And the running server answers each of them (not with route_not_found / 405).
+    let server = start(&[]);
+    for (method, path) in documented_routes() {
+        let concrete = path
+            .replace("{scenario_id}", "x")
+            .replace("{map_id}", "x")
+            .replace("{job_id}", "x");
+        let body = (method == "post").then(|| json!({}));
+        let (status, body) = server.send(&method.to_uppercase(), &concrete, body).await;
+        assert_ne!(status, StatusCode::METHOD_NOT_ALLOWED, "{method} {path}");
+        assert_ne!(body["code"], "route_not_found", "{method} {path}");
+    }
+}
+
+#[tokio::test]
+async fn paper_flow_matches_the_cli_byte_for_byte() {
+    let server = start(&[]);
+    // Registering by content: a new document is 201, the same one again 200 with the same id.
+    let doc = scenario("paper-single-user.json", |v| {
+        v["name"] = "paper-single-user-copy".into()
+    });
+    let (s1, first) = server.post("/v1/scenarios", doc.clone()).await;
+    let (s2, second) = server.post("/v1/scenarios", doc).await;
+    assert_eq!((s1, s2), (StatusCode::CREATED, StatusCode::OK));
+    assert_eq!(first["id"], second["id"]);
+    let (status, got) = server
+        .get(&format!("/v1/scenarios/{}", first["id"].as_str().unwrap()))
+        .await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(got["scenario"]["irs"]["sub_pitch_m"], 0.0075);
+
+    let id = server.scenario_id("paper-single-user").await;
+    let (status, map) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario_id": id, "kind": "gain", "phases": "continuous"}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{map}");
+    let map_id = map["map_id"].as_str().unwrap();
+    let (status, body) = server.get(&format!("/v1/maps/{map_id}")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(body["values"].as_array().unwrap().len(), 41);
+    let (_, cov) = server
+        .get(&format!("/v1/maps/{map_id}/coverage?threshold=-60"))
+        .await;
+    assert!(cov["coverage"].as_f64().unwrap() > 0.0 && cov["coverage"].as_f64().unwrap() < 1.0);
+
+    // The path answer equals the CLI's output exactly, and the request id is echoed.
+    let request = json!({"map_id": map_id, "start": [-10, 0], "goal": [10, 0], "threshold": "max"});
+    let resp = server
+        .client
+        .post(format!("{}/v1/paths", server.base))
+        .header("content-type", "application/json")
+        .header("x-request-id", "test-123")
+        .body(request.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.headers()["x-request-id"], "test-123");
+    let api_body = resp.text().await.unwrap();
+    let cli = Command::new(env!("CARGO_BIN_EXE_irs-planner"))
+        .args([
+            "plan",
+            "--scenario",
+            "scenarios/paper-single-user.json",
+            "--kind",
+            "gain",
+            "--start=-10,0",
+            "--goal",
+            "10,0",
+            "--max-threshold",
+            "--quiet",
+        ])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert_eq!(api_body, String::from_utf8(cli.stdout).unwrap().trim_end());
+    let path: Value = serde_json::from_str(&api_body).unwrap();
+    assert!((path["max_feasible_threshold"].as_f64().unwrap() - -59.6).abs() < 0.3);
+
+    // A sweep over thresholds, defined by the map key instead of the id.
+    let (status, sweep) = server
+        .post("/v1/sweeps", json!({"map": {"scenario_id": id, "kind": "gain"}, "start": [-10, 0], "goal": [10, 0], "thresholds": [-65, -62, -59]}))
+        .await;
+    assert_eq!(status, StatusCode::OK, "{sweep}");
+    let feasible: Vec<bool> = sweep["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["feasible"].as_bool().unwrap())
+        .collect();
+    assert_eq!(feasible, [true, true, false]);
+}
+
+#[tokio::test]
+async fn rate_map_job_reports_progress_and_serves_paths_with_powers() {
+    let server = start(&["--workers", "1"]);
+    let id = server.scenario_id("paper-multi-user").await;
+    let (status, job) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario_id": id, "kind": "rate", "access": "noma"}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    let job_id = job["job_id"].as_str().unwrap().to_string();
+    // Poll and record progress until done.
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let (_, j) = server.get(&format!("/v1/jobs/{job_id}")).await;
+        seen.push((
+            j["cells_done"].as_u64().unwrap(),
+            j["cells_total"].as_u64().unwrap(),
+        ));
+        if j["state"] == "done" {
+            break;
+        }
+        assert!(Instant::now() < deadline);
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert!(
+        seen.iter().any(|&(d, t)| d > 0 && d < t),
+        "no intermediate progress seen: {seen:?}"
+    );
+    assert!(
+        seen.windows(2).all(|w| w[0].0 <= w[1].0),
+        "progress went backwards"
+    );
+    let (status, path) = server
+        .post(
+            "/v1/paths",
+            json!({"map_id": job["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": 6.0}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{path}");
+    let wp = &path["waypoints"][0];
+    assert_eq!(wp["irs_phases_rad"].as_array().unwrap().len(), 60);
+    assert_eq!(wp["power_w"].as_array().unwrap().len(), 2);
+    assert_eq!(wp["decoding_order"].as_array().unwrap().len(), 2);
+    let (_, body) = server
+        .get(&format!("/v1/maps/{}", job["map_id"].as_str().unwrap()))
+        .await;
+    assert!(body["certificate"]["max_gap"].as_f64().unwrap() <= 0.05);
+}
+
+/// A long build: the paper's multi-user floor at 0.2 m (101 × 101 cells).
+fn long_rate_request(server_scenario: Value, access: &str) -> Value {
+    json!({"scenario": server_scenario, "kind": "rate", "access": access})
+}
+
+fn fine_multi_user(name: &str) -> Value {
+    scenario("paper-multi-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.2.into();
+        v["name"] = name.into();
+    })
+}
+
+#[tokio::test]
+async fn cancelling_a_job_stops_the_build() {
+    let server = start(&["--workers", "1"]);
+    let (status, job) = server
+        .post(
+            "/v1/maps",
+            long_rate_request(fine_multi_user("fine"), "noma"),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    let job_id = job["job_id"].as_str().unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let (status, _) = server
+        .send("DELETE", &format!("/v1/jobs/{job_id}"), None)
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED);
+    let started = Instant::now();
+    let finished = server.wait_job(job_id).await;
+    assert_eq!(finished["state"], "cancelled");
+    assert!(
+        started.elapsed() < Duration::from_secs(5),
+        "cancellation took {:?}",
+        started.elapsed()
+    );
+    assert!(finished["cells_done"].as_u64().unwrap() < finished["cells_total"].as_u64().unwrap());
+    let (status, body) = server
+        .send("DELETE", &format!("/v1/jobs/{job_id}"), None)
+        .await;
+    problem(status, &body, StatusCode::CONFLICT, "job_finished");
+    let (status, body) = server
+        .get(&format!("/v1/maps/{}", job["map_id"].as_str().unwrap()))
+        .await;
+    problem(status, &body, StatusCode::NOT_FOUND, "not_found");
+}
+
+#[tokio::test]
+async fn concurrent_requests_for_one_map_start_one_build() {
+    let server = start(&[]);
+    let id = server.scenario_id("paper-multi-user").await;
+    let before = server.metric("irs_map_builds_total{kind=\"rate\"}").await;
+    let request = json!({"scenario_id": id, "kind": "rate", "access": "oma"});
+    let answers = futures_join(&server, &request, 8).await;
+    let job_ids: std::collections::HashSet<String> = answers
+        .iter()
+        .map(|(_, b)| b["job_id"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(job_ids.len(), 1, "{answers:?}");
+    server.wait_job(job_ids.iter().next().unwrap()).await;
+    // Once built, the map answers at once.
+    let (status, _) = server.post("/v1/maps", request).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(
+        server.metric("irs_map_builds_total{kind=\"rate\"}").await - before,
+        1.0
+    );
+    assert!(
+        server
+            .metric("irs_map_cache_requests_total{outcome=\"hit\"}")
+            .await
+            >= 1.0
+    );
+}
+
+async fn futures_join(server: &Server, request: &Value, n: usize) -> Vec<(StatusCode, Value)> {
+    let mut handles = Vec::new();
+    for _ in 0..n {
+        let (client, url, body) = (
+            server.client.clone(),
+            format!("{}/v1/maps", server.base),
+            request.to_string(),
+        );
+        handles.push(tokio::spawn(async move {
+            let resp = client
+                .post(url)
+                .header("content-type", "application/json")
+                .body(body)
+                .send()
+                .await
+                .unwrap();
+            let status = resp.status();
+            (status, resp.json::<Value>().await.unwrap())
+        }));
+    }
+    let mut out = Vec::new();
+    for h in handles {
+        out.push(h.await.unwrap());
+    }
+    out
+}
+
+#[tokio::test]
+async fn a_full_queue_answers_503_with_retry_after() {
+    let server = start(&["--workers", "1", "--queue", "1"]);
+    let mut jobs = Vec::new();
+    for name in ["q1", "q2"] {
+        let (status, job) = server
+            .post("/v1/maps", long_rate_request(fine_multi_user(name), "noma"))
+            .await;
+        assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+        jobs.push(job["job_id"].as_str().unwrap().to_string());
+    }
+    let resp = server
+        .client
+        .post(format!("{}/v1/maps", server.base))
+        .header("content-type", "application/json")
+        .body(long_rate_request(fine_multi_user("q3"), "noma").to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::SERVICE_UNAVAILABLE);
+    assert!(resp.headers().contains_key("retry-after"));
+    assert_eq!(resp.headers()["content-type"], "application/problem+json");
+    let body: Value = resp.json().await.unwrap();
+    assert_eq!(body["code"], "queue_full");
+    assert_eq!(body["limit"], 1);
+    for job in jobs {
+        server
+            .send("DELETE", &format!("/v1/jobs/{job}"), None)
+            .await;
+        assert_eq!(server.wait_job(&job).await["state"], "cancelled");
+    }
+}
+
+#[tokio::test]
+async fn every_error_is_a_problem_naming_its_field() {
+    let server = start(&["--max-body-kb", "16", "--max-scenarios", "4"]);
+    let id = server.scenario_id("small-test").await;
+    let raw = |body: &'static str, content_type: &'static str| {
+        let (client, url) = (server.client.clone(), format!("{}/v1/paths", server.base));
+        async move {
+            let resp = client
+                .post(url)
+                .header("content-type", content_type)
+                .body(body)
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(resp.headers()["content-type"], "application/problem+json");
+            (resp.status(), resp.json::<Value>().await.unwrap())
+        }
+    };
+    let (s, b) = raw("{not json", "application/json").await;
+    problem(s, &b, StatusCode::BAD_REQUEST, "malformed_json");
+    let (s, b) = raw("{}", "text/plain").await;
+    problem(
+        s,
+        &b,
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+    );
+    let big = format!("{{\"start\": [{}0]}}", "0,".repeat(10_000));
+    let resp = server
+        .client
+        .post(format!("{}/v1/paths", server.base))
+        .header("content-type", "application/json")
+        .body(big)
+        .send()
+        .await
+        .unwrap();
+    let status = resp.status();
+    let body: Value = resp.json().await.unwrap();
+    problem(
+        status,
+        &body,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "body_too_large",
+    );
+    assert_eq!(body["limit"], 16384);
+
+    let map = json!({"scenario_id": id, "kind": "gain"});
+    let cases: Vec<(&str, Value, StatusCode, &str, Option<&str>)> = vec![
+        (
+            "/v1/paths",
+            json!({"map": map, "start": [1, 1], "goal": [2, 2], "threshold": 0, "bogus": 1}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("bogus"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map": map, "start": [1, 1], "goal": [2, 2], "threshold": "most"}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("threshold"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map": map, "start": [99, 1], "goal": [2, 2], "threshold": -80}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("start"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map_id": "nope", "start": [1, 1], "goal": [2, 2], "threshold": 0}),
+            StatusCode::NOT_FOUND,
+            "not_found",
+            None,
+        ),
+        (
+            "/v1/paths",
+            json!({"start": [1, 1], "goal": [2, 2], "threshold": 0}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("map_id"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map": {"scenario_id": id, "kind": "gain", "access": "oma"}, "start": [1, 1], "goal": [2, 2], "threshold": 0}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("map.access"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map": {"scenario_id": "nope", "kind": "gain"}, "start": [1, 1], "goal": [2, 2], "threshold": 0}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("map.scenario_id"),
+        ),
+        (
+            "/v1/paths",
+            json!({"map": map, "start": [1, 1], "goal": [2, 2], "threshold": 0, "monte_carlo_draws": 10_000_000}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "limit_exceeded",
+            Some("monte_carlo_draws"),
+        ),
+        (
+            "/v1/sweeps",
+            json!({"map": map, "start": [1, 1], "goal": [2, 2], "thresholds": vec![0.0; 1001]}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "limit_exceeded",
+            Some("thresholds"),
+        ),
+        (
+            "/v1/maps",
+            json!({"scenario_id": id, "kind": "rate", "phases": 0}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+            Some("phases"),
+        ),
+        (
+            "/v1/maps",
+            json!({"scenario": scenario("small-test.json", |v| v["grid"]["resolution_m"] = 0.0001.into()), "kind": "gain"}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_scenario",
+            Some("scenario.grid.resolution_m"),
+        ),
+        (
+            "/v1/maps",
+            json!({"scenario": scenario("paper-multi-user.json", |v| v["grid"]["resolution_m"] = 0.05.into()), "kind": "rate"}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "limit_exceeded",
+            Some("kind"),
+        ),
+        (
+            "/v1/scenarios",
+            scenario("small-test.json", |v| {
+                v["ap"]["position"] = json!([3.0, 2.0, 1.0])
+            }),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_scenario",
+            Some("ap.position"),
+        ),
+    ];
+    for (path, body, status, code, field) in cases {
+        let (s, b) = server.post(path, body.clone()).await;
+        problem(s, &b, status, code);
+        if let Some(field) = field {
+            assert_eq!(b["field"], field, "{path} {body}: {b}");
+        }
+    }
+    // The registry limit (4, three of them built in): one more is fine, the next is 507.
+    let (s, _) = server
+        .post(
+            "/v1/scenarios",
+            scenario("small-test.json", |v| v["name"] = "a".into()),
+        )
+        .await;
+    assert_eq!(s, StatusCode::CREATED);
+    let (s, b) = server
+        .post(
+            "/v1/scenarios",
+            scenario("small-test.json", |v| v["name"] = "b".into()),
+        )
+        .await;
+    problem(s, &b, StatusCode::INSUFFICIENT_STORAGE, "registry_full");
+
+    for (method, path, status, code) in [
+        (
+            "GET",
+            "/v1/scenarios/nope",
+            StatusCode::NOT_FOUND,
+            "not_found",
+        ),
+        ("GET", "/v1/maps/nope", StatusCode::NOT_FOUND, "not_found"),
+        (
+            "GET",
+            "/v1/maps/nope/coverage?threshold=1",
+            StatusCode::NOT_FOUND,
+            "not_found",
+        ),
+        ("GET", "/v1/jobs/nope", StatusCode::NOT_FOUND, "not_found"),
+        (
+            "DELETE",
+            "/v1/jobs/nope",
+            StatusCode::NOT_FOUND,
+            "not_found",
+        ),
+        (
+            "GET",
+            "/v2/anything",
+            StatusCode::NOT_FOUND,
+            "route_not_found",
+        ),
+        (
+            "PUT",
+            "/v1/paths",
+            StatusCode::METHOD_NOT_ALLOWED,
+            "method_not_allowed",
+        ),
+    ] {
+        let (s, b) = server.send(method, path, None).await;
+        problem(s, &b, status, code);
+    }
+    let (_, m) = server
+        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+        .await;
+    let (s, b) = server
+        .get(&format!(
+            "/v1/maps/{}/coverage",
+            m["map_id"].as_str().unwrap()
+        ))
+        .await;
+    problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "invalid_field");
+    assert_eq!(b["field"], "threshold");
+}
+
+#[tokio::test]
+async fn operations_endpoints() {
+    let server = start(&[]);
+    assert_eq!(
+        server.get("/healthz").await,
+        (StatusCode::OK, json!({"status": "ok"}))
+    );
+    let (s, ready) = server.get("/readyz").await;
+    assert_eq!((s, ready["scenarios"].as_u64()), (StatusCode::OK, Some(3)));
+    let (_, version) = server.get("/version").await;
+    assert_eq!(version["version"], env!("CARGO_PKG_VERSION"));
+    server.get("/v1/scenarios").await;
+    assert!(
+        server
+            .metric("http_requests_total{route=\"/v1/scenarios\",method=\"GET\",status=\"200\"}")
+            .await
+            >= 1.0
+    );
+    assert!(
+        server
+            .metric("http_request_duration_seconds_count{route=\"/v1/scenarios\"}")
+            .await
+            >= 1.0
+    );
+    assert_eq!(server.metric("irs_scenarios").await, 3.0);
+}
