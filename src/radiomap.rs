@@ -392,7 +392,7 @@ impl RadioMap {
         let (certificate, upper_bound) = match &self.cells {
             CellSolutions::Gain { .. } => (None, None),
             CellSolutions::Rate(rate) => {
-                let mut gaps = rate.gaps();
+                let mut gaps = rate.gaps(&self.values);
                 gaps.sort_by(f64::total_cmp);
                 let summary = CertificateSummary {
                     cells: gaps.len(),
@@ -518,8 +518,9 @@ pub fn build(
             )
         }
         MapKind::Rate => {
-            let rate = solver::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
-            (rate.values.clone(), CellSolutions::Rate(rate))
+            let (values, rate) =
+                solver::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
+            (values, CellSolutions::Rate(rate))
         }
     };
     Ok(RadioMap {

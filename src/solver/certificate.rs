@@ -52,17 +52,7 @@ pub fn upper_bound(problem: &CellProblem, model: &RateModel) -> f64 {
 }
 
 fn per_user_bound(problem: &CellProblem, model: &RateModel) -> f64 {
-    let lambdas: Vec<f64> = (0..problem.users())
-        .map(|l| {
-            problem
-                .user(l)
-                .iter()
-                .map(|x| x.norm())
-                .sum::<f64>()
-                .powi(2)
-                + problem.tau[l]
-        })
-        .collect();
+    let lambdas: Vec<f64> = (0..problem.users()).map(|l| problem.max_gain(l)).collect();
     (0..model.orders().len())
         .filter_map(|k| model.mru_rate_ignoring_ordering(&lambdas, k))
         .fold(f64::NEG_INFINITY, f64::max)

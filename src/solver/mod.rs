@@ -46,6 +46,12 @@ impl CellProblem {
     pub fn user(&self, l: usize) -> &[C64] {
         &self.a[l * self.dim..(l + 1) * self.dim]
     }
+    /// User l's own best gain over all phases, ‖a_l‖₁² + τ_l (eq. 15 for that user alone): an
+    /// upper bound on λ_l that the relaxation attains, since a_l a_lᴴ has rank one.
+    pub fn max_gain(&self, l: usize) -> f64 {
+        self.user(l).iter().map(|x| x.norm()).sum::<f64>().powi(2) + self.tau[l]
+    }
+
     /// λ_l(v) = |a_lᵀ v|² + τ_l for every user.
     pub fn lambdas(&self, v: &[C64], out: &mut [f64]) {
         for (l, o) in out.iter_mut().enumerate() {
@@ -75,10 +81,9 @@ pub struct CellSolution {
     pub upper_bound: f64,
 }
 
-/// Per-cell results of a rate map.
+/// Per-cell configurations and certificates of a rate map (the values live in the map).
 #[derive(Debug, Clone)]
 pub struct RateCells {
-    pub values: Vec<f64>,
     pub upper_bound: Vec<f64>,
     /// N, phases per cell (0 for `none`).
     subsurfaces: usize,
@@ -101,7 +106,7 @@ impl RateCells {
     }
 
     pub fn size_bytes(&self) -> usize {
-        8 * (self.values.len() * 2 + self.phases.len() + self.power_w.len()) + self.order.len()
+        8 * (self.upper_bound.len() + self.phases.len() + self.power_w.len()) + self.order.len()
     }
 
     /// Index of the decoding order used at a cell (into [`RateModel::orders`]).
@@ -113,9 +118,9 @@ impl RateCells {
         &self.model
     }
 
-    /// Gaps upper_bound − achieved over the cells where both are finite.
-    pub fn gaps(&self) -> Vec<f64> {
-        self.values
+    /// Gaps upper_bound − achieved (`values`, the map's) over the cells where both are finite.
+    pub fn gaps(&self, values: &[f64]) -> Vec<f64> {
+        values
             .iter()
             .zip(&self.upper_bound)
             .filter(|(v, u)| v.is_finite() && u.is_finite())
@@ -222,7 +227,8 @@ pub fn phases_of(v: &[C64]) -> impl Iterator<Item = f64> + '_ {
     v[..v.len() - 1].iter().map(|x| x.arg().rem_euclid(TAU))
 }
 
-/// Builds every free cell of a rate map in parallel (rows of the grid on rayon's pool).
+/// Builds every free cell of a rate map in parallel (rows of the grid on rayon's pool); returns
+/// the map values and the per-cell solutions.
 pub fn build_rate_cells(
     scenario: &Scenario,
     channel: &ChannelModel,
@@ -230,7 +236,7 @@ pub fn build_rate_cells(
     occupied: &[bool],
     key: &MapKey,
     progress: &Progress,
-) -> Result<RateCells, BuildError> {
+) -> Result<(Vec<f64>, RateCells), BuildError> {
     let model = rate_model(scenario, key);
     let solver = key.solver.unwrap_or(SolverKind::Fast);
     let with_irs = key.phases != PhaseMode::None;
@@ -288,13 +294,13 @@ pub fn build_rate_cells(
             Ok(())
         })?;
     phases.truncate(cells * n);
-    Ok(RateCells {
-        values,
+    let cells = RateCells {
         upper_bound: upper,
         subsurfaces: n,
         phases,
         power_w: power,
         order,
         model,
-    })
+    };
+    Ok((values, cells))
 }

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Load test: path queries on the cached paper single-user map, over loopback only, bounded in
+# time. Starts the release server on a free port, warms the map, runs wrk, stops the server.
+#   bench/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
+command -v wrk >/dev/null || { apt-get update -qq && apt-get install -y -qq wrk >/dev/null; }
+cargo build --release --quiet
+log=$(mktemp); lua=$(mktemp --suffix=.lua)
+RUST_LOG=warn ./target/release/irs-planner serve --bind 127.0.0.1:0 >"$log" 2>/dev/null &
+server=$!
+trap 'kill $server 2>/dev/null || true; rm -f "$log" "$lua"' EXIT
+for _ in $(seq 100); do grep -q listening "$log" && break; sleep 0.1; done
+url=$(sed -n 's/^listening on //p' "$log")
+sid=$(curl -s "$url/v1/scenarios" | python3 -c "import json,sys; print([s['id'] for s in json.load(sys.stdin)['scenarios'] if s['name']=='paper-single-user'][0])")
+map=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' \
+  -d "{\"scenario_id\":\"$sid\",\"kind\":\"gain\"}" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
+body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62}"
+curl -sf -X POST "$url/v1/paths" -H 'content-type: application/json' -d "$body" >/dev/null
+cat >"$lua" <<LUA
+wrk.method = "POST"
+wrk.body = '$body'
+wrk.headers["Content-Type"] = "application/json"
+done = function(summary, latency, requests)
+  io.write(string.format("requests/s %.0f  p50 %.2f ms  p99 %.2f ms  max %.2f ms  errors %d\n",
+    summary.requests / (summary.duration / 1e6), latency:percentile(50) / 1000,
+    latency:percentile(99) / 1000, latency.max / 1000,
+    summary.errors.status + summary.errors.connect + summary.errors.read + summary.errors.write + summary.errors.timeout))
+end
+LUA
+wrk -t"$threads" -c"$connections" -d"${duration}s" --latency -s "$lua" "$url/v1/paths"
