@@ -284,6 +284,42 @@ impl ChannelModel {
         DirectAndScattered { h, tau }
     }
 
+    /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 14) at `user`, in [0, 2π), for every sub-surface (`out` has
+    /// length N). With `coherent` grouping w̃_n is a positive amplitude times
+    /// e^{−j2π(d_A,n + d_n,U)/λ}, so its angle follows from the two distances without any
+    /// trigonometry; with `elements` it is the angle of the element sum. Where a term vanishes
+    /// (an NLoS link, a user behind the IRS) its angle is taken as 0: every θ is then optimal.
+    pub fn optimal_phases(&self, user: [f64; 3], out: &mut [f64]) {
+        debug_assert_eq!(out.len(), self.subsurfaces());
+        let q = P3::from(user);
+        let angle_of_distance = |d: f64| -TAU * (d / self.wavelength_m).fract();
+        let h_angle = if self.link_budget(&self.ap, &q).los {
+            angle_of_distance((q - self.ap).norm())
+        } else {
+            0.0
+        };
+        let Some(irs) = self.irs.as_ref() else { return };
+        let cascade_los = self
+            .irs_user_link(irs, &q)
+            .is_some_and(|l| l.los && irs.ap_link.los);
+        for (n, theta) in out.iter_mut().enumerate() {
+            let w_angle = if !cascade_los {
+                0.0
+            } else if irs.per_sub == 1 {
+                angle_of_distance(irs.ap_distance[n] + (q - irs.points[n]).norm())
+            } else {
+                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                let sum: C64 = irs.points[range.clone()]
+                    .iter()
+                    .zip(&irs.ap_distance[range])
+                    .map(|(p, d_ap)| self.los_phase(d_ap + (q - p).norm()))
+                    .sum();
+                if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
+            };
+            *theta = (h_angle - w_angle).rem_euclid(TAU);
+        }
+    }
+
     /// Draws instantaneous channels c_u = h_u + Σ_e θ_{n(e)} r_{u,e} g_e for several users at once
     /// from the per-element Rician model (paper eqs. 1–4), independent of the closed form above:
     /// the Monte Carlo reference for Lemma 1 and for the exact expected rates (paper Fig. 10).

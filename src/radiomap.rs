@@ -10,7 +10,7 @@
 //! A map is identified by its [`MapKey`] (scenario id, kind, phases, access, solver), whose hash is
 //! the map id. Occupied cells hold NaN (JSON null, the paper's −∞).
 
-use crate::channel::{C64, ChannelModel, DirectAndScattered};
+use crate::channel::{C64, ChannelModel, expected_gain};
 use crate::scenario::{Grid, Scenario, hash_hex};
 use crate::solver::{self, RateCells};
 use rayon::prelude::*;
@@ -291,18 +291,19 @@ impl RadioMap {
             } => {
                 let (i, j) = self.grid.cell_of(index);
                 let [x, y] = self.grid.centre(i, j);
-                let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
-                let mut phases = vec![
-                    0.0;
-                    if self.key.phases == PhaseMode::None {
-                        0
-                    } else {
-                        w.len()
-                    }
-                ];
-                if !phases.is_empty() {
-                    let direct = model.evaluate([x, y, *antenna_height_m], true, &mut w);
-                    optimal_phases(&direct, &w, self.key.phases, &mut phases);
+                let n = if self.key.phases == PhaseMode::None {
+                    0
+                } else {
+                    model.subsurfaces()
+                };
+                let mut phases = vec![0.0; n];
+                if n > 0 {
+                    phases_for_mode(
+                        model,
+                        [x, y, *antenna_height_m],
+                        self.key.phases,
+                        &mut phases,
+                    );
                 }
                 CellConfig {
                     irs_phases_rad: phases,
@@ -439,16 +440,12 @@ pub fn coverage(map: &RadioMap, threshold: f64) -> f64 {
     map.values.iter().filter(|v| **v >= threshold).count() as f64 / free as f64
 }
 
-/// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 14), quantised for `bits` to the nearest of L = 2^b levels
-/// modulo 2π (eq. 28). All phases land in [0, 2π).
-pub fn optimal_phases(direct: &DirectAndScattered, w: &[C64], mode: PhaseMode, out: &mut [f64]) {
-    let h_arg = direct.h.arg();
-    for (o, wn) in out.iter_mut().zip(w) {
-        let theta = (h_arg - wn.arg()).rem_euclid(TAU);
-        *o = match mode {
-            PhaseMode::Bits(b) => quantise_phase(theta, b),
-            _ => theta,
-        };
+/// The phases of a mode at `user`: θ* of eq. 14, quantised for `bits` to the nearest of
+/// L = 2^b levels modulo 2π (eq. 28). All phases land in [0, 2π).
+pub fn phases_for_mode(model: &ChannelModel, user: [f64; 3], mode: PhaseMode, out: &mut [f64]) {
+    model.optimal_phases(user, out);
+    if let PhaseMode::Bits(b) = mode {
+        out.iter_mut().for_each(|t| *t = quantise_phase(*t, b));
     }
 }
 
@@ -459,24 +456,26 @@ pub fn quantise_phase(theta: f64, bits: u8) -> f64 {
     ((theta / step).round() % levels) * step
 }
 
-/// The best expected gain λ (linear) at one location for a phase mode:
-/// `continuous`: (|h̃| + ‖w̃‖₁)² + τ (paper eq. 15); `bits`: λ at the quantised eq. 14 phases;
-/// `none`: |h̃|² + τ with `direct` evaluated without the IRS.
-pub fn best_gain(direct: &DirectAndScattered, w: &[C64], mode: PhaseMode) -> f64 {
+/// The best expected gain λ (linear) at `user` for a phase mode, using the buffers `w` (N) and
+/// `theta` (N): `continuous`: (|h̃| + ‖w̃‖₁)² + τ (paper eq. 15); `bits`: λ (eq. 6) at the
+/// quantised eq. 14 phases (eq. 28); `none`: |h̃|² + τ of the direct link alone.
+pub fn best_gain(
+    model: &ChannelModel,
+    user: [f64; 3],
+    mode: PhaseMode,
+    w: &mut [C64],
+    theta: &mut [f64],
+) -> f64 {
+    let direct = model.evaluate(user, mode != PhaseMode::None, w);
     match mode {
         PhaseMode::None => direct.h.norm_sqr() + direct.tau,
         PhaseMode::Continuous => {
             let l1: f64 = w.iter().map(|x| x.norm()).sum();
             (direct.h.norm() + l1).powi(2) + direct.tau
         }
-        PhaseMode::Bits(b) => {
-            let h_arg = direct.h.arg();
-            let mut sum = direct.h;
-            for wn in w {
-                let theta = quantise_phase((h_arg - wn.arg()).rem_euclid(TAU), b);
-                sum += wn * C64::from_polar(1.0, theta);
-            }
-            sum.norm_sqr() + direct.tau
+        PhaseMode::Bits(_) => {
+            phases_for_mode(model, user, mode, theta);
+            expected_gain(&direct, w, theta)
         }
     }
 }
@@ -542,14 +541,18 @@ fn gain_values(
     progress: &Progress,
 ) -> Result<Vec<f64>, BuildError> {
     let mut values = vec![f64::NAN; grid.cells()];
-    let with_irs = mode != PhaseMode::None;
     values
         .par_chunks_mut(grid.ny)
         .zip(occupied.par_chunks(grid.ny))
         .enumerate()
         .try_for_each_init(
-            || vec![C64::new(0.0, 0.0); model.subsurfaces()],
-            |w, (i, (row, occupied_row))| {
+            || {
+                (
+                    vec![C64::new(0.0, 0.0); model.subsurfaces()],
+                    vec![0.0; model.subsurfaces()],
+                )
+            },
+            |(w, theta), (i, (row, occupied_row))| {
                 if progress.is_cancelled() {
                     return Err(BuildError::Cancelled);
                 }
@@ -558,8 +561,7 @@ fn gain_values(
                         continue;
                     }
                     let [x, y] = grid.centre(i, j);
-                    let direct = model.evaluate([x, y, height], with_irs, w);
-                    *value = 10.0 * best_gain(&direct, w, mode).log10();
+                    *value = 10.0 * best_gain(model, [x, y, height], mode, w, theta).log10();
                 }
                 progress.advance(row.len());
                 Ok(())
@@ -586,22 +588,32 @@ mod tests {
     /// phases, and is the triangle-inequality bound (eq. 13) that no θ exceeds.
     #[test]
     fn closed_form_beats_random_phases_and_meets_the_bound() {
-        let s = small();
-        let model = ChannelModel::new(&s);
-        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-        let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
-        let mut theta = vec![0.0; w.len()];
-        for _ in 0..40 {
-            let q = [rng.random_range(0.0..6.0), rng.random_range(0.2..4.0), 1.0];
-            let d = model.evaluate(q, true, &mut w);
-            let best = best_gain(&d, &w, PhaseMode::Continuous);
-            let bound = (d.h.norm() + w.iter().map(|x| x.norm()).sum::<f64>()).powi(2) + d.tau;
-            assert!((best - bound).abs() <= 1e-12 * bound);
-            optimal_phases(&d, &w, PhaseMode::Continuous, &mut theta);
-            assert!((expected_gain(&d, &w, &theta) / best - 1.0).abs() < 1e-12);
-            for _ in 0..500 {
-                let random: Vec<f64> = (0..w.len()).map(|_| rng.random::<f64>() * TAU).collect();
-                assert!(expected_gain(&d, &w, &random) <= best * (1.0 + 1e-12));
+        for grouping in ["coherent", "elements"] {
+            let mut v: serde_json::Value =
+                serde_json::from_str(include_str!("../scenarios/small-test.json")).unwrap();
+            v["irs"]["grouping"] = grouping.into();
+            let s = Scenario::from_json(&v.to_string()).unwrap();
+            let model = ChannelModel::new(&s);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+            let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
+            let mut theta = vec![0.0; w.len()];
+            for _ in 0..40 {
+                let q = [rng.random_range(0.0..6.0), rng.random_range(0.2..4.0), 1.0];
+                let d = model.evaluate(q, true, &mut w);
+                let best = best_gain(&model, q, PhaseMode::Continuous, &mut w, &mut theta);
+                let bound = (d.h.norm() + w.iter().map(|x| x.norm()).sum::<f64>()).powi(2) + d.tau;
+                assert!((best - bound).abs() <= 1e-12 * bound);
+                // Eq. 14's phases (from distances) attain the closed form.
+                model.optimal_phases(q, &mut theta);
+                assert!(
+                    (expected_gain(&d, &w, &theta) / best - 1.0).abs() < 1e-12,
+                    "{grouping} at {q:?}"
+                );
+                for _ in 0..500 {
+                    let random: Vec<f64> =
+                        (0..w.len()).map(|_| rng.random::<f64>() * TAU).collect();
+                    assert!(expected_gain(&d, &w, &random) <= best * (1.0 + 1e-12));
+                }
             }
         }
     }

@@ -712,3 +712,29 @@ async fn operations_endpoints() {
     );
     assert_eq!(server.metric("irs_scenarios").await, 3.0);
 }
+
+#[tokio::test]
+async fn sigterm_shuts_down_gracefully() {
+    let mut server = start(&[]);
+    assert_eq!(server.get("/healthz").await.0, StatusCode::OK);
+    let pid = server.child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        if let Some(status) = server.child.try_wait().unwrap() {
+            assert!(status.success(), "exit status {status}");
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the server did not stop on SIGTERM"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}

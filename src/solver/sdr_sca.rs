@@ -101,7 +101,9 @@ impl<'a> Sdp<'a> {
     fn new(problem: &'a CellProblem, model: &'a RateModel, order: usize) -> Self {
         let n = problem.dim;
         let pairs = n * (n - 1) / 2;
-        let scale = (0..problem.users()).map(|l| problem.max_gain(l)).fold(0.0, f64::max);
+        let scale = (0..problem.users())
+            .map(|l| problem.max_gain(l))
+            .fold(0.0, f64::max);
         let mut lambda0 = Vec::new();
         let mut grad = Vec::new();
         for l in 0..problem.users() {
