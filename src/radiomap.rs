@@ -673,6 +673,19 @@ mod tests {
     }
 
     #[test]
+    fn sdr_sca_without_the_sdp_feature_is_a_clear_error() {
+        let s = small();
+        let key = MapKey::new("x", &s, MapKind::Rate, None, None, Some(SolverKind::SdrSca));
+        if solver::SDR_SCA_AVAILABLE {
+            assert_eq!(key.unwrap().solver, Some(SolverKind::SdrSca));
+        } else {
+            let e = key.unwrap_err();
+            assert_eq!(e.field, "solver");
+            assert!(e.reason.contains("sdp"), "{e}");
+        }
+    }
+
+    #[test]
     fn cancellation_stops_a_build() {
         let s = small();
         let progress = Progress::default();
