@@ -5,6 +5,7 @@
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::planner::{self, Threshold};
 use crate::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, RadioMap, SolverKind};
+use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
 use crate::service::config::ServeArgs;
 use clap::{Args, Parser, Subcommand};
@@ -54,6 +55,9 @@ pub struct MapArgs {
     /// No progress bar on stderr.
     #[arg(long)]
     pub quiet: bool,
+    /// Also draw the map (and, for `plan`, the path) as a PNG into this file.
+    #[arg(long, value_name = "FILE")]
+    pub png: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -187,10 +191,23 @@ fn print_json(value: &impl Serialize) -> Result<(), Failure> {
     Ok(())
 }
 
+fn write_png(
+    file: Option<&PathBuf>,
+    map: &RadioMap,
+    options: &RenderOptions,
+) -> Result<(), Failure> {
+    let Some(file) = file else { return Ok(()) };
+    std::fs::write(file, render::png(map, options)).map_err(|e| Failure {
+        message: format!("--png {}: {e}", file.display()),
+        bad_input: true,
+    })
+}
+
 /// `irs-planner map …`
 pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.scenario)?;
     let map = build_map(args, &scenario)?;
+    write_png(args.png.as_ref(), &map, &RenderOptions::default())?;
     print_json(&map.body())
 }
 
@@ -217,6 +234,15 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(format!("--{e}")))?;
+    let drawn = RenderOptions {
+        threshold: path.threshold,
+        path: path
+            .waypoints
+            .iter()
+            .map(|w| map.grid.index(w.i, w.j))
+            .collect(),
+    };
+    write_png(args.map.png.as_ref(), &map, &drawn)?;
     let monte_carlo = match args.monte_carlo {
         Some(draws) if path.feasible => Some(montecarlo::check_path(
             &scenario, &map, &path, draws, args.seed,

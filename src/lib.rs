@@ -3,7 +3,8 @@
 //! Path Planning: A Radio Map based Approach" (see SPEC.md and the README).
 //!
 //! Data flows one way: [`scenario`] → [`channel`] → [`radiomap`] (with [`rate`] and [`solver`]
-//! for rate maps) → [`planner`] → the CLI ([`cli`]) and the HTTP [`service`].
+//! for rate maps) → [`planner`] → the CLI ([`cli`]) and the HTTP [`service`]; [`render`] draws
+//! maps and paths as PNG.
 
 pub mod channel;
 pub mod cli;
@@ -11,6 +12,7 @@ pub mod montecarlo;
 pub mod planner;
 pub mod radiomap;
 pub mod rate;
+pub mod render;
 pub mod scenario;
 pub mod service;
 pub mod solver;

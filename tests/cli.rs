@@ -75,6 +75,30 @@ fn rate_plan_carries_powers_order_and_monte_carlo() {
 }
 
 #[test]
+fn png_output_is_written() {
+    let file = std::env::temp_dir().join(format!("irs-cli-{}.png", std::process::id()));
+    let (code, _, err) = run(&[
+        "plan",
+        "--scenario",
+        SMALL,
+        "--kind",
+        "gain",
+        "--start",
+        "0.5,0.5",
+        "--goal",
+        "5.5,3.5",
+        "--max-threshold",
+        "--quiet",
+        "--png",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let bytes = std::fs::read(&file).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let _ = std::fs::remove_file(file);
+}
+
+#[test]
 fn map_prints_the_map_body() {
     let (code, out, err) = run(&[
         "map",

@@ -738,3 +738,35 @@ async fn sigterm_shuts_down_gracefully() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
+
+#[tokio::test]
+async fn map_image_is_a_png_with_the_path() {
+    let server = start(&[]);
+    let id = server.scenario_id("paper-single-user").await;
+    let (_, map) = server
+        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+        .await;
+    let url = format!(
+        "{}/v1/maps/{}/image.png?start=-10,0&goal=10,0&threshold=-61",
+        server.base,
+        map["map_id"].as_str().unwrap()
+    );
+    let resp = server.client.get(url).send().await.unwrap();
+    assert_eq!(resp.status(), StatusCode::OK);
+    assert_eq!(resp.headers()["content-type"], "image/png");
+    let bytes = resp.bytes().await.unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let url = format!(
+        "{}/v1/maps/{}/image.png?start=-10,0",
+        server.base,
+        map["map_id"].as_str().unwrap()
+    );
+    let (status, body) = server.get(url.strip_prefix(&server.base).unwrap()).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+    );
+    assert_eq!(body["field"], "goal");
+}

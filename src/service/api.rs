@@ -10,6 +10,7 @@ use crate::planner::{self, SweepAnswer, Threshold};
 use crate::radiomap::{
     Access, MapBody, MapKey, MapKind, MapStats, PhaseMode, RadioMap, SolverKind,
 };
+use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
 use axum::extract::{FromRequest, Path, Query, Request, State};
 use axum::http::{StatusCode, header};
@@ -45,6 +46,7 @@ pub fn route_table() -> Vec<(
         ),
         ("/v1/maps/{map_id}", &["get"], get(get_map)),
         ("/v1/maps/{map_id}/coverage", &["get"], get(coverage)),
+        ("/v1/maps/{map_id}/image.png", &["get"], get(image)),
         ("/v1/jobs", &["get"], get(list_jobs)),
         (
             "/v1/jobs/{job_id}",
@@ -438,6 +440,82 @@ async fn coverage(
         free_cells: free,
         covered_cells: (eta * free as f64).round() as usize,
     }))
+}
+
+/// Parses "x,y" from a query parameter.
+fn query_point(
+    query: &HashMap<String, String>,
+    name: &'static str,
+) -> Result<Option<[f64; 2]>, ApiError> {
+    let Some(text) = query.get(name) else {
+        return Ok(None);
+    };
+    let parts: Vec<Option<f64>> = text
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect();
+    match parts.as_slice() {
+        [Some(x), Some(y)] => Ok(Some([*x, *y])),
+        _ => Err(ApiError::invalid(
+            name,
+            format!("expected \"x,y\" in metres, got {text:?}"),
+        )),
+    }
+}
+
+/// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
+async fn image(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    if let Some(unknown) = query
+        .keys()
+        .find(|k| !["threshold", "start", "goal"].contains(&k.as_str()))
+    {
+        return Err(ApiError::invalid(
+            unknown.clone(),
+            "unknown query parameter",
+        ));
+    }
+    let threshold =
+        match query.get("threshold").map(String::as_str) {
+            None | Some("max") => Threshold::Max,
+            Some(t) => {
+                Threshold::Value(t.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(
+                    || ApiError::invalid("threshold", "must be a finite number or \"max\""),
+                )?)
+            }
+        };
+    let (start, goal) = (query_point(&query, "start")?, query_point(&query, "goal")?);
+    let map = cached_map(&state, &map_id).await?;
+    let mut options = RenderOptions::default();
+    if let Threshold::Value(t) = threshold {
+        options.threshold = Some(t);
+    }
+    match (start, goal) {
+        (Some(s), Some(g)) => {
+            let answer = planner::plan(&map, s, g, threshold, 1.0)
+                .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+            options.threshold = answer.threshold;
+            options.path = answer
+                .waypoints
+                .iter()
+                .map(|w| map.grid.index(w.i, w.j))
+                .collect();
+        }
+        (None, None) => {}
+        _ => {
+            return Err(ApiError::invalid(
+                if start.is_none() { "start" } else { "goal" },
+                "give both start and goal, or neither",
+            ));
+        }
+    }
+    let bytes = tokio::task::spawn_blocking(move || render::png(&map, &options))
+        .await
+        .map_err(|e| ApiError::build_failed(format!("rendering failed: {e}")))?;
+    Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
 }
 
 // ---------------------------------------------------------------- jobs
