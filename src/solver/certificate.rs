@@ -32,7 +32,7 @@ use crate::rate::RateModel;
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::FRAC_PI_2;
 
-const INITIAL_DIRECTIONS: usize = 5;
+const INITIAL_DIRECTIONS: usize = 7;
 const REFINEMENT_ROUNDS: usize = 5;
 /// A refinement round that lowers the rate bound by less than this (bit/s/Hz) ends refinement.
 const REFINEMENT_SETTLED: f64 = 1e-6;
