@@ -212,10 +212,6 @@ impl ChannelModel {
         self.irs.as_ref().map_or(0, |i| i.subsurfaces)
     }
 
-    pub fn wavelength_m(&self) -> f64 {
-        self.wavelength_m
-    }
-
     /// True when the segment between two points passes through an obstacle's interior.
     pub fn is_blocked(&self, a: [f64; 3], b: [f64; 3]) -> bool {
         let (a, b) = (P3::from(a), P3::from(b));

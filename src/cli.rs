@@ -234,15 +234,11 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(format!("--{e}")))?;
-    let drawn = RenderOptions {
-        threshold: path.threshold,
-        path: path
-            .waypoints
-            .iter()
-            .map(|w| map.grid.index(w.i, w.j))
-            .collect(),
-    };
-    write_png(args.map.png.as_ref(), &map, &drawn)?;
+    write_png(
+        args.map.png.as_ref(),
+        &map,
+        &RenderOptions::for_path(&map, &path),
+    )?;
     let monte_carlo = match args.monte_carlo {
         Some(draws) if path.feasible => Some(montecarlo::check_path(
             &scenario, &map, &path, draws, args.seed,

@@ -9,7 +9,7 @@
 
 use crate::channel::ChannelModel;
 use crate::planner::PathAnswer;
-use crate::radiomap::{CellSolutions, RadioMap};
+use crate::radiomap::{CellSolutions, PhaseMode, RadioMap};
 use crate::rate::user_label;
 use crate::scenario::Scenario;
 use crate::solver::{cell_problem, sru_part};
@@ -71,6 +71,9 @@ pub fn check_path(
 ) -> MonteCarloReport {
     let channel = ChannelModel::new(scenario);
     let height = scenario.mru.antenna_height_m;
+    // The SRUs' channels do not depend on the waypoint: evaluate them once per path.
+    let with_irs = map.key.phases != PhaseMode::None;
+    let srus = sru_part(&channel, scenario, with_irs);
     let waypoints: Vec<WaypointCheck> = path
         .waypoints
         .par_iter()
@@ -108,8 +111,6 @@ pub fn check_path(
                         .power_w
                         .as_ref()
                         .expect("rate waypoints carry powers");
-                    let with_irs = theta_opt.is_some();
-                    let srus = sru_part(&channel, scenario, with_irs);
                     let problem = cell_problem(&channel, mru, &srus, with_irs);
                     let mut v: Vec<_> = theta
                         .iter()

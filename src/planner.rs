@@ -89,13 +89,6 @@ impl<'a> CellGraph<'a> {
         !self.occupied[cell] && self.values[cell] >= threshold
     }
 
-    /// The feasible map Π (paper eq. 17) for a threshold.
-    pub fn feasible_mask(&self, threshold: f64) -> Vec<bool> {
-        (0..self.values.len())
-            .map(|c| self.is_feasible(c, threshold))
-            .collect()
-    }
-
     /// Shortest feasible path from `start` to `goal` (paper problem 16), or why there is none.
     pub fn shortest_path(
         &self,

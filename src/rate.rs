@@ -119,17 +119,54 @@ impl RateModel {
     /// certificate bound it at an upper corner of the gains.
     #[inline]
     pub fn mru_rate_ignoring_ordering(&self, lambdas: &[f64], order: usize) -> Option<f64> {
+        let (p_m, interference) = self.allocate(lambdas, order, |_, _| {})?;
+        Some(match self.access {
+            Access::Oma => {
+                let bands = self.users() as f64;
+                (bands * lambdas[0] * p_m / self.noise_w).ln_1p() / bands / std::f64::consts::LN_2
+            }
+            // log2((S_k + σ²/λ_m)/(S_{k+1} + σ²/λ_m)) with S_k = S_{k+1} + p_m.
+            Access::Noma => {
+                let floor = interference + self.noise_w / lambdas[0];
+                ((floor + p_m) / floor).log2()
+            }
+        })
+    }
+
+    /// The power per user achieving [`Self::mru_rate`] for an order.
+    pub fn split(&self, lambdas: &[f64], order: usize) -> Option<PowerSplit> {
+        let mru_rate = self.mru_rate(lambdas, order)?;
+        let mut power = vec![0.0; self.users()];
+        let (p_m, _) = self.allocate(lambdas, order, |u, p| power[u] = p)?;
+        power[0] = p_m;
+        Some(PowerSplit {
+            mru_rate,
+            power_w: power,
+            order: order as u8,
+        })
+    }
+
+    /// The closed-form split of the module doc: every SRU at exactly its target, the MRU with
+    /// the rest. Returns the MRU's power p_m and the power of the users decoded after it
+    /// (S_{k+1}, its NOMA interference; 0 for OMA), or `None` if p_m would be negative. Each SRU's
+    /// power goes to `set(user, watts)`; the solvers' hot loop passes a no-op, which compiles away.
+    fn allocate(
+        &self,
+        lambdas: &[f64],
+        order: usize,
+        mut set: impl FnMut(usize, f64),
+    ) -> Option<(f64, f64)> {
         let noise = self.noise_w;
         match self.access {
             Access::Oma => {
                 let bands = self.users() as f64;
                 let mut left = self.p_max_w;
                 for (l, &lam) in lambdas.iter().enumerate().skip(1) {
-                    left -= ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lam);
+                    let p = ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lam);
+                    set(l, p);
+                    left -= p;
                 }
-                (left >= 0.0).then(|| {
-                    (bands * lambdas[0] * left / noise).ln_1p() / bands / std::f64::consts::LN_2
-                })
+                (left >= 0.0).then_some((left, 0.0))
             }
             Access::Noma => {
                 let pi = &self.orders[order];
@@ -137,67 +174,25 @@ impl RateModel {
                     .iter()
                     .position(|&u| u == 0)
                     .expect("the MRU is in every order");
-                let mut tail = 0.0; // S_{t} for t > k, from the strongest user down
-                for &u in pi[k + 1..].iter().rev() {
-                    let r = self.targets[u as usize];
-                    tail = r.exp2() * tail + (r.exp2() - 1.0) * noise / lambdas[u as usize];
-                }
-                let mut head = self.p_max_w; // S_t for t ≤ k, from the full budget up
-                for &u in &pi[..k] {
-                    let r = self.targets[u as usize];
-                    head = (head - (r.exp2() - 1.0) * noise / lambdas[u as usize]) / r.exp2();
-                }
-                if head < tail {
-                    return None;
-                }
-                let n_m = noise / lambdas[0];
-                Some(((head + n_m) / (tail + n_m)).log2())
-            }
-        }
-    }
-
-    /// The power per user achieving [`Self::mru_rate`] for an order.
-    pub fn split(&self, lambdas: &[f64], order: usize) -> Option<PowerSplit> {
-        let mru_rate = self.mru_rate(lambdas, order)?;
-        let noise = self.noise_w;
-        let users = self.users();
-        let mut power = vec![0.0; users];
-        match self.access {
-            Access::Oma => {
-                let bands = users as f64;
-                let mut left = self.p_max_w;
-                for l in 1..users {
-                    power[l] =
-                        ((bands * self.targets[l]).exp2() - 1.0) * noise / (bands * lambdas[l]);
-                    left -= power[l];
-                }
-                power[0] = left.max(0.0);
-            }
-            Access::Noma => {
-                let pi = &self.orders[order];
-                let k = pi.iter().position(|&u| u == 0).unwrap();
+                // S_t for t > k, from the strongest user down: S_t = 2^{r̄_t} S_{t+1} + a_t σ²/λ_t.
                 let mut tail = 0.0;
                 for &u in pi[k + 1..].iter().rev() {
                     let r = self.targets[u as usize];
                     let next = r.exp2() * tail + (r.exp2() - 1.0) * noise / lambdas[u as usize];
-                    power[u as usize] = next - tail;
+                    set(u as usize, next - tail);
                     tail = next;
                 }
+                // S_t for t ≤ k, from the full budget up: S_{t+1} = (S_t − a_t σ²/λ_t)/2^{r̄_t}.
                 let mut head = self.p_max_w;
                 for &u in &pi[..k] {
                     let r = self.targets[u as usize];
                     let next = (head - (r.exp2() - 1.0) * noise / lambdas[u as usize]) / r.exp2();
-                    power[u as usize] = head - next;
+                    set(u as usize, head - next);
                     head = next;
                 }
-                power[0] = (head - tail).max(0.0);
+                (head >= tail).then_some((head - tail, tail))
             }
         }
-        Some(PowerSplit {
-            mru_rate,
-            power_w: power,
-            order: order as u8,
-        })
     }
 
     /// Every user's rate for given channel power gains, powers and order. With the expected

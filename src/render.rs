@@ -4,6 +4,7 @@
 //! no value black; with a threshold, cells below it are dimmed (the feasible map Π, eq. 17); a
 //! path is drawn in white with the start green and the goal red. North (+y) is up.
 
+use crate::planner::PathAnswer;
 use crate::radiomap::RadioMap;
 
 /// Largest image side in pixels.
@@ -15,6 +16,20 @@ pub struct RenderOptions {
     pub threshold: Option<f64>,
     /// Cells (flat indices) of a path, start first.
     pub path: Vec<usize>,
+}
+
+impl RenderOptions {
+    /// The picture of a path answer: its threshold dims the cells below it, its waypoints drawn.
+    pub fn for_path(map: &RadioMap, answer: &PathAnswer) -> Self {
+        RenderOptions {
+            threshold: answer.threshold,
+            path: answer
+                .waypoints
+                .iter()
+                .map(|w| map.grid.index(w.i, w.j))
+                .collect(),
+        }
+    }
 }
 
 /// Colour stops of the value scale (low → high).
@@ -117,18 +132,7 @@ mod tests {
         .unwrap();
         let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
         let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
-        let path: Vec<usize> = answer
-            .waypoints
-            .iter()
-            .map(|w| map.grid.index(w.i, w.j))
-            .collect();
-        let bytes = png(
-            &map,
-            &RenderOptions {
-                threshold: answer.threshold,
-                path: path.clone(),
-            },
-        );
+        let bytes = png(&map, &RenderOptions::for_path(&map, &answer));
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
         let mut reader = decoder.read_info().unwrap();
         let mut buf = vec![0; reader.output_buffer_size().unwrap()];

@@ -381,13 +381,8 @@ async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, Api
     if let Some(map) = state.cache().get(map_id).await {
         return Ok(map);
     }
-    let building = state
-        .jobs()
-        .list()
-        .into_iter()
-        .find(|j| j.map_id == map_id && !j.state.is_terminal());
-    Err(match building {
-        Some(job) => ApiError::map_not_ready(map_id, &job.job_id),
+    Err(match state.jobs().building(map_id).await {
+        Some(job) => ApiError::map_not_ready(map_id, &job.id),
         None => ApiError::not_found("map", map_id),
     })
 }
@@ -497,12 +492,7 @@ async fn image(
         (Some(s), Some(g)) => {
             let answer = planner::plan(&map, s, g, threshold, 1.0)
                 .map_err(|e| ApiError::invalid(e.field, e.reason))?;
-            options.threshold = answer.threshold;
-            options.path = answer
-                .waypoints
-                .iter()
-                .map(|w| map.grid.index(w.i, w.j))
-                .collect();
+            options = RenderOptions::for_path(&map, &answer);
         }
         (None, None) => {}
         _ => {

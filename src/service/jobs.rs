@@ -181,6 +181,11 @@ impl Jobs {
         self.by_id.lock().expect("jobs lock").get(id).cloned()
     }
 
+    /// The job building `map_id`, if one is queued or running.
+    pub async fn building(&self, map_id: &str) -> Option<Arc<Job>> {
+        self.in_flight.lock().await.get(map_id).cloned()
+    }
+
     pub fn list(&self) -> Vec<JobView> {
         let mut all: Vec<JobView> = self
             .by_id
