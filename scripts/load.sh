@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Load test: path queries on the cached paper single-user map, over loopback only, bounded in
 # time. Starts the release server on a free port, warms the map, runs wrk, stops the server.
-#   bench/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
+#   scripts/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
