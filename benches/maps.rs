@@ -7,35 +7,25 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use irs_planner::channel::ChannelModel;
+use irs_planner::phases::PhaseMode;
 use irs_planner::planner::CellGraph;
-use irs_planner::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress};
+use irs_planner::radiomap::{self, MapKey, Progress};
+use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
 use irs_planner::solver::{self, certificate, fast};
 use std::hint::black_box;
 use std::time::Duration;
 
-fn paper(file: &str, edit: impl FnOnce(&mut serde_json::Value)) -> Scenario {
-    let path = format!("{}/scenarios/{file}", env!("CARGO_MANIFEST_DIR"));
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    edit(&mut v);
-    Scenario::from_json(&v.to_string()).unwrap()
+fn paper(name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> Scenario {
+    Scenario::builtin_with(name, edit).unwrap().unwrap()
 }
 
 fn gain_maps(c: &mut Criterion) {
     for grouping in ["coherent", "elements"] {
-        let s = paper("paper-single-user.json", |v| {
+        let s = paper("paper-single-user", |v| {
             v["irs"]["grouping"] = grouping.into();
         });
-        let key = MapKey::new(
-            "bench",
-            &s,
-            MapKind::Gain,
-            Some(PhaseMode::Continuous),
-            None,
-            None,
-        )
-        .unwrap();
+        let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
         c.bench_function(&format!("gain_map_41x41_{grouping}"), |b| {
             b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
         });
@@ -44,18 +34,10 @@ fn gain_maps(c: &mut Criterion) {
 
 fn large_grid(c: &mut Criterion) {
     // The paper floor at 2 cm resolution: 1001 × 1001 cells, M = 1200 coherent.
-    let s = paper("paper-single-user.json", |v| {
+    let s = paper("paper-single-user", |v| {
         v["grid"]["resolution_m"] = 0.02.into();
     });
-    let key = MapKey::new(
-        "bench",
-        &s,
-        MapKind::Gain,
-        Some(PhaseMode::Continuous),
-        None,
-        None,
-    )
-    .unwrap();
+    let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
     let mut group = c.benchmark_group("large");
     group
         .sample_size(10)
@@ -90,20 +72,12 @@ fn large_grid(c: &mut Criterion) {
 }
 
 fn rate_maps(c: &mut Criterion) {
-    let s = paper("paper-multi-user.json", |_| {});
+    let s = paper("paper-multi-user", |_| {});
     let mut group = c.benchmark_group("rate");
     group
         .sample_size(10)
         .measurement_time(Duration::from_secs(30));
-    let key = MapKey::new(
-        "bench",
-        &s,
-        MapKind::Rate,
-        Some(PhaseMode::Continuous),
-        Some(Access::Noma),
-        None,
-    )
-    .unwrap();
+    let key = MapKey::rate("bench", &s, PhaseMode::Continuous, Access::Noma).unwrap();
     group.bench_function("noma_map_41x41_n60_fast_with_certificate", |b| {
         b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
     });
@@ -113,7 +87,7 @@ fn rate_maps(c: &mut Criterion) {
     let channel = ChannelModel::new(&s);
     let srus = solver::sru_part(&channel, &s, true);
     let problem = solver::cell_problem(&channel, [3.0, -6.0, 1.0], &srus, true);
-    let model = solver::rate_model(&s, &key);
+    let model = RateModel::for_scenario(&s, Access::Noma);
     let mut group = c.benchmark_group("rate_cell");
     group.bench_function("fast_n60", |b| {
         b.iter(|| fast::solve(black_box(&problem), &model))

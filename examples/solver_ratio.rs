@@ -4,7 +4,7 @@
 //! `cargo run --release --features sdp --example solver_ratio [N_X N_Z]` (default 5 × 2, N = 10).
 
 use irs_planner::channel::ChannelModel;
-use irs_planner::radiomap::{Access, MapKey, MapKind, PhaseMode};
+use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
 use irs_planner::solver::{self, certificate, fast, objective, sdr_sca};
 use std::time::Instant;
@@ -18,15 +18,12 @@ fn main() {
         args.first().copied().unwrap_or(5),
         args.get(1).copied().unwrap_or(2),
     );
-    let path = format!(
-        "{}/scenarios/paper-multi-user.json",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    v["irs"]["nx_sub"] = nx.into();
-    v["irs"]["nz_sub"] = nz.into();
-    let s = Scenario::from_json(&v.to_string()).unwrap();
+    let s = Scenario::builtin_with("paper-multi-user", |v| {
+        v["irs"]["nx_sub"] = nx.into();
+        v["irs"]["nz_sub"] = nz.into();
+    })
+    .expect("built in")
+    .expect("a valid IRS size");
     let channel = ChannelModel::new(&s);
     let srus = solver::sru_part(&channel, &s, true);
     println!("N = {} sub-surfaces, paper multi-user geometry", nx * nz);
@@ -35,16 +32,7 @@ fn main() {
         "access", "cell", "fast rate", "sdr-sca rate", "bound", "fast s", "ratio"
     );
     for access in [Access::Noma, Access::Oma] {
-        let key = MapKey::new(
-            "ratio",
-            &s,
-            MapKind::Rate,
-            Some(PhaseMode::Continuous),
-            Some(access),
-            None,
-        )
-        .unwrap();
-        let model = solver::rate_model(&s, &key);
+        let model = RateModel::for_scenario(&s, access);
         for cell in [[-10.0, 0.0], [3.0, -6.0], [6.0, 8.0]] {
             let problem = solver::cell_problem(&channel, [cell[0], cell[1], 1.0], &srus, true);
             let rate = |v: &[irs_planner::channel::C64]| {

@@ -1,4 +1,4 @@
-//! The channel model of SPEC §1 and the paper's Section II-A: per user location it yields the
+//! The channel model of docs/model.md §2 and the paper's Section II-A: per user location it yields the
 //! direct LoS coefficient h̃, the cascaded LoS coefficients w̃ ∈ C^N of the IRS sub-surfaces and
 //! the scattered power τ, so that the expected channel power gain for phases θ is
 //!
@@ -280,7 +280,7 @@ impl ChannelModel {
         DirectAndScattered { h, tau }
     }
 
-    /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 14) at `user`, in [0, 2π), for every sub-surface (`out` has
+    /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 11) at `user`, in [0, 2π), for every sub-surface (`out` has
     /// length N). With `coherent` grouping w̃_n is a positive amplitude times
     /// e^{−j2π(d_A,n + d_n,U)/λ}, so its angle follows from the two distances without any
     /// trigonometry; with `elements` it is the angle of the element sum. Where a term vanishes
@@ -425,10 +425,11 @@ pub fn expected_gain(direct: &DirectAndScattered, w: &[C64], theta: &[f64]) -> f
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::numerics::MeanEstimate;
     use rand::{RngExt, SeedableRng};
 
     fn small() -> Scenario {
-        Scenario::from_json(include_str!("../scenarios/small-test.json")).unwrap()
+        Scenario::builtin("small-test").unwrap()
     }
 
     #[test]
@@ -489,11 +490,8 @@ mod tests {
     #[test]
     fn expected_gain_matches_monte_carlo_mean() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        for grouping in ["coherent", "elements"] {
-            let mut v: serde_json::Value =
-                serde_json::from_str(include_str!("../scenarios/small-test.json")).unwrap();
-            v["irs"]["grouping"] = grouping.into();
-            let s = Scenario::from_json(&v.to_string()).unwrap();
+        for grouping in [Grouping::Coherent, Grouping::Elements] {
+            let s = Scenario::small_test_grouped(grouping);
             let m = ChannelModel::new(&s);
             // (1, 1) sees the AP; the other two are behind the 1.5 m box.
             let points = [[1.0, 1.0, 1.0], [3.6, 2.0, 1.0], [4.0, 3.0, 0.5]];
@@ -507,17 +505,14 @@ mod tests {
                 let d = m.evaluate(q, true, &mut w);
                 let closed = expected_gain(&d, &w, &theta);
                 let draws = 200_000;
-                let (mut sum, mut sum_sq) = (0.0, 0.0);
+                let mut power_gain = MeanEstimate::default();
                 m.sample_channels(&[q], Some(&theta), draws, &mut rng, |c| {
-                    let p = c[0].norm_sqr();
-                    sum += p;
-                    sum_sq += p * p;
+                    power_gain.add(c[0].norm_sqr());
                 });
-                let mean = sum / draws as f64;
-                let se = ((sum_sq / draws as f64 - mean * mean) / draws as f64).sqrt();
+                let (mean, se) = (power_gain.mean(), power_gain.std_error());
                 assert!(
                     (mean - closed).abs() < 4.0 * se,
-                    "{grouping} at {q:?}: Monte Carlo {mean:e} ± {se:e} vs closed form {closed:e}"
+                    "{grouping:?} at {q:?}: Monte Carlo {mean:e} ± {se:e} vs closed form {closed:e}"
                 );
             }
             assert!(

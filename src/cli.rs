@@ -1,13 +1,18 @@
-//! The command line (SPEC §4): `serve` (the default), `map` and `plan`. `map` and `plan` print
-//! exactly the JSON bodies the API returns. Bad input exits with code 2 and a message naming the
-//! offending field; an infeasible path is an answer (exit 0), not an error.
+//! The command line: `serve` (the default), `map` and `plan`. `map` and `plan` print exactly the
+//! JSON bodies the API returns. Bad input exits with code 2 and a message naming the offending
+//! field; an infeasible path is an answer (exit 0), not an error; a failure that is not the
+//! input's (the server cannot bind, a file cannot be written) exits with code 1.
 
+use crate::input::parse_point;
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
+use crate::phases::PhaseMode;
 use crate::planner::{self, Threshold};
-use crate::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, RadioMap, SolverKind};
+use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use crate::rate::Access;
 use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
 use crate::service::config::ServeArgs;
+use crate::solver::SolverKind;
 use clap::{Args, Parser, Subcommand};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -40,17 +45,17 @@ pub struct MapArgs {
     /// Scenario JSON file.
     #[arg(long)]
     pub scenario: PathBuf,
-    /// Map kind.
-    #[arg(long, value_enum)]
+    /// Map kind: gain (dB) or rate (bit/s/Hz).
+    #[arg(long)]
     pub kind: MapKind,
     /// IRS phases: continuous, none, or a number of bits (1–16).
-    #[arg(long, value_parser = parse_phases)]
+    #[arg(long)]
     pub phases: Option<PhaseMode>,
-    /// Multiple access (rate maps; default noma).
-    #[arg(long, value_enum)]
+    /// Multiple access, noma or oma (rate maps; default noma).
+    #[arg(long)]
     pub access: Option<Access>,
-    /// Rate-map solver (default fast).
-    #[arg(long, value_enum)]
+    /// Rate-map solver, fast or sdr-sca (default fast).
+    #[arg(long)]
     pub solver: Option<SolverKind>,
     /// No progress bar on stderr.
     #[arg(long)]
@@ -70,15 +75,15 @@ pub struct PlanArgs {
     /// Goal point "X,Y" (m); snapped to the nearest cell centre.
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub goal: [f64; 2],
-    /// QoS threshold in the map's unit (dB or bit/s/Hz).
+    /// QoS threshold in the map's unit (dB or bit/s/Hz), or "max".
     #[arg(
         long,
         allow_hyphen_values = true,
         conflicts_with = "max_threshold",
         required_unless_present = "max_threshold"
     )]
-    pub threshold: Option<f64>,
-    /// Use the largest threshold for which a path exists.
+    pub threshold: Option<Threshold>,
+    /// Use the largest threshold for which a path exists (the same as --threshold max).
     #[arg(long)]
     pub max_threshold: bool,
     /// Check the path by Monte Carlo with this many Rician draws per waypoint (paper Fig. 10).
@@ -89,25 +94,6 @@ pub struct PlanArgs {
     pub seed: u64,
 }
 
-fn parse_phases(s: &str) -> Result<PhaseMode, String> {
-    s.parse()
-}
-
-fn parse_point(s: &str) -> Result<[f64; 2], String> {
-    let parts: Vec<&str> = s.split(',').collect();
-    let [x, y] = parts.as_slice() else {
-        return Err(format!("expected X,Y, got {s:?}"));
-    };
-    let num = |t: &str| {
-        t.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or(format!("{t:?} is not a finite number"))
-    };
-    Ok([num(x)?, num(y)?])
-}
-
 /// A CLI failure: the message and whether it was the user's input (exit 2) or not (exit 1).
 pub struct Failure {
     pub message: String,
@@ -115,10 +101,18 @@ pub struct Failure {
 }
 
 impl Failure {
-    fn input(message: impl Into<String>) -> Self {
+    /// The user's input was wrong (exit 2).
+    pub fn input(message: impl Into<String>) -> Self {
         Failure {
             message: message.into(),
             bad_input: true,
+        }
+    }
+    /// Something other than the input failed (exit 1).
+    pub fn runtime(message: impl Into<String>) -> Self {
+        Failure {
+            message: message.into(),
+            bad_input: false,
         }
     }
 }
@@ -176,17 +170,11 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
         }
         result
     });
-    result.map_err(|e| Failure {
-        message: e.to_string(),
-        bad_input: false,
-    })
+    result.map_err(|e| Failure::runtime(e.to_string()))
 }
 
 fn print_json(value: &impl Serialize) -> Result<(), Failure> {
-    let text = serde_json::to_string(value).map_err(|e| Failure {
-        message: e.to_string(),
-        bad_input: false,
-    })?;
+    let text = serde_json::to_string(value).map_err(|e| Failure::runtime(e.to_string()))?;
     println!("{text}");
     Ok(())
 }
@@ -197,10 +185,8 @@ fn write_png(
     options: &RenderOptions,
 ) -> Result<(), Failure> {
     let Some(file) = file else { return Ok(()) };
-    std::fs::write(file, render::png(map, options)).map_err(|e| Failure {
-        message: format!("--png {}: {e}", file.display()),
-        bad_input: true,
-    })
+    std::fs::write(file, render::png(map, options))
+        .map_err(|e| Failure::input(format!("--png {}: {e}", file.display())))
 }
 
 /// `irs-planner map …`
@@ -222,10 +208,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     }
     let scenario = load_scenario(&args.map.scenario)?;
     let map = build_map(&args.map, &scenario)?;
-    let threshold = match args.threshold {
-        Some(t) => Threshold::Value(t),
-        None => Threshold::Max,
-    };
+    let threshold = args.threshold.unwrap_or(Threshold::Max);
     let path = planner::plan(
         &map,
         args.start,

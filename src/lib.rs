@@ -1,14 +1,46 @@
-//! irs-planner: radio maps and communication-aware robot paths for an indoor floor served by one
+//! irs-planner: radio maps and communication-aware robot paths for an indoor floor served by an
 //! access point and an intelligent reflecting surface (IRS), after "IRS Enhanced Indoor Robot
-//! Path Planning: A Radio Map based Approach" (see SPEC.md and the README).
+//! Path Planning: A Radio Map based Approach". The model the code implements is written down in
+//! `docs/model.md`; doc comments cite its sections (§n) and the paper's equation numbers.
 //!
-//! Data flows one way: [`scenario`] → [`channel`] → [`radiomap`] (with [`rate`] and [`solver`]
-//! for rate maps) → [`planner`] → the CLI ([`cli`]) and the HTTP [`service`]; [`render`] draws
-//! maps and paths as PNG.
+//! From a scenario to a path in a few lines:
+//!
+//! ```
+//! use irs_planner::phases::PhaseMode;
+//! use irs_planner::planner::{self, Threshold};
+//! use irs_planner::radiomap::{self, MapKey, Progress};
+//! use irs_planner::scenario::Scenario;
+//!
+//! let floor = Scenario::builtin("paper-single-user").unwrap();
+//! let key = MapKey::gain(&floor.content_hash(), &floor, PhaseMode::Continuous).unwrap();
+//! let map = radiomap::build(&floor, &key, &Progress::default()).unwrap();
+//! let path = planner::plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 1.0).unwrap();
+//! assert!(path.feasible && path.max_feasible_threshold.unwrap() > -60.0);
+//! ```
+//!
+//! # Layout
+//!
+//! Data flows one way; each module uses only those above it in this list.
+//!
+//! * [`input`], [`numerics`]: the field error every rejection carries and the parsers the CLI
+//!   and the API share; small numerical tools (ℓ₁ norm, golden section, Monte Carlo means).
+//! * [`scenario`]: the scenario document — strict parsing, validation, canonical hash, grid.
+//! * [`channel`]: geometry, blockage, path loss and the per-location (h̃, w̃, τ) of Lemma 1;
+//!   [`phases`]: continuous, b-bit and no-IRS phase modes.
+//! * [`rate`]: NOMA/OMA expected rates and the closed-form power split.
+//! * [`solver`]: per-cell rate maximisation (`fast`, `sdr-sca`) and the SDR certificate.
+//! * [`radiomap`]: map keys, gain maps, rate maps and the map body.
+//! * [`planner`]: the feasible-map graph, shortest and widest paths, path and sweep answers.
+//! * [`montecarlo`] and [`render`]: a Monte Carlo check of a path; PNG pictures.
+//! * [`service`] (HTTP, axum) and [`cli`] (`serve`, `map`, `plan`): the two front doors, which
+//!   translate between users and the modules above and hold no physics.
 
 pub mod channel;
 pub mod cli;
+pub mod input;
 pub mod montecarlo;
+pub mod numerics;
+pub mod phases;
 pub mod planner;
 pub mod radiomap;
 pub mod rate;

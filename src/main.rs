@@ -21,8 +21,8 @@ fn main() -> ExitCode {
 }
 
 fn serve(args: ServeArgs) -> Result<(), cli::Failure> {
-    service::run(args).map_err(|message| cli::Failure {
-        message,
-        bad_input: true,
+    service::run(args).map_err(|e| match e {
+        service::ServeError::Config(message) => cli::Failure::input(message),
+        service::ServeError::Runtime(message) => cli::Failure::runtime(message),
     })
 }

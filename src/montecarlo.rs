@@ -1,15 +1,18 @@
 //! Monte Carlo check of a planned path (paper Section IV-B4, Fig. 10).
 //!
-//! The maps use Jensen upper bounds of the expected rates (eqs. 18 and 20) and the closed-form
-//! expected gain (Lemma 1). Here, for each waypoint, the exact instantaneous rates (eqs. 17/19)
-//! — or, on gain maps, the instantaneous power gain |c|² — are averaged over Rician draws of the
-//! per-element channel (paper eqs. 1–4) with the waypoint's θ, power split and decoding order,
+//! The maps use Jensen upper bounds of the expected rates (eqs. 22 and 24) and the closed-form
+//! expected gain (Lemma 1, eq. 5). Here, for each waypoint, the exact instantaneous rates
+//! (eqs. 21/23) — or, on gain maps, the instantaneous power gain |c|² — are averaged over Rician
+//! draws of the per-element channel (paper eqs. 1–4) with the waypoint's θ, power split and
+//! decoding order,
 //! and compared with the bound. The draws are independent of the closed forms: they reuse only
 //! the geometry and the LoS phases.
 
-use crate::channel::ChannelModel;
+use crate::channel::{C64, ChannelModel};
+use crate::numerics::MeanEstimate;
+use crate::phases::PhaseMode;
 use crate::planner::PathAnswer;
-use crate::radiomap::{CellSolutions, PhaseMode, RadioMap};
+use crate::radiomap::{CellSolutions, RadioMap};
 use crate::rate::user_label;
 use crate::scenario::Scenario;
 use crate::solver::{cell_problem, sru_part};
@@ -85,14 +88,11 @@ pub fn check_path(
             let theta_opt = (!theta.is_empty()).then_some(theta.as_slice());
             let users = match &map.cells {
                 CellSolutions::Gain { .. } => {
-                    let (mut sum, mut sum_sq) = (0.0, 0.0);
+                    let mut power_gain = MeanEstimate::default();
                     channel.sample_channels(&[mru], theta_opt, draws, &mut rng, |c| {
-                        let p = c[0].norm_sqr();
-                        sum += p;
-                        sum_sq += p * p;
+                        power_gain.add(c[0].norm_sqr());
                     });
-                    let mean = sum / draws as f64;
-                    let se = ((sum_sq / draws as f64 - mean * mean).max(0.0) / draws as f64).sqrt();
+                    let (mean, se) = (power_gain.mean(), power_gain.std_error());
                     let mean_db = 10.0 * mean.log10();
                     vec![UserCheck {
                         user: user_label(0),
@@ -112,41 +112,33 @@ pub fn check_path(
                         .as_ref()
                         .expect("rate waypoints carry powers");
                     let problem = cell_problem(&channel, mru, &srus, with_irs);
-                    let mut v: Vec<_> = theta
-                        .iter()
-                        .map(|&t| crate::channel::C64::from_polar(1.0, t))
-                        .collect();
-                    v.push(crate::channel::C64::new(1.0, 0.0));
+                    let mut v: Vec<_> = theta.iter().map(|&t| C64::from_polar(1.0, t)).collect();
+                    v.push(C64::new(1.0, 0.0));
                     let mut lambdas = vec![0.0; model.users()];
                     problem.lambdas(&v, &mut lambdas);
                     let bounds = model.rates(&lambdas, power, order);
                     let mut positions = vec![mru];
                     positions.extend(scenario.srus.iter().map(|s| s.position));
-                    let mut sums = vec![0.0; model.users()];
-                    let mut sums_sq = vec![0.0; model.users()];
+                    let mut rates = vec![MeanEstimate::default(); model.users()];
                     let mut gains = vec![0.0; model.users()];
                     channel.sample_channels(&positions, theta_opt, draws, &mut rng, |c| {
                         for (g, x) in gains.iter_mut().zip(c) {
                             *g = x.norm_sqr();
                         }
-                        for (l, r) in model.rates(&gains, power, order).into_iter().enumerate() {
-                            sums[l] += r;
-                            sums_sq[l] += r * r;
+                        for (estimate, r) in rates.iter_mut().zip(model.rates(&gains, power, order))
+                        {
+                            estimate.add(r);
                         }
                     });
-                    (0..model.users())
-                        .map(|l| {
-                            let mean = sums[l] / draws as f64;
-                            let se = ((sums_sq[l] / draws as f64 - mean * mean).max(0.0)
-                                / draws as f64)
-                                .sqrt();
-                            UserCheck {
-                                user: user_label(l),
-                                bound: bounds[l],
-                                monte_carlo_mean: mean,
-                                std_error: se,
-                                gap: bounds[l] - mean,
-                            }
+                    rates
+                        .iter()
+                        .enumerate()
+                        .map(|(l, estimate)| UserCheck {
+                            user: user_label(l),
+                            bound: bounds[l],
+                            monte_carlo_mean: estimate.mean(),
+                            std_error: estimate.std_error(),
+                            gap: bounds[l] - estimate.mean(),
                         })
                         .collect()
                 }

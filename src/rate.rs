@@ -1,13 +1,14 @@
-//! Expected rates of the MRU sharing the AP with K static robots (paper Section III, SPEC §2),
-//! and the closed-form power split that maximises the MRU's rate for given expected gains.
+//! Expected rates of the MRU sharing the AP with K static robots (paper Section III,
+//! docs/model.md §4), and the closed-form power split that maximises the MRU's rate for given
+//! expected gains.
 //!
 //! Users are indexed 0 = MRU, 1..=K = SRUs in scenario order. Rates are the Jensen upper bounds
-//! of the paper (eqs. 18 and 20), written with the expected gains λ_l:
+//! of the paper (eqs. 22 and 24), written with the expected gains λ_l:
 //!
 //! * NOMA, decoding order π (π[0] decoded first): the user at position t sees the users decoded
-//!   after it as interference, R_t = log2(1 + p_t / (Σ_{u>t} p_u + σ²/λ_t)) (eq. 18); SIC
-//!   requires the channel ordering λ_{π[0]} ≤ λ_{π[1]} ≤ … (eq. 22e, generalised).
-//! * OMA, K+1 equal bands: R_l = log2(1 + (K+1) λ_l p_l / σ²) / (K+1) (eq. 20, generalised).
+//!   after it as interference, R_t = log2(1 + p_t / (Σ_{u>t} p_u + σ²/λ_t)) (eq. 22); SIC
+//!   requires the channel ordering λ_{π[0]} ≤ λ_{π[1]} ≤ … (eq. 26h, generalised).
+//! * OMA, K+1 equal bands: R_l = log2(1 + (K+1) λ_l p_l / σ²) / (K+1) (eq. 24, generalised).
 //!
 //! **Closed-form power split (NOMA).** Write S_t = Σ_{u≥t} p_u for the power of the users from
 //! position t on (S_0 ≤ P_max, S_{K+1} = 0) and a_t = 2^{r̄_t} − 1. User t's rate constraint is
@@ -27,10 +28,41 @@
 //!
 //! **OMA** decouples: SRU k needs p_k = (2^{(K+1) r̄_k} − 1) σ² / ((K+1) λ_k), the MRU takes the rest.
 
-use serde::Serialize;
+use crate::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
 
-/// Multiple access scheme, re-exported for the solver's convenience.
-pub use crate::radiomap::Access;
+/// How the MRU and the SRUs share the AP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Access {
+    /// Power-domain NOMA with successive interference cancellation.
+    Noma,
+    /// K+1 equal orthogonal frequency bands.
+    Oma,
+}
+
+impl FromStr for Access {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::input::parse_name(s)
+    }
+}
+
+impl fmt::Display for Access {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Access::Noma => "noma",
+            Access::Oma => "oma",
+        })
+    }
+}
+
+/// P (W) from P (dBm).
+pub fn dbm_to_watts(dbm: f64) -> f64 {
+    10f64.powf((dbm - 30.0) / 10.0)
+}
 
 /// The users' fixed data for one map: power budget, noise and the SRUs' targets.
 #[derive(Debug, Clone)]
@@ -58,6 +90,17 @@ pub struct PowerSplit {
 }
 
 impl RateModel {
+    /// The scenario's users: P_max and σ² from the AP, r̄_s from each SRU.
+    pub fn for_scenario(scenario: &Scenario, access: Access) -> RateModel {
+        let targets: Vec<f64> = scenario.srus.iter().map(|s| s.min_rate_bps_hz).collect();
+        RateModel::new(
+            access,
+            dbm_to_watts(scenario.ap.tx_power_dbm),
+            dbm_to_watts(scenario.ap.noise_dbm),
+            &targets,
+        )
+    }
+
     pub fn new(access: Access, p_max_w: f64, noise_w: f64, sru_targets: &[f64]) -> RateModel {
         let users = sru_targets.len() + 1;
         let mut targets = vec![0.0];
@@ -196,8 +239,8 @@ impl RateModel {
     }
 
     /// Every user's rate for given channel power gains, powers and order. With the expected
-    /// gains λ_l these are the Jensen bounds (eqs. 18/20); with instantaneous gains |c_l|² they are
-    /// the exact rates (eqs. 17/19) whose mean the bounds over-estimate.
+    /// gains λ_l these are the Jensen bounds (eqs. 22/24); with instantaneous gains |c_l|² they are
+    /// the exact rates (eqs. 21/23) whose mean the bounds over-estimate.
     pub fn rates(&self, gains: &[f64], power_w: &[f64], order: usize) -> Vec<f64> {
         let users = self.users();
         let noise = self.noise_w;
@@ -375,5 +418,13 @@ mod tests {
             1
         );
         assert_eq!(m.order_labels(0), vec!["mru", "sru0", "sru1", "sru2"]);
+    }
+
+    #[test]
+    fn access_names_round_trip() {
+        for access in [Access::Noma, Access::Oma] {
+            assert_eq!(access.to_string().parse::<Access>(), Ok(access));
+        }
+        assert!("tdma".parse::<Access>().unwrap_err().contains("noma"));
     }
 }

@@ -1,7 +1,7 @@
 //! PNG pictures of radio maps and paths, for people rather than programs (paper Figs. 4–6 and
 //! 8–9 in spirit): each cell a square coloured by its value on a perceptually ordered scale
 //! (dark blue → teal → yellow, from the map's minimum to its maximum), obstacles grey, cells with
-//! no value black; with a threshold, cells below it are dimmed (the feasible map Π, eq. 17); a
+//! no value black; with a threshold, cells below it are dimmed (the feasible map Π, eq. 14); a
 //! path is drawn in white with the start green and the goal red. North (+y) is up.
 
 use crate::planner::PathAnswer;
@@ -114,22 +114,15 @@ pub fn png(map: &RadioMap, options: &RenderOptions) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::phases::PhaseMode;
     use crate::planner::{self, Threshold};
-    use crate::radiomap::{self, MapKey, MapKind, PhaseMode, Progress};
+    use crate::radiomap::{self, MapKey, Progress};
     use crate::scenario::Scenario;
 
     #[test]
     fn picture_shows_obstacles_path_and_endpoints() {
-        let s = Scenario::from_json(include_str!("../scenarios/small-test.json")).unwrap();
-        let key = MapKey::new(
-            "t",
-            &s,
-            MapKind::Gain,
-            Some(PhaseMode::Continuous),
-            None,
-            None,
-        )
-        .unwrap();
+        let s = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
         let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
         let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
         let bytes = png(&map, &RenderOptions::for_path(&map, &answer));

@@ -1,5 +1,5 @@
 //! The scenario: one JSON document describing a floor, its obstacles, the AP, the optional IRS,
-//! the mobile robot (MRU) and the static robots (SRUs) — SPEC §1.
+//! the mobile robot (MRU) and the static robots (SRUs) — docs/model.md §1.
 //!
 //! Parsing is strict (unknown fields are an error) and every check names the offending field by
 //! its JSON path, so a fleet manager can fix a document without reading code. Defaults the spec
@@ -7,9 +7,9 @@
 //! time, so the canonical form — and therefore the content hash — is the same whether a default
 //! was written out or omitted.
 
+use crate::input::FieldError;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-use std::fmt;
 
 /// Speed of light (m/s), for λ = c / f_c.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
@@ -23,8 +23,23 @@ pub const MAX_ELEMENTS: usize = 200_000;
 pub const MAX_SRUS: usize = 4;
 /// Largest number of obstacles.
 pub const MAX_OBSTACLES: usize = 1000;
-/// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit".
+/// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit":
+/// loose enough for spans and normals typed with six significant digits.
 const TOL: f64 = 1e-6;
+
+/// The scenarios compiled into every build (name, document): the paper's two set-ups and a
+/// small floor for quick tries. `scenarios/README.md` describes them.
+pub const BUILTIN: [(&str, &str); 3] = [
+    (
+        "paper-single-user",
+        include_str!("../scenarios/paper-single-user.json"),
+    ),
+    (
+        "paper-multi-user",
+        include_str!("../scenarios/paper-multi-user.json"),
+    ),
+    ("small-test", include_str!("../scenarios/small-test.json")),
+];
 
 /// A scenario that has passed [`Scenario::from_json`]: every field finite and consistent.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -85,7 +100,7 @@ pub struct AccessPoint {
     pub carrier_ghz: f64,
 }
 
-/// How the N̄ elements of a sub-surface combine (SPEC §1).
+/// How the N̄ elements of a sub-surface combine (docs/model.md §2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Grouping {
@@ -179,24 +194,7 @@ impl Default for ChannelSpec {
     }
 }
 
-/// A rejected scenario: the JSON path of the offending field and why.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{field}: {reason}")]
-pub struct ScenarioError {
-    pub field: String,
-    pub reason: String,
-}
-
-impl ScenarioError {
-    pub fn new(field: impl Into<String>, reason: impl fmt::Display) -> Self {
-        ScenarioError {
-            field: field.into(),
-            reason: reason.to_string(),
-        }
-    }
-}
-
-/// The cell lattice of SPEC §1: centres at `x_min + i·Δ`, both walls included.
+/// The cell lattice (docs/model.md §1): centres at `x_min + i·Δ`, both walls included.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Grid {
     pub nx: usize,
@@ -219,7 +217,7 @@ impl Grid {
     pub fn cell_of(&self, index: usize) -> (usize, usize) {
         (index / self.ny, index % self.ny)
     }
-    /// q^Δ_{i,j}, the horizontal centre of cell (i, j) (paper eq. 10).
+    /// q^Δ_{i,j}, the horizontal centre of cell (i, j) (paper eq. 8).
     #[inline]
     pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
         [
@@ -252,8 +250,27 @@ impl Grid {
 }
 
 impl Scenario {
+    /// A built-in scenario by name (see [`BUILTIN`]).
+    pub fn builtin(name: &str) -> Option<Scenario> {
+        Scenario::builtin_with(name, |_| {})
+            .map(|s| s.expect("built-in scenarios are valid (tested)"))
+    }
+
+    /// A variant of a built-in scenario: `edit` changes its JSON document before it is parsed
+    /// and validated (defaults are resolved after the edit). `None` for an unknown name.
+    pub fn builtin_with(
+        name: &str,
+        edit: impl FnOnce(&mut serde_json::Value),
+    ) -> Option<Result<Scenario, FieldError>> {
+        let (_, text) = BUILTIN.iter().find(|(n, _)| *n == name)?;
+        let mut document: serde_json::Value =
+            serde_json::from_str(text).expect("built-in scenarios are JSON");
+        edit(&mut document);
+        Some(Scenario::from_value(document))
+    }
+
     /// Parses and validates a scenario document.
-    pub fn from_json(text: &str) -> Result<Scenario, ScenarioError> {
+    pub fn from_json(text: &str) -> Result<Scenario, FieldError> {
         let mut scenario = deserialize_tracking_path(text)?;
         scenario.resolve_defaults();
         scenario.validate()?;
@@ -261,7 +278,7 @@ impl Scenario {
     }
 
     /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
-    pub fn from_value(value: serde_json::Value) -> Result<Scenario, ScenarioError> {
+    pub fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
         Scenario::from_json(&value.to_string())
     }
 
@@ -297,8 +314,8 @@ impl Scenario {
         }
     }
 
-    /// True when (x, y) lies inside or on the boundary of an obstacle footprint (SPEC §1:
-    /// such a cell is occupied).
+    /// True when (x, y) lies inside or on the boundary of an obstacle footprint (docs/model.md
+    /// §1: such a cell is occupied).
     pub fn is_occupied(&self, x: f64, y: f64) -> bool {
         const EPS: f64 = 1e-9;
         self.obstacles.iter().any(|o| {
@@ -317,8 +334,8 @@ impl Scenario {
         })
     }
 
-    fn validate(&self) -> Result<(), ScenarioError> {
-        let err = |field: &str, reason: &str| Err(ScenarioError::new(field, reason));
+    fn validate(&self) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         let r = &self.room;
         for (field, v) in [
             ("room.x_min", r.x_min),
@@ -349,13 +366,13 @@ impl Scenario {
         ] {
             let cells = span / d;
             if cells > MAX_GRID_CELLS as f64 {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     "grid.resolution_m",
                     format!("grid larger than the limit of {MAX_GRID_CELLS} cells"),
                 ));
             }
             if (cells - cells.round()).abs() > TOL * cells.max(1.0) {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     field,
                     format!(
                         "the room span {span} m is not a whole multiple of grid.resolution_m = {d} m, \
@@ -366,7 +383,7 @@ impl Scenario {
         }
         let grid = self.grid();
         if grid.cells() > MAX_GRID_CELLS {
-            return Err(ScenarioError::new(
+            return Err(FieldError::new(
                 "grid.resolution_m",
                 format!(
                     "grid of {} × {} = {} cells exceeds the limit of {MAX_GRID_CELLS} cells",
@@ -378,7 +395,7 @@ impl Scenario {
         }
 
         if self.obstacles.len() > MAX_OBSTACLES {
-            return Err(ScenarioError::new(
+            return Err(FieldError::new(
                 "obstacles",
                 format!("more than {MAX_OBSTACLES} obstacles"),
             ));
@@ -389,10 +406,10 @@ impl Scenario {
             finite_all(&f("size"), &o.size)?;
             finite(&f("height_m"), o.height_m)?;
             if o.size.iter().any(|&s| s <= 0.0) {
-                return Err(ScenarioError::new(f("size"), "both sides must be positive"));
+                return Err(FieldError::new(f("size"), "both sides must be positive"));
             }
             if o.height_m <= 0.0 {
-                return Err(ScenarioError::new(f("height_m"), "must be positive"));
+                return Err(FieldError::new(f("height_m"), "must be positive"));
             }
         }
 
@@ -419,7 +436,7 @@ impl Scenario {
             let n = irs.normal;
             let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             if (norm - 1.0).abs() > TOL {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     "irs.normal",
                     format!("must be a unit vector (its length is {norm})"),
                 ));
@@ -440,7 +457,7 @@ impl Scenario {
                 return err("irs.elements_per_sub", "must be at least 1");
             }
             if irs.subsurfaces() > MAX_SUBSURFACES {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     "irs.nx_sub",
                     format!(
                         "N = nx_sub·nz_sub = {} exceeds the limit of {MAX_SUBSURFACES}",
@@ -449,7 +466,7 @@ impl Scenario {
                 ));
             }
             if irs.elements() > MAX_ELEMENTS {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     "irs.elements_per_sub",
                     format!(
                         "M = N·N̄ = {} exceeds the limit of {MAX_ELEMENTS}",
@@ -509,7 +526,7 @@ impl Scenario {
         }
 
         if self.srus.len() > MAX_SRUS {
-            return Err(ScenarioError::new(
+            return Err(FieldError::new(
                 "srus",
                 format!(
                     "{} static robots exceed the limit of {MAX_SRUS}",
@@ -523,10 +540,10 @@ impl Scenario {
             finite(&f("min_rate_bps_hz"), s.min_rate_bps_hz)?;
             self.inside_room(&f("position"), s.position)?;
             if self.is_inside_obstacle(s.position) {
-                return Err(ScenarioError::new(f("position"), "lies inside an obstacle"));
+                return Err(FieldError::new(f("position"), "lies inside an obstacle"));
             }
             if s.min_rate_bps_hz < 0.0 || s.min_rate_bps_hz > 30.0 {
-                return Err(ScenarioError::new(
+                return Err(FieldError::new(
                     f("min_rate_bps_hz"),
                     "must lie in [0, 30] bit/s/Hz",
                 ));
@@ -540,17 +557,14 @@ impl Scenario {
         Ok(())
     }
 
-    fn inside_room(&self, field: &str, p: [f64; 3]) -> Result<(), ScenarioError> {
+    fn inside_room(&self, field: &str, p: [f64; 3]) -> Result<(), FieldError> {
         let r = &self.room;
         let inside = p[0] >= r.x_min && p[0] <= r.x_max && p[1] >= r.y_min && p[1] <= r.y_max;
         if !inside {
-            return Err(ScenarioError::new(
-                field,
-                "lies outside the room's floor plan",
-            ));
+            return Err(FieldError::new(field, "lies outside the room's floor plan"));
         }
         if p[2] < 0.0 || p[2] > r.ceiling_m {
-            return Err(ScenarioError::new(
+            return Err(FieldError::new(
                 field,
                 "height must lie between the floor and room.ceiling_m",
             ));
@@ -569,6 +583,17 @@ impl Scenario {
     /// The scenario id: the first 128 bits of SHA-256 over the canonical form, in hex.
     pub fn content_hash(&self) -> String {
         hash_hex(self.canonical_json().as_bytes())
+    }
+}
+
+#[cfg(test)]
+impl Scenario {
+    /// The built-in small floor with its IRS's elements grouped as given (a test fixture).
+    pub(crate) fn small_test_grouped(grouping: Grouping) -> Scenario {
+        let name = serde_json::to_value(grouping).expect("groupings serialise");
+        Scenario::builtin_with("small-test", |v| v["irs"]["grouping"] = name)
+            .expect("built in")
+            .expect("a valid grouping variant")
     }
 }
 
@@ -616,21 +641,21 @@ fn write_canonical(value: &serde_json::Value, out: &mut String) {
     }
 }
 
-fn finite(field: &str, v: f64) -> Result<(), ScenarioError> {
+fn finite(field: &str, v: f64) -> Result<(), FieldError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(ScenarioError::new(field, "must be a finite number"))
+        Err(FieldError::new(field, "must be a finite number"))
     }
 }
 
-fn finite_all(field: &str, v: &[f64]) -> Result<(), ScenarioError> {
+fn finite_all(field: &str, v: &[f64]) -> Result<(), FieldError> {
     v.iter().try_for_each(|&x| finite(field, x))
 }
 
 /// Deserialises while tracking the JSON path, so serde's own errors (unknown or missing fields,
 /// wrong types) name the field too.
-fn deserialize_tracking_path(text: &str) -> Result<Scenario, ScenarioError> {
+fn deserialize_tracking_path(text: &str) -> Result<Scenario, FieldError> {
     let mut deserializer = serde_json::Deserializer::from_str(text);
     let scenario: Scenario = serde_path_to_error::deserialize(&mut deserializer).map_err(|e| {
         let path = e.path().to_string();
@@ -639,10 +664,10 @@ fn deserialize_tracking_path(text: &str) -> Result<Scenario, ScenarioError> {
         } else {
             path
         };
-        ScenarioError::new(field, e.into_inner())
+        FieldError::new(field, e.into_inner())
     })?;
     deserializer.end().map_err(|e| {
-        ScenarioError::new("$", format!("trailing characters after the document: {e}"))
+        FieldError::new("$", format!("trailing characters after the document: {e}"))
     })?;
     Ok(scenario)
 }
@@ -651,7 +676,15 @@ fn deserialize_tracking_path(text: &str) -> Result<Scenario, ScenarioError> {
 mod tests {
     use super::*;
 
-    const SMALL: &str = include_str!("../scenarios/small-test.json");
+    const SMALL: &str = BUILTIN[2].1;
+
+    #[test]
+    fn builtin_scenarios_are_valid() {
+        for (name, _) in BUILTIN {
+            assert_eq!(Scenario::builtin(name).unwrap().name.as_deref(), Some(name));
+        }
+        assert!(Scenario::builtin("nope").is_none());
+    }
 
     #[test]
     fn small_scenario_parses_and_grid_includes_both_walls() {
@@ -675,7 +708,7 @@ mod tests {
         assert_ne!(a.content_hash(), c.content_hash());
     }
 
-    fn mutated(f: impl FnOnce(&mut serde_json::Value)) -> ScenarioError {
+    fn mutated(f: impl FnOnce(&mut serde_json::Value)) -> FieldError {
         let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
         f(&mut v);
         Scenario::from_json(&v.to_string()).unwrap_err()

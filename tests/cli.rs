@@ -241,3 +241,28 @@ fn bad_input_exits_2_and_names_the_field() {
         );
     }
 }
+
+/// A server that cannot run is a runtime failure (exit 1), not bad input; an invalid scenario
+/// file in the preload directory is the operator's input (exit 2, naming the file).
+#[test]
+fn serve_failures_are_runtime_errors_unless_the_input_is_bad() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap().to_string();
+    let (code, _, err) = run(&["serve", "--bind", &addr, "--scenarios", "no-such-dir"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("--bind"), "{err}");
+
+    let dir = std::env::temp_dir().join(format!("irs-bad-preload-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("broken.json"), r#"{"room": 1}"#).unwrap();
+    let (code, _, err) = run(&[
+        "serve",
+        "--bind",
+        "127.0.0.1:0",
+        "--scenarios",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("broken.json") && err.contains("room"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

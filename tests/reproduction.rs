@@ -1,27 +1,24 @@
-//! The paper's Section IV figures (SPEC §5) as regression tests, with stated tolerances.
+//! The paper's Section IV figures (docs/model.md §8) as regression tests, with stated tolerances.
 //! Maps are built once per configuration and shared between tests.
 
+use irs_planner::phases::PhaseMode;
 use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, RadioMap};
+use irs_planner::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use irs_planner::rate::Access;
 use irs_planner::scenario::Scenario;
 use std::sync::OnceLock;
 
 const Q_I: [f64; 2] = [-10.0, 0.0];
 const Q_F: [f64; 2] = [10.0, 0.0];
 
-fn scenario(file: &str) -> Scenario {
-    let path = format!("{}/scenarios/{file}", env!("CARGO_MANIFEST_DIR"));
-    Scenario::from_json(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
 fn single_user() -> &'static Scenario {
     static S: OnceLock<Scenario> = OnceLock::new();
-    S.get_or_init(|| scenario("paper-single-user.json"))
+    S.get_or_init(|| Scenario::builtin("paper-single-user").unwrap())
 }
 
 fn multi_user() -> &'static Scenario {
     static S: OnceLock<Scenario> = OnceLock::new();
-    S.get_or_init(|| scenario("paper-multi-user.json"))
+    S.get_or_init(|| Scenario::builtin("paper-multi-user").unwrap())
 }
 
 fn build(s: &Scenario, kind: MapKind, phases: PhaseMode, access: Option<Access>) -> RadioMap {
@@ -56,7 +53,7 @@ fn rate_map(access: Access, phases: PhaseMode) -> &'static RadioMap {
     &maps[index]
 }
 
-/// Paper: no IRS infeasible from −62.1 dB; continuous feasible up to −59.5 dB. Ours (SPEC §5):
+/// Paper: no IRS infeasible from −62.1 dB; continuous feasible up to −59.5 dB. Ours (docs/model.md §8):
 /// −62.3 ± 0.3 and −59.6 ± 0.3 dB, with 1 ≤ 2 ≤ 3 bits ≤ continuous.
 #[test]
 fn single_user_max_feasible_thresholds() {
@@ -98,7 +95,7 @@ fn without_irs_the_path_at_minus_63_db_is_longer() {
     assert!(irs < 24.0, "IRS path {irs} m");
 }
 
-/// SPEC §5: max feasible r̄_m from q_I to q_F within ±0.1 bit/s/Hz.
+/// docs/model.md §8: max feasible r̄_m from q_I to q_F within ±0.1 bit/s/Hz.
 #[test]
 fn multi_user_max_feasible_rates() {
     let cases = [
@@ -142,7 +139,7 @@ fn noma_dominates_oma_and_gains_more_from_the_irs() {
     );
 }
 
-/// SPEC §2 certificate on the paper's NOMA map: every cell's bound is ≥ its achieved rate, the
+/// The certificate (docs/model.md §5) on the paper's NOMA map: every cell's bound is ≥ its achieved rate, the
 /// median gap ≤ 0.01 and the max gap ≤ 0.05 bit/s/Hz.
 #[test]
 fn noma_map_is_certified_within_the_targets() {

@@ -4,19 +4,18 @@
 
 use irs_planner::channel::{C64, ChannelModel};
 use irs_planner::montecarlo;
+use irs_planner::phases::PhaseMode;
 use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, Access, MapKey, MapKind, PhaseMode, Progress, SolverKind};
+use irs_planner::radiomap::{self, MapKey, MapKind, Progress};
+use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
+use irs_planner::solver::SolverKind;
 use irs_planner::solver::{self, CellProblem, certificate, fast, objective};
 use rand::{RngExt, SeedableRng};
 use std::f64::consts::TAU;
 
 fn small(edit: impl FnOnce(&mut serde_json::Value)) -> Scenario {
-    let path = format!("{}/scenarios/small-test.json", env!("CARGO_MANIFEST_DIR"));
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    edit(&mut v);
-    Scenario::from_json(&v.to_string()).unwrap()
+    Scenario::builtin_with("small-test", edit).unwrap().unwrap()
 }
 
 fn problems(
@@ -24,17 +23,8 @@ fn problems(
     access: Access,
     cells: usize,
     seed: u64,
-) -> Vec<(CellProblem, irs_planner::rate::RateModel)> {
-    let key = MapKey::new(
-        "t",
-        s,
-        MapKind::Rate,
-        Some(PhaseMode::Continuous),
-        Some(access),
-        None,
-    )
-    .unwrap();
-    let model = solver::rate_model(s, &key);
+) -> Vec<(CellProblem, RateModel)> {
+    let model = RateModel::for_scenario(s, access);
     let channel = ChannelModel::new(s);
     let srus = solver::sru_part(&channel, s, true);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
@@ -53,7 +43,7 @@ fn problems(
         .collect()
 }
 
-fn rate_of(problem: &CellProblem, model: &irs_planner::rate::RateModel, v: &[C64]) -> f64 {
+fn rate_of(problem: &CellProblem, model: &RateModel, v: &[C64]) -> f64 {
     let mut lambdas = vec![0.0; problem.users()];
     problem.lambdas(v, &mut lambdas);
     objective(model, &lambdas)

@@ -5,13 +5,15 @@ use super::AppState;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
 use super::jobs::{JobView, MapRequestOutcome};
+use crate::input::{FieldError, parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath};
+use crate::phases::PhaseMode;
 use crate::planner::{self, SweepAnswer, Threshold};
-use crate::radiomap::{
-    Access, MapBody, MapKey, MapKind, MapStats, PhaseMode, RadioMap, SolverKind,
-};
+use crate::radiomap::{MapKey, MapKind, MapStats, RadioMap};
+use crate::rate::Access;
 use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
+use crate::solver::SolverKind;
 use axum::extract::{FromRequest, Path, Query, Request, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -68,7 +70,7 @@ pub fn router() -> Router<AppState> {
 
 /// The JSON body extractor of this API: strict parsing, problem+json on every failure, and the
 /// configured body limit named in the 413.
-pub struct Body<T>(pub T);
+pub(crate) struct Body<T>(pub T);
 
 impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
     type Rejection = ApiError;
@@ -140,7 +142,7 @@ async fn version() -> Json<Version> {
     Json(Version {
         name: env!("CARGO_PKG_NAME"),
         version: env!("CARGO_PKG_VERSION"),
-        sdr_sca_available: crate::solver::SDR_SCA_AVAILABLE,
+        sdr_sca_available: SolverKind::SdrSca.is_available(),
     })
 }
 
@@ -173,22 +175,9 @@ struct ScenarioDocument {
     scenario: Scenario,
 }
 
+/// A scenario document embedded in a request at `prefix` (e.g. `"map.scenario."`).
 fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, ApiError> {
-    Scenario::from_value(value).map_err(|e| {
-        let field = if e.field == "$" {
-            prefix.trim_end_matches('.').to_string()
-        } else {
-            format!("{prefix}{}", e.field)
-        };
-        ApiError::invalid_scenario(
-            if field.is_empty() {
-                "$".to_string()
-            } else {
-                field
-            },
-            e.to_string(),
-        )
-    })
+    Scenario::from_value(value).map_err(|e| ApiError::invalid_scenario(e.within(prefix)))
 }
 
 async fn register_scenario(
@@ -230,7 +219,7 @@ async fn get_scenario(
 /// What defines a map: a scenario (registered id or inline document) and the map parameters.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct MapRequest {
+struct MapRequest {
     scenario_id: Option<String>,
     scenario: Option<serde_json::Value>,
     kind: MapKind,
@@ -299,7 +288,7 @@ fn resolve(
         request.access,
         request.solver,
     )
-    .map_err(|e| ApiError::invalid(format!("{prefix}{}", e.field), e.reason))?;
+    .map_err(|e| e.within(prefix))?;
     let cells = scenario.grid().cells();
     let limit = state.limits().max_rate_cells;
     if key.kind == MapKind::Rate && cells > limit {
@@ -390,9 +379,34 @@ async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, Api
 async fn get_map(
     State(state): State<AppState>,
     Path(map_id): Path<String>,
-) -> Result<Json<MapBody>, ApiError> {
+) -> Result<Response, ApiError> {
     let map = cached_map(&state, &map_id).await?;
-    Ok(Json(map.body()))
+    let cells = map.grid.cells();
+    let bytes = off_runtime_if_big(cells, move || serde_json::to_vec(&map.body())).await?;
+    let bytes = bytes.map_err(|e| ApiError::internal(format!("serialising the map: {e}")))?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
+}
+
+/// Work on a map with more cells than this (path and sweep searches, map bodies, pictures)
+/// runs on tokio's blocking pool. A search or a serialisation touches every cell at a few tens
+/// of nanoseconds each, so past ~10 000 cells it would hold an async worker thread for longer
+/// than the ~0.1–1 ms tokio budgets between awaits, and every other request on that thread
+/// (health checks included) would wait. Below it (the paper's map has 1 681 cells) the work is
+/// cheaper than the hand-off to another thread.
+const INLINE_WORK_CELLS: usize = 10_000;
+
+/// Runs `work` inline for small maps and on the blocking pool for big ones (see
+/// [`INLINE_WORK_CELLS`]).
+async fn off_runtime_if_big<T: Send + 'static>(
+    cells: usize,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, ApiError> {
+    if cells <= INLINE_WORK_CELLS {
+        return Ok(work());
+    }
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|e| ApiError::internal(format!("the query's worker failed: {e}")))
 }
 
 #[derive(Serialize)]
@@ -400,7 +414,7 @@ struct Coverage {
     map_id: String,
     unit: &'static str,
     threshold: f64,
-    /// η(γ), paper eq. 29.
+    /// η(γ), paper eq. 44.
     coverage: f64,
     free_cells: usize,
     covered_cells: usize,
@@ -417,16 +431,13 @@ async fn coverage(
             "unknown query parameter",
         ));
     }
-    let threshold = query
-        .get("threshold")
-        .ok_or_else(|| ApiError::invalid("threshold", "the threshold query parameter is required"))?
-        .parse::<f64>()
-        .ok()
-        .filter(|t| t.is_finite())
-        .ok_or_else(|| ApiError::invalid("threshold", "must be a finite number"))?;
+    let threshold = query.get("threshold").ok_or_else(|| {
+        ApiError::invalid("threshold", "the threshold query parameter is required")
+    })?;
+    let threshold = parse_finite(threshold).map_err(|e| ApiError::invalid("threshold", e))?;
     let map = cached_map(&state, &map_id).await?;
-    let eta = crate::radiomap::coverage(&map, threshold);
-    let free = map.stats().free_cells;
+    let eta = map.coverage(threshold);
+    let free = map.free_cells();
     Ok(Json(Coverage {
         map_id,
         unit: map.key.unit(),
@@ -437,25 +448,15 @@ async fn coverage(
     }))
 }
 
-/// Parses "x,y" from a query parameter.
+/// An optional "x,y" query parameter.
 fn query_point(
     query: &HashMap<String, String>,
     name: &'static str,
 ) -> Result<Option<[f64; 2]>, ApiError> {
-    let Some(text) = query.get(name) else {
-        return Ok(None);
-    };
-    let parts: Vec<Option<f64>> = text
-        .split(',')
-        .map(|t| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
-        .collect();
-    match parts.as_slice() {
-        [Some(x), Some(y)] => Ok(Some([*x, *y])),
-        _ => Err(ApiError::invalid(
-            name,
-            format!("expected \"x,y\" in metres, got {text:?}"),
-        )),
-    }
+    query
+        .get(name)
+        .map(|text| parse_point(text).map_err(|e| ApiError::invalid(name, e)))
+        .transpose()
 }
 
 /// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
@@ -473,38 +474,41 @@ async fn image(
             "unknown query parameter",
         ));
     }
-    let threshold =
-        match query.get("threshold").map(String::as_str) {
-            None | Some("max") => Threshold::Max,
-            Some(t) => {
-                Threshold::Value(t.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(
-                    || ApiError::invalid("threshold", "must be a finite number or \"max\""),
-                )?)
-            }
-        };
-    let (start, goal) = (query_point(&query, "start")?, query_point(&query, "goal")?);
-    let map = cached_map(&state, &map_id).await?;
-    let mut options = RenderOptions::default();
-    if let Threshold::Value(t) = threshold {
-        options.threshold = Some(t);
-    }
-    match (start, goal) {
-        (Some(s), Some(g)) => {
-            let answer = planner::plan(&map, s, g, threshold, 1.0)
-                .map_err(|e| ApiError::invalid(e.field, e.reason))?;
-            options = RenderOptions::for_path(&map, &answer);
-        }
-        (None, None) => {}
-        _ => {
+    let threshold = match query.get("threshold") {
+        None => Threshold::Max,
+        Some(text) => text
+            .parse::<Threshold>()
+            .map_err(|e| ApiError::invalid("threshold", e))?,
+    };
+    let path_ends = match (query_point(&query, "start")?, query_point(&query, "goal")?) {
+        (Some(s), Some(g)) => Some((s, g)),
+        (None, None) => None,
+        (start, _) => {
             return Err(ApiError::invalid(
                 if start.is_none() { "start" } else { "goal" },
                 "give both start and goal, or neither",
             ));
         }
-    }
-    let bytes = tokio::task::spawn_blocking(move || render::png(&map, &options))
-        .await
-        .map_err(|e| ApiError::build_failed(format!("rendering failed: {e}")))?;
+    };
+    let map = cached_map(&state, &map_id).await?;
+    // Rendering touches every pixel, so it always leaves the async threads.
+    let bytes = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, FieldError> {
+        let options = match path_ends {
+            Some((s, g)) => {
+                RenderOptions::for_path(&map, &planner::plan(&map, s, g, threshold, 1.0)?)
+            }
+            None => RenderOptions {
+                threshold: match threshold {
+                    Threshold::Value(t) => Some(t),
+                    Threshold::Max => None,
+                },
+                ..RenderOptions::default()
+            },
+        };
+        Ok(render::png(&map, &options))
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("rendering failed: {e}")))??;
     Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
 }
 
@@ -612,17 +616,23 @@ async fn plan_path(
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
-    let path = planner::plan(&map, start, goal, request.threshold, scenario.mru.v_max_mps)
-        .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    let cells = map.grid.cells();
+    let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
+    let planned = map.clone();
+    let path = off_runtime_if_big(cells, move || {
+        planner::plan(&planned, start, goal, threshold, v_max)
+    })
+    .await??;
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
             let seed = request.seed.unwrap_or(1);
+            // Thousands of draws per waypoint: always off the async threads.
             let report = tokio::task::spawn_blocking(move || {
                 montecarlo::check_path(&scenario, &map, &path, draws, seed)
             })
             .await
-            .map_err(|e| ApiError::build_failed(format!("the Monte Carlo check failed: {e}")))?;
+            .map_err(|e| ApiError::internal(format!("the Monte Carlo check failed: {e}")))?;
             Some(report)
         }
         _ => None,
@@ -664,13 +674,10 @@ async fn sweep(
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
-    let answer: SweepAnswer = planner::sweep(
-        &map,
-        start,
-        goal,
-        &request.thresholds,
-        scenario.mru.v_max_mps,
-    )
-    .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    let (cells, v_max, thresholds) = (map.grid.cells(), scenario.mru.v_max_mps, request.thresholds);
+    let answer: SweepAnswer = off_runtime_if_big(cells, move || {
+        planner::sweep(&map, start, goal, &thresholds, v_max)
+    })
+    .await??;
     Ok(Json(answer).into_response())
 }

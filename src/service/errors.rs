@@ -3,11 +3,13 @@
 //! is one. [`parse_json`] backs the API's JSON extractor so malformed bodies, unknown fields and
 //! oversized bodies get the same treatment.
 
+use crate::input::FieldError;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+/// The body of every error answer (RFC 9457).
 #[derive(Debug, Clone, Serialize)]
 pub struct Problem {
     #[serde(rename = "type")]
@@ -78,14 +80,17 @@ impl ApiError {
         )
         .with_field(field)
     }
-    pub fn invalid_scenario(field: impl Into<String>, detail: impl Into<String>) -> Self {
+    /// A scenario document that failed validation (its own problem code, so clients can tell a
+    /// bad floor from a bad request parameter).
+    pub fn invalid_scenario(error: FieldError) -> Self {
+        let detail = error.to_string();
         Self::new(
             StatusCode::UNPROCESSABLE_ENTITY,
             "invalid_scenario",
             "Invalid scenario",
             detail,
         )
-        .with_field(field)
+        .with_field(error.field)
     }
     pub fn limit_exceeded(field: impl Into<String>, limit: u64, detail: impl Into<String>) -> Self {
         Self::new(
@@ -156,6 +161,14 @@ impl ApiError {
             format!("job {job_id} is already {state}"),
         )
     }
+    pub fn internal(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal_error",
+            "Internal error",
+            detail,
+        )
+    }
     pub fn build_failed(detail: impl Into<String>) -> Self {
         Self::new(
             StatusCode::INTERNAL_SERVER_ERROR,
@@ -194,6 +207,13 @@ impl ApiError {
     }
     pub fn status(&self) -> StatusCode {
         StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
+    }
+}
+
+/// A request field the engine rejected: 422 `invalid_field` naming it.
+impl From<FieldError> for ApiError {
+    fn from(error: FieldError) -> Self {
+        ApiError::invalid(error.field, error.reason)
     }
 }
 

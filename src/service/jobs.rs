@@ -8,7 +8,7 @@
 
 use super::cache::MapCache;
 use super::errors::ApiError;
-use crate::radiomap::{self, BuildError, MapKey, Progress, RadioMap};
+use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap};
 use crate::scenario::Scenario;
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
@@ -278,18 +278,13 @@ impl Jobs {
                 job.set_state(JobState::Done);
                 tracing::info!(build_s = seconds, "build done");
             }
-            Ok(Err(BuildError::Cancelled)) => {
+            Ok(Err(Cancelled)) => {
                 job.set_state(JobState::Cancelled);
                 tracing::info!(
                     build_s = seconds,
                     cells_done = job.progress.cells_done(),
                     "build cancelled"
                 );
-            }
-            Ok(Err(e)) => {
-                *job.error.lock().expect("job lock") = Some(e.to_string());
-                job.set_state(JobState::Failed);
-                tracing::warn!(error = %e, "build failed");
             }
             Err(panic) => {
                 *job.error.lock().expect("job lock") = Some(format!("the build panicked: {panic}"));

@@ -1,16 +1,20 @@
-//! The HTTP planning service (SPEC §4): axum on tokio, maps cached in moka, builds on a bounded
-//! blocking pool, `tracing` spans per request and per job, Prometheus metrics.
+//! The HTTP planning service: axum on tokio, maps cached in moka, builds on a bounded blocking
+//! pool, `tracing` spans per request and per job, Prometheus metrics. The contract is
+//! `openapi.yaml`.
 //!
-//! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), [`cache`]
-//! (scenario registry and map cache), [`jobs`] (map builds), [`errors`] (problem+json).
+//! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
+//! registry and map cache), `jobs` (map builds), `errors` (problem+json; [`Problem`] is the
+//! body of every error answer).
 
 pub mod api;
-pub mod cache;
+pub(crate) mod cache;
 pub mod config;
-pub mod errors;
-pub mod jobs;
+pub(crate) mod errors;
+pub(crate) mod jobs;
 
-use crate::scenario::Scenario;
+pub use errors::Problem;
+
+use crate::scenario::{BUILTIN, Scenario};
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -26,25 +30,9 @@ use tower::ServiceBuilder;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 
-/// The scenarios every build serves, even without a scenarios directory.
-pub const BUILTIN_SCENARIOS: [(&str, &str); 3] = [
-    (
-        "paper-single-user",
-        include_str!("../../scenarios/paper-single-user.json"),
-    ),
-    (
-        "paper-multi-user",
-        include_str!("../../scenarios/paper-multi-user.json"),
-    ),
-    (
-        "small-test",
-        include_str!("../../scenarios/small-test.json"),
-    ),
-];
-
 /// Request limits, from the configuration.
 #[derive(Debug, Clone)]
-pub struct Limits {
+pub(crate) struct Limits {
     pub max_body_bytes: usize,
     pub sync_cells: usize,
     pub max_rate_cells: usize,
@@ -86,16 +74,16 @@ impl AppState {
             }),
         }
     }
-    pub fn limits(&self) -> &Limits {
+    pub(crate) fn limits(&self) -> &Limits {
         &self.inner.limits
     }
-    pub fn registry(&self) -> &ScenarioRegistry {
+    pub(crate) fn registry(&self) -> &ScenarioRegistry {
         &self.inner.registry
     }
-    pub fn cache(&self) -> &MapCache {
+    pub(crate) fn cache(&self) -> &MapCache {
         &self.inner.cache
     }
-    pub fn jobs(&self) -> &Arc<Jobs> {
+    pub(crate) fn jobs(&self) -> &Arc<Jobs> {
         &self.inner.jobs
     }
     pub fn is_ready(&self) -> bool {
@@ -104,7 +92,7 @@ impl AppState {
     fn set_ready(&self, ready: bool) {
         self.inner.ready.store(ready, Ordering::Relaxed)
     }
-    pub fn render_metrics(&self) -> String {
+    pub(crate) fn render_metrics(&self) -> String {
         self.inner.metrics.render()
     }
 }
@@ -112,7 +100,7 @@ impl AppState {
 /// Loads the built-in scenarios, then every `*.json` in `dir` (a missing directory is fine; an
 /// invalid file is an error naming the file and the field).
 pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
-    for (name, text) in BUILTIN_SCENARIOS {
+    for (name, text) in BUILTIN {
         let scenario =
             Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
         state
@@ -223,27 +211,42 @@ async fn shutdown_signal() {
     tracing::info!("shutdown signal received; draining connections");
 }
 
+/// Why `serve` stopped with an error.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ServeError {
+    /// What the operator gave is wrong: a scenario file in the scenarios directory is invalid.
+    #[error("{0}")]
+    Config(String),
+    /// The service could not run: the address is taken, the runtime or the metrics recorder
+    /// could not start, or serving failed.
+    #[error("{0}")]
+    Runtime(String),
+}
+
 /// `irs-planner serve`: runs until SIGINT/SIGTERM. Prints `listening on http://ADDR` on stdout
 /// once bound (with `--bind …:0`, the port chosen).
-pub fn run(args: ServeArgs) -> Result<(), String> {
+pub fn run(args: ServeArgs) -> Result<(), ServeError> {
+    let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
     init_tracing(args.log_format);
     let metrics = PrometheusBuilder::new()
         .set_buckets(&[
             0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
             30.0, 60.0,
         ])
-        .map_err(|e| e.to_string())?
+        .map_err(|e| runtime_error(&e))?
         .install_recorder()
-        .map_err(|e| format!("metrics recorder: {e}"))?;
+        .map_err(|e| runtime_error(&format!("metrics recorder: {e}")))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| runtime_error(&e))?;
     runtime.block_on(async move {
         let state = AppState::new(&args, metrics);
-        preload(&state, &args.scenarios)?;
-        let listener = tokio::net::TcpListener::bind(args.bind).await.map_err(|e| format!("--bind {}: {e}", args.bind))?;
-        let addr = listener.local_addr().map_err(|e| e.to_string())?;
+        preload(&state, &args.scenarios).map_err(ServeError::Config)?;
+        let listener = tokio::net::TcpListener::bind(args.bind)
+            .await
+            .map_err(|e| runtime_error(&format!("--bind {}: {e}", args.bind)))?;
+        let addr = listener.local_addr().map_err(|e| runtime_error(&e))?;
         state.set_ready(true);
         tracing::info!(%addr, workers = args.workers(), queue = args.queue, cache_mb = args.cache_mb, "irs-planner listening");
         println!("listening on http://{addr}");
@@ -254,6 +257,6 @@ pub fn run(args: ServeArgs) -> Result<(), String> {
                 ready.set_ready(false);
             })
             .await
-            .map_err(|e| e.to_string())
+            .map_err(|e| runtime_error(&e))
     })
 }

@@ -1,17 +1,17 @@
 //! The paper's reference solver (Algorithms 1 and 2) on Clarabel: for every decoding order,
 //! bisection on the MRU's rate target r; each target is checked by the semidefinite relaxation
-//! (problem 24 without eq. 24g) and, when that is feasible, by SCA on the rank penalty
-//! ‖V‖_* − ‖V‖₂ (eqs. 26–27): since ‖V‖_* = tr V = N+1 on the feasible set, each SCA step
+//! (problem 29 without eq. 29g) and, when that is feasible, by SCA on the rank penalty
+//! ‖V‖_* − ‖V‖₂ (eqs. 34–36): since ‖V‖_* = tr V = N+1 on the feasible set, each SCA step
 //! maximises u_maxᴴ V u_max, the linearisation of ‖V‖₂ at the previous iterate.
 //!
 //! The rate constraints are the unrolled closed form of [`crate::rate`]: Σ_l c_l(r)/λ_l(V) ≤ P,
 //! written with epigraph variables t_l ≥ c_l/λ_l(V) as rotated second-order cones
-//! ((t_l + λ_l)/2 ≥ ‖((t_l − λ_l)/2, √c_l)‖), which is the paper's eqs. (25a–b) with the power
-//! split eliminated. The SIC ordering (eq. 22e) is linear in V.
+//! ((t_l + λ_l)/2 ≥ ‖((t_l − λ_l)/2, √c_l)‖), which is the paper's eqs. 29b–c (via 30–31) with the
+//! power split eliminated. The SIC ordering (eq. 29d) is linear in V.
 //!
 //! Clarabel has no complex PSD cone, so V = V_r + jV_i ⪰ 0 is embedded as the real
 //! X = [[V_r, −V_i], [V_i, V_r]] ⪰ 0; the variables are the strict upper triangles of V_r and
-//! V_i (diag V = 1 is fixed, eq. 24d). A target is declared feasible when an extracted rank-one
+//! V_i (diag V = 1 is fixed, eq. 29e). A target is declared feasible when an extracted rank-one
 //! v (principal eigenvector, projected to unit modulus) reaches it in the exact objective.
 
 use super::{CellProblem, objective};
@@ -184,7 +184,7 @@ impl<'a> Sdp<'a> {
             columns[2 * pairs + l].push((row, 1.0));
         }
         row += 1;
-        if self.model.access == crate::radiomap::Access::Noma {
+        if self.model.access == crate::rate::Access::Noma {
             for w in self.model.orders()[self.order].windows(2) {
                 let (weak, strong) = (w[0] as usize, w[1] as usize);
                 b.push(self.lambda0[strong] - self.lambda0[weak]);
@@ -335,7 +335,7 @@ pub fn support_value(a: &[C64], b: &[C64], w1: f64, w2: f64) -> Option<f64> {
         tau: vec![0.0, 0.0],
     };
     // OMA with zero targets makes every rate constraint vacuous: only V ⪰ 0, diag V = 1 bind.
-    let model = RateModel::new(crate::radiomap::Access::Oma, 1.0, 1.0, &[0.0]);
+    let model = RateModel::new(crate::rate::Access::Oma, 1.0, 1.0, &[0.0]);
     let sdp = Sdp::new(&problem, &model, 0);
     let pairs = a.len() * (a.len() - 1) / 2;
     let weights: Vec<f64> = (0..2 * pairs)

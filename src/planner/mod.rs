@@ -1,0 +1,256 @@
+//! Communication-aware paths over a radio map (docs/model.md §6, paper Section II-D): path and
+//! sweep queries and the answers they return. The searches themselves live in [`graph`].
+
+pub mod graph;
+
+pub use graph::{CellGraph, Infeasible, Path};
+
+use crate::input::{FieldError, parse_finite};
+use crate::radiomap::{CellConfig, RadioMap};
+use crate::scenario::Grid;
+use serde::{Deserialize, Serialize};
+use std::str::FromStr;
+
+/// The QoS threshold of a path query: a value in the map's unit, or the largest feasible one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Threshold {
+    Value(f64),
+    Max,
+}
+
+impl Serialize for Threshold {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Threshold::Value(v) => s.serialize_f64(*v),
+            Threshold::Max => s.serialize_str("max"),
+        }
+    }
+}
+
+impl FromStr for Threshold {
+    type Err = String;
+    /// `"max"` or a finite number, as in `?threshold=` and `--threshold`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "max" => Ok(Threshold::Max),
+            number => parse_finite(number)
+                .map(Threshold::Value)
+                .map_err(|e| format!("expected a number or \"max\": {e}")),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Threshold {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        match serde_json::Value::deserialize(d)? {
+            serde_json::Value::String(s) if s == "max" => Ok(Threshold::Max),
+            serde_json::Value::Number(n) => n
+                .as_f64()
+                .filter(|v| v.is_finite())
+                .map(Threshold::Value)
+                .ok_or_else(|| serde::de::Error::custom("threshold must be a finite number")),
+            other => Err(serde::de::Error::custom(format!(
+                "expected a number or \"max\", got {other}"
+            ))),
+        }
+    }
+}
+
+/// Where a requested point landed on the grid.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Endpoint {
+    pub requested: [f64; 2],
+    pub x: f64,
+    pub y: f64,
+    pub i: usize,
+    pub j: usize,
+    /// True when the requested point was not itself a cell centre.
+    pub snapped: bool,
+}
+
+/// One waypoint of a path and the configuration to apply there.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Waypoint {
+    pub x: f64,
+    pub y: f64,
+    pub i: usize,
+    pub j: usize,
+    /// The map's value at this cell.
+    pub value: f64,
+    #[serde(flatten)]
+    pub config: CellConfig,
+}
+
+/// The answer to a path query; the same body from the CLI and the API.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PathAnswer {
+    pub map_id: String,
+    pub unit: &'static str,
+    /// The threshold applied (for `"max"`, the largest feasible one).
+    pub threshold: Option<f64>,
+    pub feasible: bool,
+    pub reason: Option<Infeasible>,
+    pub distance_m: Option<f64>,
+    pub travel_time_s: Option<f64>,
+    /// The largest threshold for which any path joins start and goal.
+    pub max_feasible_threshold: Option<f64>,
+    pub start: Endpoint,
+    pub goal: Endpoint,
+    pub waypoints: Vec<Waypoint>,
+}
+
+/// One point of a threshold sweep (paper Figs. 7 and 9).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepPoint {
+    pub threshold: f64,
+    pub feasible: bool,
+    pub reason: Option<Infeasible>,
+    pub distance_m: Option<f64>,
+    pub travel_time_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepAnswer {
+    pub map_id: String,
+    pub unit: &'static str,
+    pub max_feasible_threshold: Option<f64>,
+    pub start: Endpoint,
+    pub goal: Endpoint,
+    pub points: Vec<SweepPoint>,
+}
+
+fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), FieldError> {
+    let (i, j) = grid.snap(p[0], p[1]).ok_or_else(|| {
+        FieldError::new(field, format!("({}, {}) lies outside the room", p[0], p[1]))
+    })?;
+    let [x, y] = grid.centre(i, j);
+    let snapped = (x - p[0]).abs() > 1e-9 || (y - p[1]).abs() > 1e-9;
+    Ok((
+        grid.index(i, j),
+        Endpoint {
+            requested: p,
+            x,
+            y,
+            i,
+            j,
+            snapped,
+        },
+    ))
+}
+
+fn graph(map: &RadioMap) -> CellGraph<'_> {
+    CellGraph {
+        grid: &map.grid,
+        values: &map.values,
+        occupied: &map.occupied,
+    }
+}
+
+/// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre).
+pub fn plan(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    v_max_mps: f64,
+) -> Result<PathAnswer, FieldError> {
+    let (s, start) = endpoint(&map.grid, "start", start)?;
+    let (g, goal) = endpoint(&map.grid, "goal", goal)?;
+    let graph = graph(map);
+    let widest = graph.widest_path_threshold(s, g);
+    let applied = match threshold {
+        Threshold::Value(v) => Some(v),
+        Threshold::Max => widest,
+    };
+    let result = match applied {
+        Some(t) => graph.shortest_path(s, g, t),
+        None => Err(if map.occupied[s] {
+            Infeasible::StartOccupied
+        } else if map.occupied[g] {
+            Infeasible::GoalOccupied
+        } else {
+            Infeasible::Disconnected
+        }),
+    };
+    let mut answer = PathAnswer {
+        map_id: map.key.id(),
+        unit: map.key.unit(),
+        threshold: applied,
+        feasible: result.is_ok(),
+        reason: result.as_ref().err().copied(),
+        distance_m: None,
+        travel_time_s: None,
+        max_feasible_threshold: widest,
+        start,
+        goal,
+        waypoints: Vec::new(),
+    };
+    if let Ok(path) = result {
+        answer.distance_m = Some(path.distance_m);
+        answer.travel_time_s = Some(path.distance_m / v_max_mps);
+        answer.waypoints = path
+            .cells
+            .iter()
+            .map(|&c| {
+                let (i, j) = map.grid.cell_of(c);
+                let [x, y] = map.grid.centre(i, j);
+                Waypoint {
+                    x,
+                    y,
+                    i,
+                    j,
+                    value: map.values[c],
+                    config: map.cell_config(c),
+                }
+            })
+            .collect();
+    }
+    Ok(answer)
+}
+
+/// Distance versus threshold for a list of thresholds, in one request.
+pub fn sweep(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    thresholds: &[f64],
+    v_max_mps: f64,
+) -> Result<SweepAnswer, FieldError> {
+    let (s, start) = endpoint(&map.grid, "start", start)?;
+    let (g, goal) = endpoint(&map.grid, "goal", goal)?;
+    let graph = graph(map);
+    let points = thresholds
+        .iter()
+        .map(|&t| {
+            let r = graph.shortest_path(s, g, t);
+            SweepPoint {
+                threshold: t,
+                feasible: r.is_ok(),
+                reason: r.as_ref().err().copied(),
+                distance_m: r.as_ref().ok().map(|p| p.distance_m),
+                travel_time_s: r.as_ref().ok().map(|p| p.distance_m / v_max_mps),
+            }
+        })
+        .collect();
+    Ok(SweepAnswer {
+        map_id: map.key.id(),
+        unit: map.key.unit(),
+        max_feasible_threshold: graph.widest_path_threshold(s, g),
+        start,
+        goal,
+        points,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thresholds_parse_as_in_json() {
+        assert_eq!("max".parse::<Threshold>(), Ok(Threshold::Max));
+        assert_eq!("-63.5".parse::<Threshold>(), Ok(Threshold::Value(-63.5)));
+        assert!("NaN".parse::<Threshold>().is_err());
+        assert!("maximum".parse::<Threshold>().is_err());
+    }
+}

@@ -1,0 +1,127 @@
+//! What a built map says about itself: summary statistics, coverage η(γ) (eq. 44), the
+//! certificate summary of rate maps, and the JSON body that the CLI's `map` and
+//! `GET /v1/maps/{id}` print.
+
+use super::{CellSolutions, MapKey, RadioMap};
+use crate::scenario::Grid;
+use serde::Serialize;
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MapStats {
+    pub cells: usize,
+    pub free_cells: usize,
+    pub occupied_cells: usize,
+    /// Free cells with a value (on rate maps, those where every SRU can be served).
+    pub valued_cells: usize,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub mean: Option<f64>,
+    pub median: Option<f64>,
+}
+
+/// How close the rate map is to the SDR bound over its cells (bit/s/Hz).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CertificateSummary {
+    /// Cells with both an achieved rate and a finite bound.
+    pub cells: usize,
+    pub median_gap: Option<f64>,
+    pub mean_gap: Option<f64>,
+    pub max_gap: Option<f64>,
+}
+
+/// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MapBody {
+    pub map_id: String,
+    pub key: MapKey,
+    pub unit: &'static str,
+    pub grid: Grid,
+    pub stats: MapStats,
+    /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
+    /// maps, where no configuration serves every SRU).
+    pub values: Vec<Vec<Option<f64>>>,
+    /// Rate maps: the certificate summary.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub certificate: Option<CertificateSummary>,
+    /// Rate maps: the SDR upper bound per cell, laid out like `values`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upper_bound: Option<Vec<Vec<Option<f64>>>>,
+}
+
+impl RadioMap {
+    /// Summary statistics over the free cells with a finite value.
+    pub fn stats(&self) -> MapStats {
+        let mut finite: Vec<f64> = self
+            .values
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        finite.sort_by(f64::total_cmp);
+        let free = self.free_cells();
+        let pick = |q: f64| {
+            finite
+                .get(((finite.len() - 1) as f64 * q).round() as usize)
+                .copied()
+        };
+        MapStats {
+            cells: self.values.len(),
+            free_cells: free,
+            occupied_cells: self.values.len() - free,
+            valued_cells: finite.len(),
+            min: finite.first().copied(),
+            max: finite.last().copied(),
+            mean: (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64),
+            median: if finite.is_empty() { None } else { pick(0.5) },
+        }
+    }
+
+    /// Υ's complement: the cells no obstacle occupies.
+    pub fn free_cells(&self) -> usize {
+        self.occupied.iter().filter(|o| !**o).count()
+    }
+
+    /// η(γ) of paper eq. 44: the share of free cells whose value is ≥ γ.
+    pub fn coverage(&self, threshold: f64) -> f64 {
+        let free = self.free_cells();
+        if free == 0 {
+            return 0.0;
+        }
+        self.values.iter().filter(|v| **v >= threshold).count() as f64 / free as f64
+    }
+
+    fn as_rows(&self, data: &[f64]) -> Vec<Vec<Option<f64>>> {
+        data.chunks(self.grid.ny)
+            .map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect())
+            .collect()
+    }
+
+    /// The map's JSON body.
+    pub fn body(&self) -> MapBody {
+        let (certificate, upper_bound) = match &self.cells {
+            CellSolutions::Gain { .. } => (None, None),
+            CellSolutions::Rate(rate) => {
+                let mut gaps = rate.gaps(&self.values);
+                gaps.sort_by(f64::total_cmp);
+                let summary = CertificateSummary {
+                    cells: gaps.len(),
+                    median_gap: (!gaps.is_empty()).then(|| gaps[gaps.len() / 2]),
+                    mean_gap: (!gaps.is_empty())
+                        .then(|| gaps.iter().sum::<f64>() / gaps.len() as f64),
+                    max_gap: gaps.last().copied(),
+                };
+                (Some(summary), Some(self.as_rows(&rate.upper_bound)))
+            }
+        };
+        MapBody {
+            map_id: self.key.id(),
+            key: self.key.clone(),
+            unit: self.key.unit(),
+            grid: self.grid,
+            stats: self.stats(),
+            values: self.as_rows(&self.values),
+            certificate,
+            upper_bound,
+        }
+    }
+}

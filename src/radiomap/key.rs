@@ -1,0 +1,194 @@
+//! What defines a map: its [`MapKey`] (scenario id, kind, phase mode, access, solver), whose
+//! hash is the map id under which the map is cached and served.
+
+use crate::input::{FieldError, parse_name};
+use crate::phases::PhaseMode;
+use crate::rate::Access;
+use crate::scenario::{Scenario, hash_hex};
+use crate::solver::SolverKind;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Which value a map holds per cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapKind {
+    /// Channel power gain map C (dB), docs/model.md §3.
+    Gain,
+    /// Communication rate map U of the MRU (bit/s/Hz), docs/model.md §4.
+    Rate,
+}
+
+impl FromStr for MapKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        parse_name(s)
+    }
+}
+
+impl fmt::Display for MapKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            MapKind::Gain => "gain",
+            MapKind::Rate => "rate",
+        })
+    }
+}
+
+/// Everything that defines a map; its hash is the map id.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapKey {
+    pub scenario_id: String,
+    pub kind: MapKind,
+    pub phases: PhaseMode,
+    /// Rate maps only (default `noma`).
+    pub access: Option<Access>,
+    /// Rate maps only (default `fast`).
+    pub solver: Option<SolverKind>,
+}
+
+impl MapKey {
+    /// Normalises a request as users write it (every parameter but the kind optional): gain
+    /// maps take no `access`/`solver`, rate maps default them to `noma`/`fast`, phases default
+    /// to `continuous`, and the scenario must be able to support the kind. Errors name the
+    /// request's field (`phases`, `access`, `solver`, `kind`).
+    pub fn new(
+        scenario_id: &str,
+        scenario: &Scenario,
+        kind: MapKind,
+        phases: Option<PhaseMode>,
+        access: Option<Access>,
+        solver: Option<SolverKind>,
+    ) -> Result<MapKey, FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
+        let phases = phases.unwrap_or(PhaseMode::Continuous);
+        if scenario.irs.is_none() && phases != PhaseMode::None {
+            return err("phases", "the scenario has no IRS: only \"none\" applies");
+        }
+        let (access, solver) = match kind {
+            MapKind::Gain => {
+                if access.is_some() {
+                    return err("access", "applies only to rate maps");
+                }
+                if solver.is_some() {
+                    return err("solver", "applies only to rate maps");
+                }
+                (None, None)
+            }
+            MapKind::Rate => {
+                if scenario.srus.is_empty() {
+                    return err(
+                        "kind",
+                        "a rate map needs at least one static robot (srus is empty)",
+                    );
+                }
+                let solver = solver.unwrap_or(SolverKind::Fast);
+                if !solver.is_available() {
+                    return err(
+                        "solver",
+                        "\"sdr-sca\" needs the `sdp` cargo feature (Clarabel with BLAS/LAPACK); this build has it off",
+                    );
+                }
+                (Some(access.unwrap_or(Access::Noma)), Some(solver))
+            }
+        };
+        Ok(MapKey {
+            scenario_id: scenario_id.to_string(),
+            kind,
+            phases,
+            access,
+            solver,
+        })
+    }
+
+    /// The key of a channel power gain map.
+    pub fn gain(
+        scenario_id: &str,
+        scenario: &Scenario,
+        phases: PhaseMode,
+    ) -> Result<MapKey, FieldError> {
+        MapKey::new(
+            scenario_id,
+            scenario,
+            MapKind::Gain,
+            Some(phases),
+            None,
+            None,
+        )
+    }
+
+    /// The key of a rate map solved by the default (`fast`) solver.
+    pub fn rate(
+        scenario_id: &str,
+        scenario: &Scenario,
+        phases: PhaseMode,
+        access: Access,
+    ) -> Result<MapKey, FieldError> {
+        MapKey::new(
+            scenario_id,
+            scenario,
+            MapKind::Rate,
+            Some(phases),
+            Some(access),
+            None,
+        )
+    }
+
+    /// The map id: hash of the key's canonical JSON.
+    pub fn id(&self) -> String {
+        hash_hex(
+            serde_json::to_string(self)
+                .expect("keys serialise")
+                .as_bytes(),
+        )
+    }
+
+    pub fn unit(&self) -> &'static str {
+        match self.kind {
+            MapKind::Gain => "dB",
+            MapKind::Rate => "bit/s/Hz",
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_reject_what_does_not_apply() {
+        let s = Scenario::builtin("small-test").unwrap();
+        let e = MapKey::new("x", &s, MapKind::Gain, None, Some(Access::Oma), None).unwrap_err();
+        assert_eq!(e.field, "access");
+        let rate = MapKey::new("x", &s, MapKind::Rate, None, None, None).unwrap();
+        assert_eq!(
+            (rate.access, rate.solver),
+            (Some(Access::Noma), Some(SolverKind::Fast))
+        );
+        assert_eq!(
+            rate,
+            MapKey::rate("x", &s, PhaseMode::Continuous, Access::Noma).unwrap()
+        );
+        assert_ne!(
+            rate.id(),
+            MapKey::gain("x", &s, PhaseMode::Continuous).unwrap().id()
+        );
+        assert_eq!("rate".parse::<MapKind>(), Ok(MapKind::Rate));
+        assert_eq!(MapKind::Gain.to_string(), "gain");
+    }
+
+    #[test]
+    fn sdr_sca_without_the_sdp_feature_is_a_clear_error() {
+        let s = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::new("x", &s, MapKind::Rate, None, None, Some(SolverKind::SdrSca));
+        if SolverKind::SdrSca.is_available() {
+            assert_eq!(key.unwrap().solver, Some(SolverKind::SdrSca));
+        } else {
+            let e = key.unwrap_err();
+            assert_eq!(e.field, "solver");
+            assert!(e.reason.contains("sdp"), "{e}");
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! Radio maps (docs/model.md §3–4): per free grid cell the best value the MRU can get there, and
+//! the configuration that achieves it.
+//!
+//! * [`key`]: what defines a map ([`MapKey`]); its hash is the map id.
+//! * [`gain`]: the channel power gain map C (eqs. 9 and 12), in dB.
+//! * [`rate_cells`]: the communication rate map U (eqs. 26 and 37), in bit/s/Hz, solved per cell
+//!   by [`crate::solver`].
+//! * [`body`]: statistics, coverage and the JSON body of a built map.
+//!
+//! Occupied cells hold NaN (JSON null, the paper's −∞).
+
+pub mod body;
+pub mod gain;
+pub mod key;
+pub mod rate_cells;
+
+pub use body::{CertificateSummary, MapBody, MapStats};
+pub use key::{MapKey, MapKind};
+pub use rate_cells::RateCells;
+
+use crate::channel::ChannelModel;
+use crate::scenario::{Grid, Scenario};
+use serde::Serialize;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+/// Shared progress and cancellation of one map build.
+#[derive(Debug, Default)]
+pub struct Progress {
+    done: AtomicUsize,
+    total: AtomicUsize,
+    cancelled: AtomicBool,
+}
+
+impl Progress {
+    pub fn cells_done(&self) -> usize {
+        self.done.load(Ordering::Relaxed)
+    }
+    pub fn cells_total(&self) -> usize {
+        self.total.load(Ordering::Relaxed)
+    }
+    pub fn cancel(&self) {
+        self.cancelled.store(true, Ordering::Relaxed);
+    }
+    pub fn is_cancelled(&self) -> bool {
+        self.cancelled.load(Ordering::Relaxed)
+    }
+    pub(crate) fn start(&self, total: usize) {
+        self.total.store(total, Ordering::Relaxed);
+        self.done.store(0, Ordering::Relaxed);
+    }
+    pub(crate) fn advance(&self, cells: usize) {
+        self.done.fetch_add(cells, Ordering::Relaxed);
+    }
+}
+
+/// A build stopped by [`Progress::cancel`]; the only way a build of a validated key can fail.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the map build was cancelled")]
+pub struct Cancelled;
+
+/// What a map keeps per cell to answer "how do I configure the IRS (and the AP) here?".
+#[derive(Debug, Clone)]
+pub enum CellSolutions {
+    /// Gain maps: θ* is recomputed per waypoint from the channel model (see [`gain`]).
+    Gain {
+        model: Arc<ChannelModel>,
+        antenna_height_m: f64,
+    },
+    /// Rate maps: the solver's argmax per cell (phases, power split, order, certificate).
+    Rate(RateCells),
+}
+
+/// The configuration to apply at one waypoint.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CellConfig {
+    /// θ_n in [0, 2π), N values (empty without IRS).
+    pub irs_phases_rad: Vec<f64>,
+    /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub power_w: Option<Vec<f64>>,
+    /// NOMA rate maps: users in SIC decoding order (decoded first = weakest first).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decoding_order: Option<Vec<String>>,
+}
+
+/// A computed radio map.
+#[derive(Debug, Clone)]
+pub struct RadioMap {
+    pub key: MapKey,
+    pub grid: Grid,
+    /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
+    /// (and, on rate maps, where no configuration meets every SRU's rate).
+    pub values: Vec<f64>,
+    /// Per cell: true if an obstacle occupies it.
+    pub occupied: Vec<bool>,
+    pub cells: CellSolutions,
+    /// Wall-clock build time (s).
+    pub build_seconds: f64,
+}
+
+impl RadioMap {
+    /// The configuration achieving `values[index]`.
+    pub fn cell_config(&self, index: usize) -> CellConfig {
+        match &self.cells {
+            CellSolutions::Gain {
+                model,
+                antenna_height_m,
+            } => {
+                let (i, j) = self.grid.cell_of(index);
+                let [x, y] = self.grid.centre(i, j);
+                CellConfig {
+                    irs_phases_rad: gain::waypoint_phases(
+                        model,
+                        [x, y, *antenna_height_m],
+                        self.key.phases,
+                    ),
+                    power_w: None,
+                    decoding_order: None,
+                }
+            }
+            CellSolutions::Rate(rate) => rate.config(index),
+        }
+    }
+
+    /// Approximate heap size, for cache weighing.
+    pub fn size_bytes(&self) -> usize {
+        let base = self.values.len() * 9 + 256;
+        match &self.cells {
+            CellSolutions::Gain { .. } => base,
+            CellSolutions::Rate(r) => base + r.size_bytes(),
+        }
+    }
+}
+
+/// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress
+/// advances and cancellation is checked once per row.
+pub fn build(
+    scenario: &Scenario,
+    key: &MapKey,
+    progress: &Progress,
+) -> Result<RadioMap, Cancelled> {
+    let started = std::time::Instant::now();
+    let grid = scenario.grid();
+    let model = Arc::new(ChannelModel::new(scenario));
+    let occupied: Vec<bool> = (0..grid.cells())
+        .map(|k| {
+            let (i, j) = grid.cell_of(k);
+            let [x, y] = grid.centre(i, j);
+            scenario.is_occupied(x, y)
+        })
+        .collect();
+    progress.start(grid.cells());
+    let (values, cells) = match key.kind {
+        MapKind::Gain => {
+            let height = scenario.mru.antenna_height_m;
+            let values = gain::gain_values(&model, &grid, &occupied, height, key.phases, progress)?;
+            let cells = CellSolutions::Gain {
+                model,
+                antenna_height_m: height,
+            };
+            (values, cells)
+        }
+        MapKind::Rate => {
+            let (values, rate) =
+                rate_cells::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
+            (values, CellSolutions::Rate(rate))
+        }
+    };
+    Ok(RadioMap {
+        key: key.clone(),
+        grid,
+        values,
+        occupied,
+        cells,
+        build_seconds: started.elapsed().as_secs_f64(),
+    })
+}
