@@ -456,21 +456,26 @@ impl Scenario {
             if irs.elements_per_sub == 0 {
                 return err("irs.elements_per_sub", "must be at least 1");
             }
-            if irs.subsurfaces() > MAX_SUBSURFACES {
+            // Checked products: N and M are derived from user input, and a wrapped product
+            // (2^32 × 2^32 = 0 in release builds) would pass a plain comparison.
+            let subsurfaces = irs.nx_sub.checked_mul(irs.nz_sub);
+            if subsurfaces.is_none_or(|n| n > MAX_SUBSURFACES) {
                 return Err(FieldError::new(
                     "irs.nx_sub",
                     format!(
-                        "N = nx_sub·nz_sub = {} exceeds the limit of {MAX_SUBSURFACES}",
-                        irs.subsurfaces()
+                        "N = nx_sub·nz_sub = {}·{} exceeds the limit of {MAX_SUBSURFACES}",
+                        irs.nx_sub, irs.nz_sub
                     ),
                 ));
             }
-            if irs.elements() > MAX_ELEMENTS {
+            let elements = subsurfaces.and_then(|n| n.checked_mul(irs.elements_per_sub));
+            if elements.is_none_or(|m| m > MAX_ELEMENTS) {
                 return Err(FieldError::new(
                     "irs.elements_per_sub",
                     format!(
-                        "M = N·N̄ = {} exceeds the limit of {MAX_ELEMENTS}",
-                        irs.elements()
+                        "M = N·N̄ = {}·{} exceeds the limit of {MAX_ELEMENTS}",
+                        irs.nx_sub * irs.nz_sub,
+                        irs.elements_per_sub
                     ),
                 ));
             }
@@ -740,6 +745,22 @@ mod tests {
                 "irs.normal",
             ),
             (Box::new(|v| v["irs"]["nx_sub"] = 0.into()), "irs.nx_sub"),
+            // Products that wrap around in 64 bits must not slip through the size limits.
+            (
+                Box::new(|v| {
+                    v["irs"]["nx_sub"] = (1u64 << 32).into();
+                    v["irs"]["nz_sub"] = (1u64 << 32).into();
+                }),
+                "irs.nx_sub",
+            ),
+            (
+                Box::new(|v| v["irs"]["nz_sub"] = (1u64 << 63).into()),
+                "irs.nx_sub",
+            ),
+            (
+                Box::new(|v| v["irs"]["elements_per_sub"] = ((1u64 << 63) + 1).into()),
+                "irs.elements_per_sub",
+            ),
             (
                 Box::new(|v| v["mru"]["v_max_mps"] = 0.into()),
                 "mru.v_max_mps",
