@@ -63,6 +63,9 @@ pub struct MapArgs {
     /// Also draw the map (and, for `plan`, the path) as a PNG into this file.
     #[arg(long, value_name = "FILE")]
     pub png: Option<PathBuf>,
+    /// Pixels per grid cell in the PNG (1–32; default: the longer side fits in 1024 px).
+    #[arg(long, value_name = "PX", requires = "png", value_parser = clap::value_parser!(u16).range(1..=render::MAX_CELL_PX as i64))]
+    pub cell_px: Option<u16>,
 }
 
 #[derive(Debug, Args)]
@@ -180,12 +183,23 @@ fn print_json(value: &impl Serialize) -> Result<(), Failure> {
 }
 
 fn write_png(
-    file: Option<&PathBuf>,
+    args: &MapArgs,
     map: &RadioMap,
-    options: &RenderOptions,
+    scenario: &Scenario,
+    options: RenderOptions,
 ) -> Result<(), Failure> {
-    let Some(file) = file else { return Ok(()) };
-    std::fs::write(file, render::png(map, options))
+    let Some(file) = &args.png else { return Ok(()) };
+    let options = RenderOptions {
+        cell_px: args.cell_px.map(usize::from),
+        ..options
+    };
+    let bytes = render::png(map, scenario, &options).ok_or_else(|| {
+        Failure::input(format!(
+            "--cell-px: the picture would exceed {} pixels a side",
+            render::MAX_SIDE_PX
+        ))
+    })?;
+    std::fs::write(file, bytes)
         .map_err(|e| Failure::input(format!("--png {}: {e}", file.display())))
 }
 
@@ -193,7 +207,7 @@ fn write_png(
 pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.scenario)?;
     let map = build_map(args, &scenario)?;
-    write_png(args.png.as_ref(), &map, &RenderOptions::default())?;
+    write_png(args, &map, &scenario, RenderOptions::default())?;
     print_json(&map.body())
 }
 
@@ -218,9 +232,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     )
     .map_err(|e| Failure::input(format!("--{e}")))?;
     write_png(
-        args.map.png.as_ref(),
+        &args.map,
         &map,
-        &RenderOptions::for_path(&map, &path),
+        &scenario,
+        RenderOptions::for_path(&map, &path),
     )?;
     let monte_carlo = match args.monte_carlo {
         Some(draws) if path.feasible => Some(montecarlo::check_path(

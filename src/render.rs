@@ -1,14 +1,27 @@
 //! PNG pictures of radio maps and paths, for people rather than programs (paper Figs. 4–6 and
-//! 8–9 in spirit): each cell a square coloured by its value on a perceptually ordered scale
-//! (dark blue → teal → yellow, from the map's minimum to its maximum), obstacles grey, cells with
-//! no value black; with a threshold, cells below it are dimmed (the feasible map Π, eq. 14); a
-//! path is drawn in white with the start green and the goal red. North (+y) is up.
+//! 8–9 in spirit). A picture explains itself:
+//!
+//! * each cell a square coloured by its value on viridis (dark purple → teal → yellow, readable
+//!   with colour-blindness and in grey scale), from the map's minimum to its maximum; obstacles
+//!   grey, free cells with no value (rate maps: no configuration serves every SRU) black;
+//! * with a threshold, cells below it are dimmed (the feasible map Π, eq. 14) and the threshold is
+//!   marked on the colour bar;
+//! * axes with ticks in metres, a colour bar with its range and unit, and a title;
+//! * markers: the AP (white square), the IRS (magenta bar along its wall), the SRUs (white
+//!   circles), start (green) and goal (red) — also when the path is infeasible, so the reason
+//!   (an occupied or below-threshold end) can be seen; the path in white.
+//!
+//! North (+y) is up. Text uses the public-domain 8×8 bitmap font of `font8x8`.
 
 use crate::planner::PathAnswer;
-use crate::radiomap::RadioMap;
+use crate::radiomap::{MapKind, RadioMap};
+use crate::scenario::Scenario;
+use font8x8::UnicodeFonts;
 
-/// Largest image side in pixels.
+/// Largest plot side in pixels (the map itself, without margins).
 pub const MAX_SIDE_PX: usize = 4096;
+/// Largest pixels per cell a caller may ask for.
+pub const MAX_CELL_PX: usize = 32;
 
 #[derive(Debug, Clone, Default)]
 pub struct RenderOptions {
@@ -16,10 +29,15 @@ pub struct RenderOptions {
     pub threshold: Option<f64>,
     /// Cells (flat indices) of a path, start first.
     pub path: Vec<usize>,
+    /// The start and goal cells to mark (flat indices), feasible or not.
+    pub ends: Option<(usize, usize)>,
+    /// Pixels per cell; default: the longer side of the plot fits in 1024 px.
+    pub cell_px: Option<usize>,
 }
 
 impl RenderOptions {
-    /// The picture of a path answer: its threshold dims the cells below it, its waypoints drawn.
+    /// The picture of a path answer: its threshold dims the cells below it, its waypoints and
+    /// its two ends are drawn.
     pub fn for_path(map: &RadioMap, answer: &PathAnswer) -> Self {
         RenderOptions {
             threshold: answer.threshold,
@@ -28,11 +46,18 @@ impl RenderOptions {
                 .iter()
                 .map(|w| map.grid.index(w.i, w.j))
                 .collect(),
+            ends: Some((
+                map.grid.index(answer.start.i, answer.start.j),
+                map.grid.index(answer.goal.i, answer.goal.j),
+            )),
+            cell_px: None,
         }
     }
 }
 
-/// Colour stops of the value scale (low → high).
+type Rgb = [u8; 3];
+
+/// Viridis at five stops (low → high).
 const SCALE: [[f64; 3]; 5] = [
     [68.0, 1.0, 84.0],
     [59.0, 82.0, 139.0],
@@ -40,13 +65,19 @@ const SCALE: [[f64; 3]; 5] = [
     [94.0, 201.0, 98.0],
     [253.0, 231.0, 37.0],
 ];
-const OBSTACLE: [u8; 3] = [128, 128, 128];
-const NO_VALUE: [u8; 3] = [0, 0, 0];
-const PATH: [u8; 3] = [255, 255, 255];
-const START: [u8; 3] = [0, 200, 0];
-const GOAL: [u8; 3] = [230, 0, 0];
+const BACKGROUND: Rgb = [255, 255, 255];
+const INK: Rgb = [0, 0, 0];
+const OBSTACLE: Rgb = [128, 128, 128];
+const NO_VALUE: Rgb = [0, 0, 0];
+const PATH: Rgb = [255, 255, 255];
+const START: Rgb = [0, 200, 0];
+const GOAL: Rgb = [230, 0, 0];
+const IRS: Rgb = [230, 0, 230];
+const DEVICE: Rgb = [255, 255, 255];
+/// Factor applied to the colour of cells below the threshold.
+const DIM: f64 = 0.3;
 
-fn colour(t: f64) -> [u8; 3] {
+fn colour(t: f64) -> Rgb {
     let x = t.clamp(0.0, 1.0) * (SCALE.len() - 1) as f64;
     let k = (x.floor() as usize).min(SCALE.len() - 2);
     let f = x - k as f64;
@@ -54,19 +85,226 @@ fn colour(t: f64) -> [u8; 3] {
     [mix(0), mix(1), mix(2)]
 }
 
-/// Pixels per cell so that the longer side fits in 1024 px (at least 1, at most 16).
-pub fn pixels_per_cell(map: &RadioMap) -> usize {
-    (1024 / map.grid.nx.max(map.grid.ny)).clamp(1, 16)
+/// Pixels per cell so that the longer side of the plot fits in 768 px (at least 1, at most
+/// [`MAX_CELL_PX`]): big enough to read on a laptop screen, small enough to embed.
+pub fn default_cell_px(map: &RadioMap) -> usize {
+    (768 / map.grid.nx.max(map.grid.ny)).clamp(1, MAX_CELL_PX)
 }
 
-/// Encodes the picture of `map` as PNG.
-pub fn png(map: &RadioMap, options: &RenderOptions) -> Vec<u8> {
-    let (nx, ny) = (map.grid.nx, map.grid.ny);
-    let ppc = pixels_per_cell(map);
-    let (width, height) = ((nx * ppc).min(MAX_SIDE_PX), (ny * ppc).min(MAX_SIDE_PX));
+/// Where everything goes in the picture.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layout {
+    /// Pixels per cell.
+    pub cell_px: usize,
+    /// Top-left pixel of the plot area.
+    pub left: usize,
+    pub top: usize,
+    pub plot_width: usize,
+    pub plot_height: usize,
+    pub width: usize,
+    pub height: usize,
+    /// Text glyphs are 8 × `text_scale` pixels.
+    text_scale: usize,
+}
+
+impl Layout {
+    /// The layout for a map; `None` when the plot would exceed [`MAX_SIDE_PX`].
+    pub fn new(map: &RadioMap, cell_px: Option<usize>) -> Option<Layout> {
+        let cell_px = cell_px.unwrap_or_else(|| default_cell_px(map));
+        let (plot_width, plot_height) = (map.grid.nx * cell_px, map.grid.ny * cell_px);
+        if plot_width > MAX_SIDE_PX || plot_height > MAX_SIDE_PX {
+            return None;
+        }
+        // Big plots get double-size text so labels stay legible next to them.
+        let text_scale = if plot_width.max(plot_height) >= 400 {
+            2
+        } else {
+            1
+        };
+        let glyph = 8 * text_scale;
+        // Left: tick labels like "-10.5"; top: the title line, then the axis and unit labels;
+        // right: the colour bar and its labels; bottom: tick labels and the x caption.
+        let (left, top) = (7 * glyph, 4 * glyph);
+        let (right, bottom) = (12 * glyph, 5 * glyph);
+        let title_width = glyph * (title(map).chars().count() + 2);
+        Some(Layout {
+            cell_px,
+            left,
+            top,
+            plot_width,
+            plot_height,
+            width: (left + plot_width + right).max(title_width),
+            height: top + plot_height + bottom,
+            text_scale,
+        })
+    }
+
+    /// The pixel (column, row) of the centre of cell (i, j).
+    pub fn cell_centre(&self, map: &RadioMap, i: usize, j: usize) -> (usize, usize) {
+        (
+            self.left + i * self.cell_px + self.cell_px / 2,
+            self.top + (map.grid.ny - 1 - j) * self.cell_px + self.cell_px / 2,
+        )
+    }
+
+    /// The pixel of a point (x, y) in metres (cell centres are pixel-cell centres).
+    fn point(&self, map: &RadioMap, x: f64, y: f64) -> (f64, f64) {
+        let g = &map.grid;
+        let px = self.left as f64 + ((x - g.x_min) / g.resolution_m + 0.5) * self.cell_px as f64;
+        let py = self.top as f64
+            + ((g.ny - 1) as f64 - (y - g.y_min) / g.resolution_m + 0.5) * self.cell_px as f64;
+        (px, py)
+    }
+}
+
+/// An RGB canvas with the few drawing operations the picture needs.
+struct Canvas {
+    width: usize,
+    height: usize,
+    pixels: Vec<u8>,
+}
+
+impl Canvas {
+    fn new(width: usize, height: usize) -> Canvas {
+        let mut pixels = vec![0; width * height * 3];
+        pixels
+            .chunks_mut(3)
+            .for_each(|p| p.copy_from_slice(&BACKGROUND));
+        Canvas {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    fn set(&mut self, x: i64, y: i64, rgb: Rgb) {
+        if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
+            let at = (y as usize * self.width + x as usize) * 3;
+            self.pixels[at..at + 3].copy_from_slice(&rgb);
+        }
+    }
+
+    fn fill(&mut self, x0: i64, y0: i64, w: i64, h: i64, rgb: Rgb) {
+        for y in y0..y0 + h {
+            for x in x0..x0 + w {
+                self.set(x, y, rgb);
+            }
+        }
+    }
+
+    fn frame(&mut self, x0: i64, y0: i64, w: i64, h: i64, rgb: Rgb) {
+        for x in x0..x0 + w {
+            self.set(x, y0, rgb);
+            self.set(x, y0 + h - 1, rgb);
+        }
+        for y in y0..y0 + h {
+            self.set(x0, y, rgb);
+            self.set(x0 + w - 1, y, rgb);
+        }
+    }
+
+    fn disk(&mut self, cx: f64, cy: f64, radius: f64, rgb: Rgb) {
+        let r = radius.ceil() as i64;
+        let (x0, y0) = (cx.round() as i64, cy.round() as i64);
+        for dy in -r..=r {
+            for dx in -r..=r {
+                if ((dx * dx + dy * dy) as f64) <= radius * radius {
+                    self.set(x0 + dx, y0 + dy, rgb);
+                }
+            }
+        }
+    }
+
+    /// Text with its top-left corner at (x, y); characters the font lacks are skipped.
+    fn text(&mut self, x: i64, y: i64, text: &str, scale: usize, rgb: Rgb) {
+        let s = scale as i64;
+        for (k, c) in text.chars().enumerate() {
+            let Some(glyph) = font8x8::BASIC_FONTS
+                .get(c)
+                .or_else(|| font8x8::GREEK_FONTS.get(c))
+            else {
+                continue;
+            };
+            let gx = x + 8 * s * k as i64;
+            for (row, bits) in glyph.iter().enumerate() {
+                for col in 0..8 {
+                    if bits & (1 << col) != 0 {
+                        self.fill(gx + col * s, y + row as i64 * s, s, s, rgb);
+                    }
+                }
+            }
+        }
+    }
+
+    fn text_width(text: &str, scale: usize) -> i64 {
+        (8 * scale * text.chars().count()) as i64
+    }
+}
+
+/// Tick positions from `low` to `high` at a 1-2-5 step giving about `target` ticks.
+fn ticks(low: f64, high: f64, target: usize) -> Vec<f64> {
+    let span = (high - low).abs().max(f64::MIN_POSITIVE);
+    let raw = span / target.max(1) as f64;
+    let magnitude = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * magnitude)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * magnitude);
+    let first = (low / step).ceil() as i64;
+    let last = (high / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
+}
+
+/// A tick label without trailing zeros ("−10", "2.5", "−59.6").
+fn label(v: f64) -> String {
+    let text = format!("{:.2}", if v.abs() < 1e-9 { 0.0 } else { v });
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Encodes the picture of `map` (with the devices of its `scenario`) as PNG; `None` when the
+/// plot would exceed [`MAX_SIDE_PX`] at the requested cell size.
+pub fn png(map: &RadioMap, scenario: &Scenario, options: &RenderOptions) -> Option<Vec<u8>> {
+    let layout = Layout::new(map, options.cell_px)?;
+    let mut canvas = Canvas::new(layout.width, layout.height);
     let stats = map.stats();
     let (low, high) = (stats.min.unwrap_or(0.0), stats.max.unwrap_or(1.0));
     let span = if high > low { high - low } else { 1.0 };
+    draw_cells(&mut canvas, map, &layout, options, low, span);
+    draw_axes(&mut canvas, map, &layout);
+    draw_colour_bar(&mut canvas, map, &layout, options.threshold, low, high);
+    draw_devices(&mut canvas, map, scenario, &layout);
+    if let Some((start, goal)) = options.ends {
+        for (cell, rgb) in [(start, START), (goal, GOAL)] {
+            let (i, j) = map.grid.cell_of(cell);
+            let (cx, cy) = layout.cell_centre(map, i, j);
+            let radius = (layout.cell_px as f64 * 0.45).max(4.0);
+            canvas.disk(cx as f64, cy as f64, radius + 1.5, INK);
+            canvas.disk(cx as f64, cy as f64, radius, rgb);
+        }
+    }
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, layout.width as u32, layout.height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().expect("PNG header to memory");
+        writer
+            .write_image_data(&canvas.pixels)
+            .expect("PNG data to memory");
+    }
+    Some(out)
+}
+
+fn draw_cells(
+    canvas: &mut Canvas,
+    map: &RadioMap,
+    layout: &Layout,
+    options: &RenderOptions,
+    low: f64,
+    span: f64,
+) {
+    let (nx, ny) = (map.grid.nx, map.grid.ny);
     let mut cell_rgb = vec![[0u8; 3]; nx * ny];
     for (k, rgb) in cell_rgb.iter_mut().enumerate() {
         let v = map.values[k];
@@ -77,7 +315,7 @@ pub fn png(map: &RadioMap, options: &RenderOptions) -> Vec<u8> {
         } else {
             let c = colour((v - low) / span);
             match options.threshold {
-                Some(t) if v < t => c.map(|x| (x as f64 * 0.3) as u8),
+                Some(t) if v < t => c.map(|x| (x as f64 * DIM) as u8),
                 _ => c,
             }
         };
@@ -85,30 +323,156 @@ pub fn png(map: &RadioMap, options: &RenderOptions) -> Vec<u8> {
     for &c in &options.path {
         cell_rgb[c] = PATH;
     }
-    if let (Some(&first), Some(&last)) = (options.path.first(), options.path.last()) {
-        cell_rgb[first] = START;
-        cell_rgb[last] = GOAL;
-    }
-    let mut pixels = vec![0u8; width * height * 3];
-    for py in 0..height {
-        let j = ny - 1 - (py * ny / height); // row 0 of the image is the room's far (+y) wall
-        for px in 0..width {
-            let i = px * nx / width;
-            let at = (py * width + px) * 3;
-            pixels[at..at + 3].copy_from_slice(&cell_rgb[map.grid.index(i, j)]);
+    let ppc = layout.cell_px as i64;
+    for i in 0..nx {
+        for j in 0..ny {
+            let x = layout.left as i64 + i as i64 * ppc;
+            let y = layout.top as i64 + (ny - 1 - j) as i64 * ppc;
+            canvas.fill(x, y, ppc, ppc, cell_rgb[map.grid.index(i, j)]);
         }
     }
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().expect("PNG header to memory");
-        writer
-            .write_image_data(&pixels)
-            .expect("PNG data to memory");
+}
+
+fn draw_axes(canvas: &mut Canvas, map: &RadioMap, layout: &Layout) {
+    let s = layout.text_scale;
+    let glyph = 8 * s as i64;
+    let (left, top) = (layout.left as i64, layout.top as i64);
+    let (w, h) = (layout.plot_width as i64, layout.plot_height as i64);
+    canvas.frame(left - 1, top - 1, w + 2, h + 2, INK);
+    let g = &map.grid;
+    let (x_max, y_max) = (
+        g.x_min + (g.nx - 1) as f64 * g.resolution_m,
+        g.y_min + (g.ny - 1) as f64 * g.resolution_m,
+    );
+    for x in ticks(g.x_min, x_max, 8) {
+        let (px, _) = layout.point(map, x, g.y_min);
+        let px = px.round() as i64;
+        canvas.fill(px, top + h, 1, glyph / 2, INK);
+        let text = label(x);
+        let tw = Canvas::text_width(&text, s);
+        canvas.text(px - tw / 2, top + h + glyph * 3 / 4, &text, s, INK);
     }
-    out
+    for y in ticks(g.y_min, y_max, 8) {
+        let (_, py) = layout.point(map, g.x_min, y);
+        let py = py.round() as i64;
+        canvas.fill(left - glyph / 2, py, glyph / 2, 1, INK);
+        let text = label(y);
+        let tw = Canvas::text_width(&text, s);
+        canvas.text(left - glyph * 3 / 4 - tw, py - glyph / 2, &text, s, INK);
+    }
+    let caption = "x (m)";
+    let cw = Canvas::text_width(caption, s);
+    canvas.text(left + w / 2 - cw / 2, top + h + glyph * 2, caption, s, INK);
+    canvas.text(left - glyph * 6, top - glyph * 2, "y (m)", s, INK);
+    canvas.text(glyph / 2, glyph / 2, &title(map), s, INK);
+}
+
+/// "channel power gain map, phases 2" / "MRU rate map, NOMA, phases continuous".
+fn title(map: &RadioMap) -> String {
+    match (map.key.kind, map.key.access) {
+        (MapKind::Rate, Some(access)) => format!(
+            "MRU rate map, {}, phases {}",
+            access.to_string().to_uppercase(),
+            map.key.phases
+        ),
+        _ => format!("channel power gain map, phases {}", map.key.phases),
+    }
+}
+
+fn draw_colour_bar(
+    canvas: &mut Canvas,
+    map: &RadioMap,
+    layout: &Layout,
+    threshold: Option<f64>,
+    low: f64,
+    high: f64,
+) {
+    let s = layout.text_scale;
+    let glyph = 8 * s as i64;
+    let x0 = (layout.left + layout.plot_width) as i64 + glyph * 2;
+    let (top, h) = (layout.top as i64, layout.plot_height as i64);
+    let bar_width = glyph * 2;
+    let span = if high > low { high - low } else { 1.0 };
+    for row in 0..h {
+        let t = 1.0 - row as f64 / (h - 1).max(1) as f64;
+        canvas.fill(x0, top + row, bar_width, 1, colour(t));
+    }
+    canvas.frame(x0 - 1, top - 1, bar_width + 2, h + 2, INK);
+    let y_of = |v: f64| top + ((high - v) / span * (h - 1) as f64).round() as i64;
+    let mut marks = vec![low, high];
+    marks.extend(
+        ticks(low, high, 5)
+            .into_iter()
+            .filter(|t| (t - low).abs() > span * 0.08 && (high - t).abs() > span * 0.08),
+    );
+    for v in marks {
+        let y = y_of(v);
+        canvas.fill(x0 + bar_width, y, glyph / 2, 1, INK);
+        canvas.text(
+            x0 + bar_width + glyph * 3 / 4,
+            y - glyph / 2,
+            &label(v),
+            s,
+            INK,
+        );
+    }
+    if let Some(t) = threshold.filter(|t| *t >= low && *t <= high) {
+        let y = y_of(t);
+        canvas.fill(x0 - glyph / 2, y - 1, bar_width + glyph, 3, INK);
+        canvas.fill(x0 - glyph / 2, y, bar_width + glyph, 1, BACKGROUND);
+    }
+    let unit = map.key.unit();
+    canvas.text(x0, top - glyph * 2, unit, s, INK);
+}
+
+fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout: &Layout) {
+    let s = layout.text_scale;
+    let glyph = (8 * s) as f64;
+    let radius = (layout.cell_px as f64 * 0.35).max(3.0 * s as f64);
+    let marker_label = |canvas: &mut Canvas, px: f64, py: f64, text: &str| {
+        let (x, y) = ((px + radius + 2.0) as i64, (py - glyph / 2.0) as i64);
+        let w = Canvas::text_width(text, s);
+        canvas.fill(x - 1, y - 1, w + 2, glyph as i64 + 2, BACKGROUND);
+        canvas.text(x, y, text, s, INK);
+    };
+    if let Some(irs) = &scenario.irs {
+        // The surface as a bar along its wall (at least three cells long, to stay visible).
+        let n = irs.normal;
+        let along = [-n[1], n[0]];
+        let norm = along[0].hypot(along[1]).max(f64::MIN_POSITIVE);
+        let width = irs.nx_sub as f64 * irs.sub_pitch_m.unwrap_or(0.0);
+        let half = (width / 2.0).max(1.5 * map.grid.resolution_m);
+        let steps = 200;
+        for k in 0..=steps {
+            let t = -half + 2.0 * half * k as f64 / steps as f64;
+            let (px, py) = layout.point(
+                map,
+                irs.center[0] + t * along[0] / norm,
+                irs.center[1] + t * along[1] / norm,
+            );
+            canvas.disk(px, py, radius * 0.6, IRS);
+        }
+        let (px, py) = layout.point(map, irs.center[0], irs.center[1]);
+        marker_label(canvas, px, py - glyph, "IRS");
+    }
+    let ap = scenario.ap.position;
+    let (px, py) = layout.point(map, ap[0], ap[1]);
+    let r = radius.round() as i64;
+    canvas.fill(
+        px as i64 - r - 1,
+        py as i64 - r - 1,
+        2 * r + 3,
+        2 * r + 3,
+        INK,
+    );
+    canvas.fill(px as i64 - r, py as i64 - r, 2 * r + 1, 2 * r + 1, DEVICE);
+    marker_label(canvas, px, py, "AP");
+    for (k, sru) in scenario.srus.iter().enumerate() {
+        let (px, py) = layout.point(map, sru.position[0], sru.position[1]);
+        canvas.disk(px, py, radius + 1.0, INK);
+        canvas.disk(px, py, radius, DEVICE);
+        marker_label(canvas, px, py, &format!("SRU{k}"));
+    }
 }
 
 #[cfg(test)]
@@ -117,43 +481,94 @@ mod tests {
     use crate::phases::PhaseMode;
     use crate::planner::{self, Threshold};
     use crate::radiomap::{self, MapKey, Progress};
-    use crate::scenario::Scenario;
 
-    #[test]
-    fn picture_shows_obstacles_path_and_endpoints() {
-        let s = Scenario::builtin("small-test").unwrap();
-        let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
-        let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
-        let bytes = png(&map, &RenderOptions::for_path(&map, &answer));
+    fn decode(bytes: Vec<u8>) -> (usize, usize, Vec<u8>) {
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
         let mut reader = decoder.read_info().unwrap();
         let mut buf = vec![0; reader.output_buffer_size().unwrap()];
         let info = reader.next_frame(&mut buf).unwrap();
-        let ppc = pixels_per_cell(&map);
-        assert_eq!(
-            (info.width as usize, info.height as usize),
-            (map.grid.nx * ppc, map.grid.ny * ppc)
-        );
-        let pixel = |i: usize, j: usize| {
-            let (px, py) = (i * ppc + ppc / 2, (map.grid.ny - 1 - j) * ppc + ppc / 2);
-            let at = (py * info.width as usize + px) * 3;
-            [buf[at], buf[at + 1], buf[at + 2]]
-        };
-        // The obstacle's centre cell (3, 2) m is grey; start and goal are green and red; an inner
-        // waypoint is white.
-        let (oi, oj) = map.grid.snap(3.0, 2.0).unwrap();
-        assert_eq!(pixel(oi, oj), OBSTACLE);
-        assert_eq!(pixel(answer.start.i, answer.start.j), START);
-        assert_eq!(pixel(answer.goal.i, answer.goal.j), GOAL);
-        let mid = &answer.waypoints[answer.waypoints.len() / 2];
-        assert_eq!(pixel(mid.i, mid.j), PATH);
+        (info.width as usize, info.height as usize, buf)
     }
 
     #[test]
-    fn scale_runs_from_dark_to_bright() {
+    fn picture_shows_obstacles_path_endpoints_devices_and_colour_bar() {
+        let s = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
+        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
+        let options = RenderOptions::for_path(&map, &answer);
+        let layout = Layout::new(&map, None).unwrap();
+        let (width, height, buf) = decode(png(&map, &s, &options).unwrap());
+        assert_eq!((width, height), (layout.width, layout.height));
+        assert!(width > layout.plot_width && height > layout.plot_height);
+        let pixel = |(x, y): (usize, usize)| {
+            let at = (y * width + x) * 3;
+            [buf[at], buf[at + 1], buf[at + 2]]
+        };
+        let cell = |i, j| pixel(layout.cell_centre(&map, i, j));
+        // The obstacle's centre cell (3, 2) m is grey; start and goal are green and red; an
+        // inner waypoint is white.
+        let (oi, oj) = map.grid.snap(3.0, 2.0).unwrap();
+        assert_eq!(cell(oi, oj), OBSTACLE);
+        assert_eq!(cell(answer.start.i, answer.start.j), START);
+        assert_eq!(cell(answer.goal.i, answer.goal.j), GOAL);
+        let mid = &answer.waypoints[answer.waypoints.len() / 2];
+        assert_eq!(cell(mid.i, mid.j), PATH);
+        // The AP marker is drawn at the AP, the SRU's at the SRU.
+        let (ai, aj) = map.grid.snap(s.ap.position[0], s.ap.position[1]).unwrap();
+        assert_eq!(cell(ai, aj), DEVICE);
+        // The colour bar runs from the brightest colour at the top to the darkest at the bottom,
+        // and the axes carry ink (tick labels) left of and below the plot.
+        let bar_x = layout.left + layout.plot_width + 16 * layout.text_scale + 4;
+        assert_eq!(pixel((bar_x, layout.top)), colour(1.0));
+        assert_eq!(
+            pixel((bar_x, layout.top + layout.plot_height - 1)),
+            colour(0.0)
+        );
+        let ink_below = (layout.top + layout.plot_height + 4..height)
+            .flat_map(|y| (layout.left..layout.left + layout.plot_width).map(move |x| (x, y)))
+            .filter(|&p| pixel(p) == INK)
+            .count();
+        assert!(
+            ink_below > 50,
+            "x tick labels drawn ({ink_below} ink pixels)"
+        );
+    }
+
+    #[test]
+    fn infeasible_ends_are_still_marked_and_sizes_are_bounded() {
+        let s = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
+        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let answer =
+            planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Value(1e9), 1.0).unwrap();
+        assert!(!answer.feasible);
+        let options = RenderOptions::for_path(&map, &answer);
+        let layout = Layout::new(&map, None).unwrap();
+        let (width, _, buf) = decode(png(&map, &s, &options).unwrap());
+        let (x, y) = layout.cell_centre(&map, answer.start.i, answer.start.j);
+        let at = (y * width + x) * 3;
+        assert_eq!([buf[at], buf[at + 1], buf[at + 2]], START);
+        let too_big = RenderOptions {
+            cell_px: Some(MAX_SIDE_PX),
+            ..RenderOptions::default()
+        };
+        assert!(png(&map, &s, &too_big).is_none());
+    }
+
+    #[test]
+    fn scale_ticks_and_labels() {
         assert_eq!(colour(0.0), [68, 1, 84]);
         assert_eq!(colour(1.0), [253, 231, 37]);
         assert_eq!(colour(2.0), colour(1.0));
+        assert_eq!(ticks(-10.0, 10.0, 8), vec![-10.0, -5.0, 0.0, 5.0, 10.0]);
+        assert_eq!(ticks(0.0, 6.0, 8), vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(
+            ticks(-64.2, -59.6, 5),
+            vec![-64.0, -63.0, -62.0, -61.0, -60.0]
+        );
+        assert_eq!(label(-10.0), "-10");
+        assert_eq!(label(2.5), "2.5");
+        assert_eq!(label(-0.0), "0");
     }
 }

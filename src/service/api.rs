@@ -376,6 +376,19 @@ async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, Api
     })
 }
 
+/// A built map and the scenario it was built from.
+async fn map_and_scenario(
+    state: &AppState,
+    map_id: &str,
+) -> Result<(Arc<RadioMap>, Arc<Scenario>), ApiError> {
+    let map = cached_map(state, map_id).await?;
+    let stored = state
+        .registry()
+        .get(&map.key.scenario_id)
+        .ok_or_else(|| ApiError::not_found("scenario", &map.key.scenario_id))?;
+    Ok((map, stored.scenario.clone()))
+}
+
 async fn get_map(
     State(state): State<AppState>,
     Path(map_id): Path<String>,
@@ -467,7 +480,7 @@ async fn image(
 ) -> Result<Response, ApiError> {
     if let Some(unknown) = query
         .keys()
-        .find(|k| !["threshold", "start", "goal"].contains(&k.as_str()))
+        .find(|k| !["threshold", "start", "goal", "cell_px"].contains(&k.as_str()))
     {
         return Err(ApiError::invalid(
             unknown.clone(),
@@ -490,9 +503,27 @@ async fn image(
             ));
         }
     };
-    let map = cached_map(&state, &map_id).await?;
+    let cell_px = query
+        .get("cell_px")
+        .map(|text| {
+            text.parse::<usize>()
+                .ok()
+                .filter(|px| (1..=render::MAX_CELL_PX).contains(px))
+                .ok_or_else(|| {
+                    ApiError::limit_exceeded(
+                        "cell_px",
+                        render::MAX_CELL_PX as u64,
+                        format!(
+                            "must be a whole number of pixels from 1 to {}",
+                            render::MAX_CELL_PX
+                        ),
+                    )
+                })
+        })
+        .transpose()?;
+    let (map, scenario) = map_and_scenario(&state, &map_id).await?;
     // Rendering touches every pixel, so it always leaves the async threads.
-    let bytes = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, FieldError> {
+    let bytes = tokio::task::spawn_blocking(move || -> Result<Option<Vec<u8>>, FieldError> {
         let options = match path_ends {
             Some((s, g)) => {
                 RenderOptions::for_path(&map, &planner::plan(&map, s, g, threshold, 1.0)?)
@@ -505,10 +536,21 @@ async fn image(
                 ..RenderOptions::default()
             },
         };
-        Ok(render::png(&map, &options))
+        let options = RenderOptions { cell_px, ..options };
+        Ok(render::png(&map, &scenario, &options))
     })
     .await
-    .map_err(|e| ApiError::internal(format!("rendering failed: {e}")))??;
+    .map_err(|e| ApiError::internal(format!("rendering failed: {e}")))??
+    .ok_or_else(|| {
+        ApiError::limit_exceeded(
+            "cell_px",
+            render::MAX_SIDE_PX as u64,
+            format!(
+                "the picture would exceed {} pixels a side",
+                render::MAX_SIDE_PX
+            ),
+        )
+    })?;
     Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
 }
 
@@ -567,14 +609,7 @@ async fn map_for_query(
     map: Option<MapRequest>,
 ) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, ApiError> {
     match (map_id, map) {
-        (Some(id), None) => {
-            let built = cached_map(state, &id).await?;
-            let scenario = state
-                .registry()
-                .get(&built.key.scenario_id)
-                .ok_or_else(|| ApiError::not_found("scenario", &built.key.scenario_id))?;
-            Ok(Ok((built, scenario.scenario.clone())))
-        }
+        (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
         (None, Some(request)) => {
             let (scenario, key) = resolve(state, request, "map.")?;
             Ok(obtain(state, scenario.clone(), key)
