@@ -31,6 +31,9 @@ pub fn route_table() -> Vec<(
     MethodRouter<AppState>,
 )> {
     vec![
+        ("/", &["get"], get(super::viewer::index)),
+        ("/viewer/viewer.js", &["get"], get(super::viewer::script)),
+        ("/viewer/viewer.css", &["get"], get(super::viewer::style)),
         ("/healthz", &["get"], get(healthz)),
         ("/readyz", &["get"], get(readyz)),
         ("/version", &["get"], get(version)),

@@ -4,13 +4,14 @@
 //!
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
 //! registry and map cache), `jobs` (map builds), `errors` (problem+json; [`Problem`] is the
-//! body of every error answer).
+//! body of every error answer), `viewer` (the built-in map viewer at `/`).
 
 pub mod api;
 pub(crate) mod cache;
 pub mod config;
 pub(crate) mod errors;
 pub(crate) mod jobs;
+pub(crate) mod viewer;
 
 pub use errors::Problem;
 
