@@ -5,8 +5,8 @@
 //! `map.phases`, `start`), so a user can fix a request without reading code. An error raised
 //! inside a nested document is re-rooted with [`FieldError::within`] by whoever embedded it.
 
-use serde::de::DeserializeOwned;
 use serde::de::value::{Error as ValueError, StrDeserializer};
+use serde::de::{Deserialize, DeserializeOwned, Deserializer};
 use std::fmt;
 
 /// A rejected input: the JSON path of the offending field and why.
@@ -45,16 +45,65 @@ pub fn parse_name<T: DeserializeOwned>(text: &str) -> Result<T, String> {
     T::deserialize(StrDeserializer::<ValueError>::new(text)).map_err(|e| e.to_string())
 }
 
-/// A finite number written as text (query parameters, CLI values).
-pub fn parse_finite(text: &str) -> Result<f64, String> {
-    text.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| format!("{text:?} is not a finite number"))
+/// For optional fields (`#[serde(default, deserialize_with = "crate::input::present")]`): an
+/// absent field is `None`, but an explicit `null` is an error naming the field, so a document
+/// has one meaning (`"irs": null` does not quietly mean "no IRS").
+pub fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(
+    d: D,
+) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
 }
 
-/// A point on the floor written `"x,y"` in metres (`--start`, `?start=`).
+/// The grammar of a number written as text (query parameters, CLI values), as the OpenAPI
+/// contract states it: an optional sign, at most 30 integer digits, an optional fraction and
+/// an optional exponent of at most two digits. Every such number is finite (< 1e130), so the
+/// grammar alone decides validity and the contract can say exactly what the server accepts.
+pub const NUMBER_PATTERN: &str = r"[+-]?([0-9]{1,30}(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]{1,2})?";
+
+/// True when `text` matches [`NUMBER_PATTERN`] exactly.
+fn is_number(text: &str) -> bool {
+    let b = text.as_bytes();
+    let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let digits = |k: &mut usize| {
+        let start = *k;
+        while *k < b.len() && b[*k].is_ascii_digit() {
+            *k += 1;
+        }
+        *k - start
+    };
+    let integer = digits(&mut k);
+    let fraction = if b.get(k) == Some(&b'.') {
+        k += 1;
+        Some(digits(&mut k))
+    } else {
+        None
+    };
+    let mantissa_ok = match (integer, fraction) {
+        (1..=30, _) => true,
+        (0, Some(f)) => f > 0,
+        _ => false,
+    };
+    if matches!(b.get(k), Some(b'e' | b'E')) {
+        k += 1;
+        k += usize::from(matches!(b.get(k), Some(b'+' | b'-')));
+        if !(1..=2).contains(&digits(&mut k)) {
+            return false;
+        }
+    }
+    mantissa_ok && k == b.len()
+}
+
+/// A finite number written as text, following [`NUMBER_PATTERN`].
+pub fn parse_finite(text: &str) -> Result<f64, String> {
+    is_number(text)
+        .then(|| text.parse::<f64>().ok())
+        .flatten()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("{text:?} is not a decimal number (like -63, 0.5 or 1e-3)"))
+}
+
+/// A point on the floor written `"x,y"` in metres (`--start`, `?start=`), two numbers of
+/// [`NUMBER_PATTERN`] joined by a comma.
 pub fn parse_point(text: &str) -> Result<[f64; 2], String> {
     match text.split(',').collect::<Vec<_>>().as_slice() {
         [x, y] => Ok([parse_finite(x)?, parse_finite(y)?]),
@@ -81,9 +130,75 @@ mod tests {
 
     #[test]
     fn points_and_numbers() {
-        assert_eq!(parse_point("-10, 0.5"), Ok([-10.0, 0.5]));
+        assert_eq!(parse_point("-10,0.5"), Ok([-10.0, 0.5]));
         assert!(parse_point("1,2,3").is_err());
         assert!(parse_point("1,NaN").is_err());
-        assert!(parse_finite("inf").is_err());
+        assert!(
+            parse_point("-10, 0.5").is_err(),
+            "no spaces: the contract's pattern has none"
+        );
+        for ok in [
+            "0",
+            "-63",
+            "+1.5",
+            ".5",
+            "5.",
+            "1e-3",
+            "2E+10",
+            "123456789012345678901234567890",
+        ] {
+            assert!(parse_finite(ok).is_ok(), "{ok}");
+        }
+        for bad in [
+            "",
+            "-",
+            ".",
+            "e5",
+            "1e",
+            "1e100",
+            "1e-100",
+            "inf",
+            "NaN",
+            "0x10",
+            "1_0",
+            " 1",
+            "1234567890123456789012345678901",
+        ] {
+            assert!(parse_finite(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// The hand-written scanner and the contract's pattern accept the same strings.
+    #[test]
+    fn scanner_agrees_with_the_pattern() {
+        let pattern = format!("^{NUMBER_PATTERN}$");
+        let alphabet = ['1', '0', '.', 'e', '-', '+', 'E'];
+        let mut checked = 0;
+        for len in 1..=5 {
+            let mut word = vec![0usize; len];
+            loop {
+                let text: String = word.iter().map(|&k| alphabet[k]).collect();
+                assert_eq!(
+                    is_number(&text),
+                    regex_lite_match(&pattern, &text),
+                    "{text:?}"
+                );
+                checked += 1;
+                let mut k = 0;
+                while k < len && word[k] == alphabet.len() - 1 {
+                    word[k] = 0;
+                    k += 1;
+                }
+                if k == len {
+                    break;
+                }
+                word[k] += 1;
+            }
+        }
+        assert!(checked > 19_000);
+    }
+
+    fn regex_lite_match(pattern: &str, text: &str) -> bool {
+        regex_lite::Regex::new(pattern).unwrap().is_match(text)
     }
 }

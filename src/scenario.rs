@@ -7,7 +7,7 @@
 //! time, so the canonical form — and therefore the content hash — is the same whether a default
 //! was written out or omitted.
 
-use crate::input::FieldError;
+use crate::input::{FieldError, present};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -46,14 +46,22 @@ pub const BUILTIN: [(&str, &str); 3] = [
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Free-text label; part of the document (and so of its hash).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub name: Option<String>,
     pub room: Room,
     pub grid: GridSpec,
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
     pub ap: AccessPoint,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub irs: Option<Irs>,
     pub mru: Mru,
     #[serde(default)]
@@ -124,14 +132,18 @@ pub struct Irs {
     /// N̄, elements per sub-surface (M = N·N̄).
     pub elements_per_sub: usize,
     /// Centre-to-centre spacing of sub-surfaces (m); default λ/2.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "present")]
     pub sub_pitch_m: Option<f64>,
     #[serde(default)]
     pub grouping: Grouping,
     /// Spacing of the elements of one sub-surface, laid out in a row along the wall's horizontal
     /// axis (`elements` grouping only); default `sub_pitch_m / N̄`, so the row tiles the
     /// sub-surface.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub element_pitch_m: Option<f64>,
 }
 
@@ -724,6 +736,13 @@ mod tests {
         type Mutation = Box<dyn FnOnce(&mut serde_json::Value)>;
         let cases: Vec<(Mutation, &str)> = vec![
             (Box::new(|v| v["room"]["bogus"] = 1.into()), "room.bogus"),
+            // An explicit null is not "absent": it is rejected, naming the field.
+            (Box::new(|v| v["irs"] = serde_json::Value::Null), "irs"),
+            (
+                Box::new(|v| v["irs"]["sub_pitch_m"] = serde_json::Value::Null),
+                "irs.sub_pitch_m",
+            ),
+            (Box::new(|v| v["name"] = serde_json::Value::Null), "name"),
             (
                 Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])),
                 "obstacles[0].size",

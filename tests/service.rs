@@ -620,21 +620,30 @@ async fn every_error_is_a_problem_naming_its_field() {
             assert_eq!(b["field"], field, "{path} {body}: {b}");
         }
     }
-    // The registry limit (4, three of them built in): one more is fine, the next is 507.
-    let (s, _) = server
+    // The registry limit (4, three of them built in): one more is fine. The next one evicts the
+    // least recently used API scenario unless a cached map needs it; only then is it 507.
+    let (s, a) = server
         .post(
             "/v1/scenarios",
             scenario("small-test.json", |v| v["name"] = "a".into()),
         )
         .await;
     assert_eq!(s, StatusCode::CREATED);
-    let (s, b) = server
-        .post(
-            "/v1/scenarios",
-            scenario("small-test.json", |v| v["name"] = "b".into()),
-        )
+    let a_id = a["id"].as_str().unwrap().to_string();
+    let (s, a_map) = server
+        .post("/v1/maps", json!({"scenario_id": a_id, "kind": "gain"}))
         .await;
+    assert_eq!(s, StatusCode::OK, "{a_map}");
+    let b_doc = scenario("small-test.json", |v| v["name"] = "b".into());
+    let (s, b) = server.post("/v1/scenarios", b_doc.clone()).await;
     problem(s, &b, StatusCode::INSUFFICIENT_STORAGE, "registry_full");
+    let a_map_path = format!("/v1/maps/{}", a_map["map_id"].as_str().unwrap());
+    let (s, _) = server.send("DELETE", &a_map_path, None).await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    let (s, _) = server.post("/v1/scenarios", b_doc).await;
+    assert_eq!(s, StatusCode::CREATED, "a, no longer needed, made room");
+    let (s, _) = server.get(&format!("/v1/scenarios/{a_id}")).await;
+    assert_eq!(s, StatusCode::NOT_FOUND);
 
     for (method, path, status, code) in [
         (
@@ -684,6 +693,72 @@ async fn every_error_is_a_problem_naming_its_field() {
         .await;
     problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "invalid_field");
     assert_eq!(b["field"], "threshold");
+}
+
+/// What users create can be deleted; an explicit null is never "absent"; exactly one of
+/// scenario_id and scenario.
+#[tokio::test]
+async fn scenarios_and_maps_can_be_deleted_and_nulls_are_rejected() {
+    let server = start(&[]);
+    let doc = scenario("small-test.json", |v| v["name"] = "to-delete".into());
+    let (_, created) = server.post("/v1/scenarios", doc).await;
+    let id = created["id"].as_str().unwrap().to_string();
+    let (_, map) = server
+        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+        .await;
+    let map_path = format!("/v1/maps/{}", map["map_id"].as_str().unwrap());
+    let (s, _) = server
+        .send("DELETE", &format!("/v1/scenarios/{id}"), None)
+        .await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    let (s, b) = server.get(&map_path).await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+    let (s, b) = server
+        .send("DELETE", &format!("/v1/scenarios/{id}"), None)
+        .await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+    let builtin = server.scenario_id("small-test").await;
+    let (s, b) = server
+        .send("DELETE", &format!("/v1/scenarios/{builtin}"), None)
+        .await;
+    problem(s, &b, StatusCode::CONFLICT, "scenario_protected");
+    let (s, b) = server.send("DELETE", "/v1/maps/nope", None).await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+
+    for (path, body, field) in [
+        (
+            "/v1/scenarios",
+            scenario("small-test.json", |v| v["irs"] = Value::Null),
+            "irs",
+        ),
+        (
+            "/v1/maps",
+            json!({"scenario": null, "scenario_id": builtin, "kind": "gain"}),
+            "scenario",
+        ),
+        (
+            "/v1/maps",
+            json!({"scenario_id": builtin, "kind": "gain", "phases": null}),
+            "phases",
+        ),
+        (
+            "/v1/paths",
+            json!({"map_id": null, "start": [0, 0], "goal": [1, 1], "threshold": 1}),
+            "map_id",
+        ),
+    ] {
+        let (s, b) = server.post(path, body).await;
+        assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{b}");
+        assert_eq!(b["field"], field, "{b}");
+    }
+    let (s, b) = server
+        .post(
+            "/v1/paths",
+            json!({"map": {"scenario_id": builtin, "kind": "gain"}, "start": [0, 0], "goal": [1, 1], "threshold": 1, "seed": 9007199254740992u64}),
+        )
+        .await;
+    problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
+    assert_eq!(b["field"], "seed");
 }
 
 #[tokio::test]

@@ -5,7 +5,7 @@ use super::AppState;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
 use super::jobs::{JobView, MapRequestOutcome};
-use crate::input::{FieldError, parse_finite, parse_point};
+use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
 use crate::planner::{self, SweepAnswer, Threshold};
@@ -43,13 +43,21 @@ pub fn route_table() -> Vec<(
             &["get", "post"],
             get(list_scenarios).post(register_scenario),
         ),
-        ("/v1/scenarios/{scenario_id}", &["get"], get(get_scenario)),
+        (
+            "/v1/scenarios/{scenario_id}",
+            &["get", "delete"],
+            get(get_scenario).delete(delete_scenario),
+        ),
         (
             "/v1/maps",
             &["get", "post"],
             get(list_maps).post(request_map),
         ),
-        ("/v1/maps/{map_id}", &["get"], get(get_map)),
+        (
+            "/v1/maps/{map_id}",
+            &["get", "delete"],
+            get(get_map).delete(delete_map),
+        ),
         ("/v1/maps/{map_id}/coverage", &["get"], get(coverage)),
         ("/v1/maps/{map_id}/image.png", &["get"], get(image)),
         ("/v1/jobs", &["get"], get(list_jobs)),
@@ -188,7 +196,7 @@ async fn register_scenario(
     Body(value): Body<serde_json::Value>,
 ) -> Result<Response, ApiError> {
     let scenario = parse_scenario(value, "")?;
-    let (stored, created) = state.registry().register(scenario, "api")?;
+    let (stored, created) = state.register_scenario(scenario, "api")?;
     let status = if created {
         StatusCode::CREATED
     } else {
@@ -217,17 +225,46 @@ async fn get_scenario(
     }))
 }
 
+/// Deletes an API-registered scenario and the cached maps built from it. A scenario that a
+/// queued or running job needs is kept (409 with the job).
+async fn delete_scenario(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if let Some(job) = state
+        .jobs()
+        .live()
+        .into_iter()
+        .find(|j| j.key.scenario_id == id)
+    {
+        return Err(ApiError::scenario_in_use(&id, &job.id));
+    }
+    state.registry().delete(&id)?;
+    for (map_id, map) in state.cache().entries() {
+        if map.key.scenario_id == id {
+            state.cache().remove(&map_id).await;
+        }
+    }
+    tracing::info!(scenario_id = %id, "scenario deleted");
+    Ok(StatusCode::NO_CONTENT)
+}
+
 // ---------------------------------------------------------------- maps
 
 /// What defines a map: a scenario (registered id or inline document) and the map parameters.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MapRequest {
+    #[serde(default, deserialize_with = "present")]
     scenario_id: Option<String>,
-    scenario: Option<serde_json::Value>,
+    #[serde(default, deserialize_with = "present")]
+    scenario: Option<serde_json::Map<String, serde_json::Value>>,
     kind: MapKind,
+    #[serde(default, deserialize_with = "present")]
     phases: Option<PhaseMode>,
+    #[serde(default, deserialize_with = "present")]
     access: Option<Access>,
+    #[serde(default, deserialize_with = "present")]
     solver: Option<SolverKind>,
 }
 
@@ -273,7 +310,7 @@ fn resolve(
             (id, stored.scenario.clone(), false)
         }
         (None, Some(doc)) => {
-            let scenario = parse_scenario(doc, &format!("{prefix}scenario."))?;
+            let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
             (scenario.content_hash(), Arc::new(scenario), true)
         }
         _ => {
@@ -302,7 +339,7 @@ fn resolve(
         ));
     }
     if inline {
-        let (stored, _) = state.registry().register((*scenario).clone(), "api")?;
+        let (stored, _) = state.register_scenario((*scenario).clone(), "api")?;
         return Ok((stored.scenario.clone(), key));
     }
     Ok((scenario, key))
@@ -377,6 +414,22 @@ async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, Api
         Some(job) => ApiError::map_not_ready(map_id, &job.id),
         None => ApiError::not_found("map", map_id),
     })
+}
+
+/// Drops a cached map (the next request for it builds it again). A map being built answers
+/// 409 with its job: cancel the job instead.
+async fn delete_map(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if let Some(job) = state.jobs().building(&map_id).await {
+        return Err(ApiError::map_not_ready(&map_id, &job.id));
+    }
+    if !state.cache().remove(&map_id).await {
+        return Err(ApiError::not_found("map", &map_id));
+    }
+    tracing::info!(map_id = %map_id, "map deleted");
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// A built map and the scenario it was built from.
@@ -591,17 +644,24 @@ async fn cancel_job(
 
 // ---------------------------------------------------------------- paths and sweeps
 
+/// 2^53 − 1: integers above it lose precision in JavaScript and other double-based JSON clients.
+const MAX_JSON_SAFE_INTEGER: u64 = (1 << 53) - 1;
+
 /// A path query names its map by `map_id` (a built map) or `map` (the request defining it).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PathRequest {
+    #[serde(default, deserialize_with = "present")]
     map_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
     map: Option<MapRequest>,
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
     /// Monte Carlo draws per waypoint for the Jensen-gap check (paper Fig. 10).
+    #[serde(default, deserialize_with = "present")]
     monte_carlo_draws: Option<usize>,
+    #[serde(default, deserialize_with = "present")]
     seed: Option<u64>,
 }
 
@@ -650,6 +710,16 @@ async fn plan_path(
             ));
         }
     }
+    if request
+        .seed
+        .is_some_and(|seed| seed > MAX_JSON_SAFE_INTEGER)
+    {
+        return Err(ApiError::limit_exceeded(
+            "seed",
+            MAX_JSON_SAFE_INTEGER,
+            "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
+        ));
+    }
     let (map, scenario) = match map_for_query(&state, request.map_id, request.map).await? {
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
@@ -681,7 +751,9 @@ async fn plan_path(
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SweepRequest {
+    #[serde(default, deserialize_with = "present")]
     map_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
     map: Option<MapRequest>,
     start: [f64; 2],
     goal: [f64; 2],

@@ -1,11 +1,13 @@
-//! What the service keeps in memory: the scenario registry (bounded by count) and the map cache
-//! (moka, bounded by bytes through a weigher, keyed by the map id = hash of the map key).
+//! What the service keeps in memory: the scenario registry (bounded by count, least recently
+//! used API scenarios evicted first) and the map cache (moka, bounded by bytes through a
+//! weigher, keyed by the map id = hash of the map key).
 
 use super::errors::ApiError;
 use crate::radiomap::RadioMap;
 use crate::scenario::Scenario;
 use serde::Serialize;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
 
 /// A registered scenario.
@@ -13,8 +15,11 @@ use std::sync::{Arc, RwLock};
 pub struct StoredScenario {
     pub id: String,
     pub scenario: Arc<Scenario>,
-    /// Where it came from: "builtin", "file", or "api".
+    /// Where it came from: "builtin", "file", or "api". Only "api" scenarios are evicted or
+    /// deleted: the others are the server's configuration.
     pub source: &'static str,
+    /// The registry's clock at the last registration or lookup (least recently used = lowest).
+    last_used: AtomicU64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -37,9 +42,15 @@ impl StoredScenario {
 }
 
 /// Scenarios by content hash; registering the same document twice is idempotent.
+///
+/// Inline scenarios in map requests are registered too, so without eviction a stream of them
+/// would fill the registry for good. When it is full, a new scenario replaces the least
+/// recently used one registered through the API that no cached map and no live job needs;
+/// only when there is none is the registration refused (507).
 pub struct ScenarioRegistry {
     limit: usize,
     by_id: RwLock<HashMap<String, Arc<StoredScenario>>>,
+    clock: AtomicU64,
 }
 
 impl ScenarioRegistry {
@@ -47,27 +58,45 @@ impl ScenarioRegistry {
         ScenarioRegistry {
             limit,
             by_id: RwLock::new(HashMap::new()),
+            clock: AtomicU64::new(0),
         }
     }
 
-    /// Registers a validated scenario; returns it and whether it was new.
+    fn tick(&self) -> u64 {
+        self.clock.fetch_add(1, Ordering::Relaxed)
+    }
+
+    /// Registers a validated scenario; returns it and whether it was new. `in_use` lists the
+    /// scenarios that cached maps or live jobs need; it is asked only when the registry is full.
     pub fn register(
         &self,
         scenario: Scenario,
         source: &'static str,
+        in_use: impl FnOnce() -> HashSet<String>,
     ) -> Result<(Arc<StoredScenario>, bool), ApiError> {
         let id = scenario.content_hash();
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
+            existing.last_used.store(self.tick(), Ordering::Relaxed);
             return Ok((existing.clone(), false));
         }
         if by_id.len() >= self.limit {
-            return Err(ApiError::registry_full(self.limit));
+            let needed = in_use();
+            let victim = by_id
+                .values()
+                .filter(|s| s.source == "api" && !needed.contains(&s.id))
+                .min_by_key(|s| s.last_used.load(Ordering::Relaxed))
+                .map(|s| s.id.clone())
+                .ok_or_else(|| ApiError::registry_full(self.limit))?;
+            by_id.remove(&victim);
+            metrics::counter!("irs_scenarios_evicted_total").increment(1);
+            tracing::info!(scenario_id = %victim, "least recently used scenario evicted");
         }
         let stored = Arc::new(StoredScenario {
             id: id.clone(),
             scenario: Arc::new(scenario),
             source,
+            last_used: AtomicU64::new(self.tick()),
         });
         by_id.insert(id, stored.clone());
         metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
@@ -75,7 +104,25 @@ impl ScenarioRegistry {
     }
 
     pub fn get(&self, id: &str) -> Option<Arc<StoredScenario>> {
-        self.by_id.read().expect("registry lock").get(id).cloned()
+        let found = self.by_id.read().expect("registry lock").get(id).cloned();
+        if let Some(s) = &found {
+            s.last_used.store(self.tick(), Ordering::Relaxed);
+        }
+        found
+    }
+
+    /// Removes an API-registered scenario; builtin and preloaded files stay (409).
+    pub fn delete(&self, id: &str) -> Result<Arc<StoredScenario>, ApiError> {
+        let mut by_id = self.by_id.write().expect("registry lock");
+        match by_id.get(id) {
+            None => Err(ApiError::not_found("scenario", id)),
+            Some(s) if s.source != "api" => Err(ApiError::scenario_protected(id, s.source)),
+            Some(_) => {
+                let removed = by_id.remove(id).expect("present");
+                metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
+                Ok(removed)
+            }
+        }
     }
 
     pub fn list(&self) -> Vec<ScenarioSummary> {
@@ -135,5 +182,20 @@ impl MapCache {
     /// The cached maps (id and map), for listing.
     pub fn entries(&self) -> Vec<(String, Arc<RadioMap>)> {
         self.maps.iter().map(|(k, v)| ((*k).clone(), v)).collect()
+    }
+
+    /// Drops a map; true if it was cached.
+    pub async fn remove(&self, map_id: &str) -> bool {
+        let removed = self.maps.remove(map_id).await.is_some();
+        self.record_size();
+        removed
+    }
+
+    /// The scenarios the cached maps were built from.
+    pub fn scenario_ids(&self) -> HashSet<String> {
+        self.maps
+            .iter()
+            .map(|(_, m)| m.key.scenario_id.clone())
+            .collect()
     }
 }

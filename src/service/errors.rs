@@ -153,6 +153,26 @@ impl ApiError {
         e.problem.job_id = Some(job_id.to_string());
         e
     }
+    pub fn scenario_protected(id: &str, source: &str) -> Self {
+        Self::new(
+            StatusCode::CONFLICT,
+            "scenario_protected",
+            "Scenario is part of the configuration",
+            format!(
+                "scenario {id} comes from the server's {source} scenarios and cannot be deleted"
+            ),
+        )
+    }
+    pub fn scenario_in_use(id: &str, job_id: &str) -> Self {
+        let mut e = Self::new(
+            StatusCode::CONFLICT,
+            "scenario_in_use",
+            "Scenario in use",
+            format!("job {job_id} is building a map of scenario {id}; cancel it or wait"),
+        );
+        e.problem.job_id = Some(job_id.to_string());
+        e
+    }
     pub fn job_finished(job_id: &str, state: &str) -> Self {
         Self::new(
             StatusCode::CONFLICT,

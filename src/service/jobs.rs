@@ -186,6 +186,17 @@ impl Jobs {
         self.in_flight.lock().await.get(map_id).cloned()
     }
 
+    /// The jobs that are queued or running.
+    pub fn live(&self) -> Vec<Arc<Job>> {
+        self.by_id
+            .lock()
+            .expect("jobs lock")
+            .values()
+            .filter(|j| !j.state().is_terminal())
+            .cloned()
+            .collect()
+    }
+
     pub fn list(&self) -> Vec<JobView> {
         let mut all: Vec<JobView> = self
             .by_id

@@ -87,6 +87,25 @@ impl AppState {
     pub(crate) fn jobs(&self) -> &Arc<Jobs> {
         &self.inner.jobs
     }
+    /// Registers a scenario, evicting the least recently used unneeded one if the registry is
+    /// full (see [`ScenarioRegistry`]).
+    pub(crate) fn register_scenario(
+        &self,
+        scenario: Scenario,
+        source: &'static str,
+    ) -> Result<(Arc<cache::StoredScenario>, bool), ApiError> {
+        self.registry().register(scenario, source, || {
+            let mut needed = self.cache().scenario_ids();
+            needed.extend(
+                self.jobs()
+                    .live()
+                    .into_iter()
+                    .map(|job| job.key.scenario_id.clone()),
+            );
+            needed
+        })
+    }
+
     pub fn is_ready(&self) -> bool {
         self.inner.ready.load(Ordering::Relaxed)
     }
@@ -105,8 +124,7 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
         state
-            .registry()
-            .register(scenario, "builtin")
+            .register_scenario(scenario, "builtin")
             .map_err(|e| e.problem.detail)?;
     }
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -125,8 +143,7 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_json(&text).map_err(|e| format!("{}: {e}", path.display()))?;
         let (stored, created) = state
-            .registry()
-            .register(scenario, "file")
+            .register_scenario(scenario, "file")
             .map_err(|e| e.problem.detail)?;
         tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
     }
