@@ -13,11 +13,13 @@ use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
 use crate::service::config::ServeArgs;
 use crate::solver::SolverKind;
+use crate::timing::Timed;
 use clap::{Args, Parser, Subcommand};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
+use std::time::Instant;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -206,9 +208,11 @@ fn write_png(
 /// `irs-planner map …`
 pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.scenario)?;
+    let started = Instant::now();
     let map = build_map(args, &scenario)?;
+    let body = Timed::since(started, map.body());
     write_png(args, &map, &scenario, RenderOptions::default())?;
-    print_json(&map.body())
+    print_json(&body)
 }
 
 /// `irs-planner plan …`
@@ -223,6 +227,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.map.scenario)?;
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
+    let started = Instant::now();
     let path = planner::plan(
         &map,
         args.start,
@@ -243,5 +248,5 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         )),
         _ => None,
     };
-    print_json(&CheckedPath { path, monte_carlo })
+    print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))
 }

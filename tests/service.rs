@@ -266,8 +266,12 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         .current_dir(root())
         .output()
         .unwrap();
-    assert_eq!(api_body, String::from_utf8(cli.stdout).unwrap().trim_end());
+    // Identical but for the time each took (the last field).
+    let untimed = |body: &str| body.rsplit_once(",\"took_ms\":").unwrap().0.to_string();
+    let cli_body = String::from_utf8(cli.stdout).unwrap();
+    assert_eq!(untimed(&api_body), untimed(cli_body.trim_end()));
     let path: Value = serde_json::from_str(&api_body).unwrap();
+    assert!(path["took_ms"].as_f64().unwrap() >= 0.0);
     assert!((path["max_feasible_threshold"].as_f64().unwrap() - -59.6).abs() < 0.3);
 
     // A sweep over thresholds, defined by the map key instead of the id.
@@ -759,6 +763,49 @@ async fn scenarios_and_maps_can_be_deleted_and_nulls_are_rejected() {
         .await;
     problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
     assert_eq!(b["field"], "seed");
+}
+
+/// Big answers are compressed when the client accepts it; PNGs are not (already compressed).
+#[tokio::test]
+async fn answers_are_compressed_when_accepted() {
+    let server = start(&[]);
+    let id = server.scenario_id("paper-single-user").await;
+    let (_, map) = server
+        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+        .await;
+    let url = format!(
+        "{}/v1/maps/{}",
+        server.base,
+        map["map_id"].as_str().unwrap()
+    );
+    let plain = server.client.get(&url).send().await.unwrap();
+    assert!(plain.headers().get("content-encoding").is_none());
+    let plain_len = plain.bytes().await.unwrap().len();
+    for (encoding, magic) in [("gzip", &[0x1f, 0x8b][..]), ("br", &[][..])] {
+        let resp = server
+            .client
+            .get(&url)
+            .header("accept-encoding", encoding)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(resp.headers()["content-encoding"], encoding);
+        let bytes = resp.bytes().await.unwrap();
+        assert!(bytes.starts_with(magic));
+        assert!(
+            bytes.len() * 3 < plain_len,
+            "{encoding}: {} of {plain_len} bytes",
+            bytes.len()
+        );
+    }
+    let png = server
+        .client
+        .get(format!("{url}/image.png"))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert!(png.headers().get("content-encoding").is_none());
 }
 
 #[tokio::test]

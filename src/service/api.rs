@@ -14,6 +14,7 @@ use crate::rate::Access;
 use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
 use crate::solver::SolverKind;
+use crate::timing::Timed;
 use axum::extract::{FromRequest, Path, Query, Request, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -22,6 +23,7 @@ use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Every route: path, methods, handler. The router is built from this table and a test checks
 /// it against `openapi.yaml`.
@@ -383,9 +385,10 @@ async fn request_map(
     State(state): State<AppState>,
     Body(request): Body<MapRequest>,
 ) -> Result<Response, ApiError> {
+    let started = Instant::now();
     let (scenario, key) = resolve(&state, request, "")?;
     Ok(match obtain(&state, scenario, key).await? {
-        Ok(map) => Json(summary(&map)).into_response(),
+        Ok(map) => Json(Timed::since(started, summary(&map))).into_response(),
         Err(job) => job,
     })
 }
@@ -449,9 +452,13 @@ async fn get_map(
     State(state): State<AppState>,
     Path(map_id): Path<String>,
 ) -> Result<Response, ApiError> {
+    let started = Instant::now();
     let map = cached_map(&state, &map_id).await?;
     let cells = map.grid.cells();
-    let bytes = off_runtime_if_big(cells, move || serde_json::to_vec(&map.body())).await?;
+    let bytes = off_runtime_if_big(cells, move || {
+        serde_json::to_vec(&Timed::since(started, map.body()))
+    })
+    .await?;
     let bytes = bytes.map_err(|e| ApiError::internal(format!("serialising the map: {e}")))?;
     Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
 }
@@ -698,6 +705,7 @@ async fn plan_path(
     State(state): State<AppState>,
     Body(request): Body<PathRequest>,
 ) -> Result<Response, ApiError> {
+    let started = Instant::now();
     let start = check_point("start", request.start)?;
     let goal = check_point("goal", request.goal)?;
     let limit = state.limits().max_draws;
@@ -745,7 +753,8 @@ async fn plan_path(
         }
         _ => None,
     };
-    Ok(Json(CheckedPath { path, monte_carlo }).into_response())
+    let answer = Timed::since(started, CheckedPath { path, monte_carlo });
+    Ok(Json(answer).into_response())
 }
 
 #[derive(Debug, Deserialize)]
@@ -764,6 +773,7 @@ async fn sweep(
     State(state): State<AppState>,
     Body(request): Body<SweepRequest>,
 ) -> Result<Response, ApiError> {
+    let started = Instant::now();
     let start = check_point("start", request.start)?;
     let goal = check_point("goal", request.goal)?;
     let limit = state.limits().max_sweep;
@@ -789,5 +799,5 @@ async fn sweep(
         planner::sweep(&map, start, goal, &thresholds, v_max)
     })
     .await??;
-    Ok(Json(answer).into_response())
+    Ok(Json(Timed::since(started, answer)).into_response())
 }
