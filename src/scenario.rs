@@ -27,6 +27,10 @@ pub const MAX_OBSTACLES: usize = 1000;
 /// loose enough for spans and normals typed with six significant digits.
 const TOL: f64 = 1e-6;
 
+/// How far (m) a point may sit from a wall or an obstacle face and still count as on it: well
+/// below any grid resolution, above the rounding of coordinates typed to the millimetre.
+const WALL_TOL_M: f64 = 1e-3;
+
 /// The scenarios compiled into every build (name, document): the paper's two set-ups and a
 /// small floor for quick tries. `scenarios/README.md` describes them.
 pub const BUILTIN: [(&str, &str); 3] = [
@@ -423,6 +427,25 @@ impl Scenario {
             if o.height_m <= 0.0 {
                 return Err(FieldError::new(f("height_m"), "must be positive"));
             }
+            let (lo, hi) = (
+                [o.center[0] - o.size[0] / 2.0, o.center[1] - o.size[1] / 2.0],
+                [o.center[0] + o.size[0] / 2.0, o.center[1] + o.size[1] / 2.0],
+            );
+            let slack = WALL_TOL_M;
+            if lo[0] < r.x_min - slack
+                || lo[1] < r.y_min - slack
+                || hi[0] > r.x_max + slack
+                || hi[1] > r.y_max + slack
+            {
+                return Err(FieldError::new(
+                    f("center"),
+                    format!(
+                        "the footprint [{}, {}] × [{}, {}] reaches outside the room; \
+                         clip it to the room (walls need no obstacle: the room ends there)",
+                        lo[0], hi[0], lo[1], hi[1]
+                    ),
+                ));
+            }
         }
 
         let ap = &self.ap;
@@ -528,6 +551,7 @@ impl Scenario {
                     "the AP lies behind the IRS surface, so the IRS cannot reflect its signal",
                 );
             }
+            self.check_irs_mount(irs)?;
         }
 
         finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
@@ -570,6 +594,48 @@ impl Scenario {
         finite("channel.rician_k_db", self.channel.rician_k_db)?;
         if self.channel.rician_k_db.abs() > 60.0 {
             return err("channel.rician_k_db", "must lie in [-60, 60] dB");
+        }
+        Ok(())
+    }
+
+    /// An IRS hangs on something: a wall of the room or a face of an obstacle, with its normal
+    /// pointing away from that surface (into free space). One that floats in the room or faces
+    /// into its own wall is almost always a typo in `center` or `normal`.
+    fn check_irs_mount(&self, irs: &Irs) -> Result<(), FieldError> {
+        let (c, n, r) = (irs.center, irs.normal, &self.room);
+        let near = |a: f64, b: f64| (a - b).abs() <= WALL_TOL_M;
+        // (on this surface, the surface's outward direction into free space along x or y)
+        let mut mounts: Vec<(bool, [f64; 2])> = vec![
+            (near(c[0], r.x_min), [1.0, 0.0]),
+            (near(c[0], r.x_max), [-1.0, 0.0]),
+            (near(c[1], r.y_min), [0.0, 1.0]),
+            (near(c[1], r.y_max), [0.0, -1.0]),
+        ];
+        for o in &self.obstacles {
+            let (hx, hy) = (o.size[0] / 2.0, o.size[1] / 2.0);
+            let within_x = (c[0] - o.center[0]).abs() <= hx + WALL_TOL_M;
+            let within_y = (c[1] - o.center[1]).abs() <= hy + WALL_TOL_M;
+            if c[2] > o.height_m + WALL_TOL_M {
+                continue;
+            }
+            mounts.push((within_y && near(c[0], o.center[0] - hx), [-1.0, 0.0]));
+            mounts.push((within_y && near(c[0], o.center[0] + hx), [1.0, 0.0]));
+            mounts.push((within_x && near(c[1], o.center[1] - hy), [0.0, -1.0]));
+            mounts.push((within_x && near(c[1], o.center[1] + hy), [0.0, 1.0]));
+        }
+        let on: Vec<[f64; 2]> = mounts.into_iter().filter(|m| m.0).map(|m| m.1).collect();
+        if on.is_empty() {
+            return Err(FieldError::new(
+                "irs.center",
+                "the IRS is on no wall and no obstacle face: put its centre on a wall of the room \
+                 (e.g. y = room.y_min) or on an obstacle's side",
+            ));
+        }
+        if !on.iter().any(|d| d[0] * n[0] + d[1] * n[1] > 0.0) {
+            return Err(FieldError::new(
+                "irs.normal",
+                "the IRS faces into the surface it hangs on; the normal must point into the room",
+            ));
         }
         Ok(())
     }
@@ -743,6 +809,22 @@ mod tests {
                 "irs.sub_pitch_m",
             ),
             (Box::new(|v| v["name"] = serde_json::Value::Null), "name"),
+            // Obstacles stay in the room; the IRS hangs on a wall, facing into the room.
+            (
+                Box::new(|v| v["obstacles"][0]["center"] = serde_json::json!([5.8, 2.0])),
+                "obstacles[0].center",
+            ),
+            (
+                Box::new(|v| v["irs"]["center"] = serde_json::json!([3.0, 0.5, 2.0])),
+                "irs.center",
+            ),
+            (
+                Box::new(|v| {
+                    v["irs"]["center"] = serde_json::json!([6.0, 2.0, 2.0]);
+                    v["irs"]["normal"] = serde_json::json!([1.0, 0.0, 0.0]);
+                }),
+                "irs.normal",
+            ),
             (
                 Box::new(|v| v["obstacles"][0]["size"] = serde_json::json!([-1.0, 2.0])),
                 "obstacles[0].size",
@@ -801,6 +883,22 @@ mod tests {
             let e = mutated(mutate);
             assert_eq!(e.field, field, "{e}");
         }
+    }
+
+    /// An IRS on an obstacle's side, facing away from it, is a valid mount.
+    #[test]
+    fn irs_may_hang_on_an_obstacle_face() {
+        // The small room's obstacle spans x ∈ [2.5, 3.5], y ∈ [1, 3], 1.5 m high.
+        let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+        v["irs"]["center"] = serde_json::json!([2.5, 2.0, 1.0]);
+        v["irs"]["normal"] = serde_json::json!([-1.0, 0.0, 0.0]);
+        assert!(Scenario::from_json(&v.to_string()).is_ok());
+        v["irs"]["center"] = serde_json::json!([2.5, 2.0, 2.0]);
+        let e = Scenario::from_json(&v.to_string()).unwrap_err();
+        assert_eq!(
+            e.field, "irs.center",
+            "above the obstacle it hangs on nothing"
+        );
     }
 
     #[test]

@@ -52,8 +52,8 @@ pub struct MapKey {
 impl MapKey {
     /// Normalises a request as users write it (every parameter but the kind optional): gain
     /// maps take no `access`/`solver`, rate maps default them to `noma`/`fast`, phases default
-    /// to `continuous`, and the scenario must be able to support the kind. Errors name the
-    /// request's field (`phases`, `access`, `solver`, `kind`).
+    /// to `continuous` (`none` for a scenario without an IRS), and the scenario must be able to
+    /// support the kind. Errors name the request's field (`phases`, `access`, `solver`, `kind`).
     pub fn new(
         scenario_id: &str,
         scenario: &Scenario,
@@ -63,9 +63,16 @@ impl MapKey {
         solver: Option<SolverKind>,
     ) -> Result<MapKey, FieldError> {
         let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
-        let phases = phases.unwrap_or(PhaseMode::Continuous);
+        // Without an IRS the only mode is `none`, so that is the default there.
+        let phases = phases.unwrap_or(match scenario.irs {
+            Some(_) => PhaseMode::Continuous,
+            None => PhaseMode::None,
+        });
         if scenario.irs.is_none() && phases != PhaseMode::None {
-            return err("phases", "the scenario has no IRS: only \"none\" applies");
+            return err(
+                "phases",
+                "the scenario has no IRS: send \"none\" (or leave phases out)",
+            );
         }
         let (access, solver) = match kind {
             MapKind::Gain => {
@@ -177,6 +184,17 @@ mod tests {
         );
         assert_eq!("rate".parse::<MapKind>(), Ok(MapKind::Rate));
         assert_eq!(MapKind::Gain.to_string(), "gain");
+    }
+
+    #[test]
+    fn scenarios_without_an_irs_default_to_no_phases() {
+        let mut s = Scenario::builtin("small-test").unwrap();
+        s.irs = None;
+        let key = MapKey::new("x", &s, MapKind::Gain, None, None, None).unwrap();
+        assert_eq!(key.phases, PhaseMode::None);
+        let e = MapKey::gain("x", &s, PhaseMode::Continuous).unwrap_err();
+        assert_eq!(e.field, "phases");
+        assert!(e.reason.contains("\"none\""), "{e}");
     }
 
     #[test]
