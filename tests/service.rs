@@ -568,8 +568,8 @@ async fn every_error_is_a_problem_naming_its_field() {
         (
             "/v1/paths",
             json!({"map": {"scenario_id": "nope", "kind": "gain"}, "start": [1, 1], "goal": [2, 2], "threshold": 0}),
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "invalid_field",
+            StatusCode::NOT_FOUND,
+            "not_found",
             Some("map.scenario_id"),
         ),
         (

@@ -303,11 +303,9 @@ fn resolve(
 ) -> Result<(Arc<Scenario>, MapKey), ApiError> {
     let (id, scenario, inline) = match (request.scenario_id, request.scenario) {
         (Some(id), None) => {
+            // An unknown id is "not found" (404), as an unknown map_id is, naming the field.
             let stored = state.registry().get(&id).ok_or_else(|| {
-                ApiError::invalid(
-                    format!("{prefix}scenario_id"),
-                    format!("no scenario with id {id:?}"),
-                )
+                ApiError::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
             })?;
             (id, stored.scenario.clone(), false)
         }

@@ -1,0 +1,176 @@
+#!/usr/bin/env python3
+"""A user's session through the Python client that openapi-python-client generates from
+openapi.yaml, against a running server, with no hand patch:
+
+    python3 tests/clients/flow.py URL DIR_CONTAINING_irs_planner_client
+
+register a scenario, a gain map, a path at "max", a sweep, coverage, a rate-map job polled to
+done, a path with the power split, a cancelled job, an error decoded as the Problem type, the PNG
+bytes, and deleting what was created. Every request and response is also validated against the
+contract with openapi-core. Prints "N passed, M failed"; exits 1 on any failure.
+"""
+
+import json
+import pathlib
+import sys
+import time
+from urllib.parse import parse_qs, urlparse
+
+import httpx
+import yaml
+from openapi_core import Config, OpenAPI
+from openapi_core.datatypes import RequestParameters
+from werkzeug.datastructures import Headers, ImmutableMultiDict
+
+URL = sys.argv[1].rstrip("/")
+sys.path.insert(0, sys.argv[2])
+
+from irs_planner_client import Client  # noqa: E402
+from irs_planner_client.api.default import (  # noqa: E402
+    cancel_job, delete_scenario, get_coverage, get_job, get_map, get_map_image, list_scenarios,
+    plan_path, register_scenario, request_map, sweep)
+from irs_planner_client.models import (  # noqa: E402
+    Coverage, Job, JobState, MapBody, MapRequestById, MapSummary, PathAnswer, PathRequestByMapId,
+    Problem, Scenario, ScenarioDocument, SweepAnswer, SweepRequestByMapId)
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+# The contract, with the server under test as its server (openapi.yaml names the default one).
+SPEC = yaml.safe_load((ROOT / "openapi.yaml").read_text())
+SPEC["servers"] = [{"url": URL}]
+# openapi-core parses application/json only; problem+json is JSON too (RFC 9457).
+CONTRACT = OpenAPI.from_dict(SPEC, config=Config(
+    extra_media_type_deserializers={"application/problem+json": json.loads}))
+
+
+class HttpxRequest:
+    """An httpx request as openapi-core's request protocol."""
+
+    def __init__(self, request: httpx.Request):
+        self.request = request
+        url = urlparse(str(request.url))
+        self.host_url = f"{url.scheme}://{url.netloc}"
+        self.path = url.path
+        self.method = request.method.lower()
+        self.parameters = RequestParameters(
+            query=ImmutableMultiDict(parse_qs(url.query)),
+            header=Headers(dict(request.headers)),
+            cookie=ImmutableMultiDict({}))
+        self.body = request.content or None
+        self.content_type = request.headers.get("content-type", "")
+
+
+class HttpxResponse:
+    """An httpx response as openapi-core's response protocol."""
+
+    def __init__(self, response: httpx.Response):
+        self.data = response.content
+        self.status_code = response.status_code
+        self.content_type = response.headers.get("content-type", "")
+        self.headers = Headers(dict(response.headers))
+
+
+results = []
+exchanges = []
+
+
+def check(name, condition, detail=""):
+    results.append(bool(condition))
+    print(("ok   " if condition else "FAIL ") + name + (f": {detail}" if detail else ""), flush=True)
+
+
+def record(response: httpx.Response):
+    """httpx event hook: keep every exchange for contract validation."""
+    response.read()
+    exchanges.append(response)
+
+
+client = Client(base_url=URL, timeout=httpx.Timeout(120.0),
+                httpx_args={"event_hooks": {"response": [record]}})
+
+# Register a scenario by content.
+document = json.loads((ROOT / "scenarios" / "small-test.json").read_text())
+document["name"] = "generated-client-flow"
+r = register_scenario.sync_detailed(client=client, body=Scenario.from_dict(document))
+check("register a scenario (201)", r.status_code == 201 and isinstance(r.parsed, ScenarioDocument),
+      r.status_code)
+scenario_id = r.parsed.id
+listed = list_scenarios.sync(client=client)
+check("it is listed", any(s.id == scenario_id for s in listed.scenarios))
+
+# A gain map, a path at "max", a sweep, coverage.
+r = request_map.sync_detailed(client=client, body=MapRequestById.from_dict({"scenario_id": scenario_id, "kind": "gain"}))
+check("a gain map is built while the request waits (200)",
+      r.status_code == 200 and isinstance(r.parsed, MapSummary), r.status_code)
+gain_id = r.parsed.map_id
+check("the summary says how long it took", r.parsed.took_ms >= 0)
+body = get_map.sync(client=client, map_id=gain_id)
+check("the map body decodes, access and solver null", isinstance(body, MapBody)
+      and body.key.access is None and body.key.solver is None, type(body).__name__)
+path = plan_path.sync(client=client, body=PathRequestByMapId.from_dict(
+    {"map_id": gain_id, "start": [0.5, 0.5], "goal": [5.5, 3.5], "threshold": "max"}))
+check('a path at "max"', isinstance(path, PathAnswer) and path.feasible
+      and path.threshold == path.max_feasible_threshold and len(path.waypoints) > 2,
+      getattr(path, "distance_m", path))
+points = sweep.sync(client=client, body=SweepRequestByMapId.from_dict(
+    {"map_id": gain_id, "start": [0.5, 0.5], "goal": [5.5, 3.5], "thresholds": [-80, -70, -60, -50]}))
+check("a sweep", isinstance(points, SweepAnswer) and len(points.points) == 4)
+coverage = get_coverage.sync(client=client, map_id=gain_id, threshold="-60")
+check("coverage", isinstance(coverage, Coverage) and 0 <= coverage.coverage <= 1)
+
+# A rate map is a job: poll it to done, then plan with the power split.
+r = request_map.sync_detailed(client=client, body=MapRequestById.from_dict(
+    {"scenario_id": scenario_id, "kind": "rate", "access": "noma"}))
+check("a rate map starts a job (202)", r.status_code == 202 and isinstance(r.parsed, Job), r.status_code)
+job = r.parsed
+deadline = time.time() + 300
+while job.state not in (JobState.DONE, JobState.FAILED, JobState.CANCELLED) and time.time() < deadline:
+    time.sleep(0.2)
+    job = get_job.sync(client=client, job_id=job.job_id)
+check("the job is polled to done", job.state == JobState.DONE, f"{job.state} {job.cells_done}/{job.cells_total}")
+path = plan_path.sync(client=client, body=PathRequestByMapId.from_dict(
+    {"map_id": job.map_id, "start": [0.5, 0.5], "goal": [5.5, 3.0], "threshold": "max"}))
+check("a rate-map path carries the power split and order per waypoint",
+      isinstance(path, PathAnswer) and path.feasible
+      and all(len(w.power_w) == 2 and len(w.decoding_order) == 2 for w in path.waypoints))
+
+# A long build, cancelled.
+multi = next(s.id for s in listed.scenarios if s.name == "paper-multi-user")
+r = request_map.sync_detailed(client=client, body=MapRequestById.from_dict(
+    {"scenario_id": multi, "kind": "rate", "access": "oma", "phases": 3}))
+check("a long rate map starts a job", r.status_code == 202, r.status_code)
+cancelled = cancel_job.sync(client=client, job_id=r.parsed.job_id)
+check("cancelling it is accepted", isinstance(cancelled, Job), type(cancelled).__name__)
+job = cancelled
+deadline = time.time() + 60
+while job.state != JobState.CANCELLED and time.time() < deadline:
+    time.sleep(0.2)
+    job = get_job.sync(client=client, job_id=job.job_id)
+check("the job ends cancelled", job.state == JobState.CANCELLED, job.state)
+
+# An error answer decodes as the Problem type.
+problem = get_map.sync(client=client, map_id="no-such-map")
+check("an error decodes as a Problem", isinstance(problem, Problem) and problem.status == 404
+      and problem.code.value == "not_found", problem)
+
+# The picture.
+r = get_map_image.sync_detailed(client=client, map_id=gain_id, start="0.5,0.5", goal="5.5,3.5")
+check("the PNG bytes", r.status_code == 200 and r.content.startswith(b"\x89PNG\r\n\x1a\n"), len(r.content))
+
+# Clean up.
+r = delete_scenario.sync_detailed(client=client, scenario_id=scenario_id)
+check("the scenario is deleted (204)", r.status_code == 204, r.status_code)
+
+# Every exchange against the contract.
+invalid = []
+for response in exchanges:
+    request = HttpxRequest(response.request)
+    try:
+        CONTRACT.validate_request(request)
+        CONTRACT.validate_response(request, HttpxResponse(response))
+    except Exception as error:  # openapi-core raises one class per kind of violation
+        invalid.append(f"{request.method.upper()} {request.path} {response.status_code}: {error!r}"[:400])
+check(f"all {len(exchanges)} requests and responses match openapi.yaml", not invalid, "\n".join(invalid))
+
+failed = results.count(False)
+print(f"{len(results) - failed} passed, {failed} failed")
+sys.exit(1 if failed else 0)
