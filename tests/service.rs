@@ -104,6 +104,14 @@ impl Server {
             .unwrap()
             .to_string()
     }
+    /// The paper floor's continuous gain map (built while the request waits): its URL.
+    async fn paper_gain_map_url(&self) -> String {
+        let id = self.scenario_id("paper-single-user").await;
+        let (_, map) = self
+            .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+            .await;
+        format!("{}/v1/maps/{}", self.base, map["map_id"].as_str().unwrap())
+    }
     async fn metric(&self, needle: &str) -> f64 {
         let text = self
             .client
@@ -769,15 +777,7 @@ async fn scenarios_and_maps_can_be_deleted_and_nulls_are_rejected() {
 #[tokio::test]
 async fn answers_are_compressed_when_accepted() {
     let server = start(&[]);
-    let id = server.scenario_id("paper-single-user").await;
-    let (_, map) = server
-        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
-        .await;
-    let url = format!(
-        "{}/v1/maps/{}",
-        server.base,
-        map["map_id"].as_str().unwrap()
-    );
+    let url = server.paper_gain_map_url().await;
     let plain = server.client.get(&url).send().await.unwrap();
     assert!(plain.headers().get("content-encoding").is_none());
     let plain_len = plain.bytes().await.unwrap().len();
@@ -864,25 +864,14 @@ async fn sigterm_shuts_down_gracefully() {
 #[tokio::test]
 async fn map_image_is_a_png_with_the_path() {
     let server = start(&[]);
-    let id = server.scenario_id("paper-single-user").await;
-    let (_, map) = server
-        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
-        .await;
-    let url = format!(
-        "{}/v1/maps/{}/image.png?start=-10,0&goal=10,0&threshold=-61",
-        server.base,
-        map["map_id"].as_str().unwrap()
-    );
+    let map_url = server.paper_gain_map_url().await;
+    let url = format!("{map_url}/image.png?start=-10,0&goal=10,0&threshold=-61");
     let resp = server.client.get(url).send().await.unwrap();
     assert_eq!(resp.status(), StatusCode::OK);
     assert_eq!(resp.headers()["content-type"], "image/png");
     let bytes = resp.bytes().await.unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
-    let url = format!(
-        "{}/v1/maps/{}/image.png?start=-10,0",
-        server.base,
-        map["map_id"].as_str().unwrap()
-    );
+    let url = format!("{map_url}/image.png?start=-10,0");
     let (status, body) = server.get(url.strip_prefix(&server.base).unwrap()).await;
     problem(
         status,

@@ -557,11 +557,15 @@ function showTooltip(w, px, py) {
   tip.hidden = false;
 }
 
+// The pointer's position in canvas pixels.
+function pointer(event) {
+  const rect = $("map").getBoundingClientRect();
+  return [event.clientX - rect.left, event.clientY - rect.top];
+}
+
 function onPointerMove(event) {
   if (!state.map) return;
-  const rect = $("map").getBoundingClientRect();
-  const px = event.clientX - rect.left;
-  const py = event.clientY - rect.top;
+  const [px, py] = pointer(event);
   const cell = cellAt(px, py);
   if (cell) {
     const [i, j] = cell;
@@ -576,10 +580,7 @@ function onPointerMove(event) {
 
 function onClick(event) {
   if (!state.map) return;
-  const rect = $("map").getBoundingClientRect();
-  const px = event.clientX - rect.left;
-  const py = event.clientY - rect.top;
-  const cell = cellAt(px, py);
+  const cell = cellAt(...pointer(event));
   if (!cell) return;
   // A click means "this cell": use its centre, as the planner would snap it anyway.
   const g = state.map.grid;
