@@ -361,17 +361,17 @@ impl ChannelModel {
                     r_scatter: 0.0,
                     irs: false,
                 };
-                if let Some(irs) = irs {
-                    if let Some(link) = self.irs_user_link(irs, &q) {
-                        s.irs = true;
-                        s.r_scatter = link.scattered_power().sqrt();
-                        s.r_los = (0..irs.elements)
-                            .map(|e| {
-                                let p = irs.points[element_point(e, irs)];
-                                self.los_phase((q - p).norm()) * link.los_amplitude()
-                            })
-                            .collect();
-                    }
+                if let Some(irs) = irs
+                    && let Some(link) = self.irs_user_link(irs, &q)
+                {
+                    s.irs = true;
+                    s.r_scatter = link.scattered_power().sqrt();
+                    s.r_los = (0..irs.elements)
+                        .map(|e| {
+                            let p = irs.points[element_point(e, irs)];
+                            self.los_phase((q - p).norm()) * link.los_amplitude()
+                        })
+                        .collect();
                 }
                 s
             })

@@ -217,12 +217,12 @@ pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
 
 /// `irs-planner plan …`
 pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
-    if let Some(draws) = args.monte_carlo {
-        if draws == 0 || draws > MAX_DRAWS {
-            return Err(Failure::input(format!(
-                "--monte-carlo: must lie in 1..={MAX_DRAWS}"
-            )));
-        }
+    if let Some(draws) = args.monte_carlo
+        && (draws == 0 || draws > MAX_DRAWS)
+    {
+        return Err(Failure::input(format!(
+            "--monte-carlo: must lie in 1..={MAX_DRAWS}"
+        )));
     }
     let scenario = load_scenario(&args.map.scenario)?;
     let map = build_map(&args.map, &scenario)?;

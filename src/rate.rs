@@ -134,10 +134,10 @@ impl RateModel {
     pub fn best(&self, lambdas: &[f64]) -> Option<PowerSplit> {
         let mut best: Option<(f64, u8)> = None;
         for k in 0..self.orders.len() {
-            if let Some(r) = self.mru_rate(lambdas, k) {
-                if best.is_none_or(|(b, _)| r > b) {
-                    best = Some((r, k as u8));
-                }
+            if let Some(r) = self.mru_rate(lambdas, k)
+                && best.is_none_or(|(b, _)| r > b)
+            {
+                best = Some((r, k as u8));
             }
         }
         best.map(|(_, k)| self.split(lambdas, k as usize).expect("feasible order"))

@@ -707,14 +707,14 @@ async fn plan_path(
     let start = check_point("start", request.start)?;
     let goal = check_point("goal", request.goal)?;
     let limit = state.limits().max_draws;
-    if let Some(draws) = request.monte_carlo_draws {
-        if draws == 0 || draws > limit {
-            return Err(ApiError::limit_exceeded(
-                "monte_carlo_draws",
-                limit as u64,
-                format!("must lie in 1..={limit}"),
-            ));
-        }
+    if let Some(draws) = request.monte_carlo_draws
+        && (draws == 0 || draws > limit)
+    {
+        return Err(ApiError::limit_exceeded(
+            "monte_carlo_draws",
+            limit as u64,
+            format!("must lie in 1..={limit}"),
+        ));
     }
     if request
         .seed
