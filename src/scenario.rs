@@ -431,11 +431,10 @@ impl Scenario {
                 [o.center[0] - o.size[0] / 2.0, o.center[1] - o.size[1] / 2.0],
                 [o.center[0] + o.size[0] / 2.0, o.center[1] + o.size[1] / 2.0],
             );
-            let slack = WALL_TOL_M;
-            if lo[0] < r.x_min - slack
-                || lo[1] < r.y_min - slack
-                || hi[0] > r.x_max + slack
-                || hi[1] > r.y_max + slack
+            if lo[0] < r.x_min - WALL_TOL_M
+                || lo[1] < r.y_min - WALL_TOL_M
+                || hi[0] > r.x_max + WALL_TOL_M
+                || hi[1] > r.y_max + WALL_TOL_M
             {
                 return Err(FieldError::new(
                     f("center"),
@@ -604,26 +603,36 @@ impl Scenario {
     fn check_irs_mount(&self, irs: &Irs) -> Result<(), FieldError> {
         let (c, n, r) = (irs.center, irs.normal, &self.room);
         let near = |a: f64, b: f64| (a - b).abs() <= WALL_TOL_M;
-        // (on this surface, the surface's outward direction into free space along x or y)
-        let mut mounts: Vec<(bool, [f64; 2])> = vec![
+        // Each surface the centre lies on, as its direction into free space (along x or y).
+        let mut on: Vec<[f64; 2]> = [
             (near(c[0], r.x_min), [1.0, 0.0]),
             (near(c[0], r.x_max), [-1.0, 0.0]),
             (near(c[1], r.y_min), [0.0, 1.0]),
             (near(c[1], r.y_max), [0.0, -1.0]),
-        ];
-        for o in &self.obstacles {
+        ]
+        .into_iter()
+        .filter_map(|(is_on, away)| is_on.then_some(away))
+        .collect();
+        for o in self
+            .obstacles
+            .iter()
+            .filter(|o| c[2] <= o.height_m + WALL_TOL_M)
+        {
             let (hx, hy) = (o.size[0] / 2.0, o.size[1] / 2.0);
             let within_x = (c[0] - o.center[0]).abs() <= hx + WALL_TOL_M;
             let within_y = (c[1] - o.center[1]).abs() <= hy + WALL_TOL_M;
-            if c[2] > o.height_m + WALL_TOL_M {
-                continue;
-            }
-            mounts.push((within_y && near(c[0], o.center[0] - hx), [-1.0, 0.0]));
-            mounts.push((within_y && near(c[0], o.center[0] + hx), [1.0, 0.0]));
-            mounts.push((within_x && near(c[1], o.center[1] - hy), [0.0, -1.0]));
-            mounts.push((within_x && near(c[1], o.center[1] + hy), [0.0, 1.0]));
+            let faces = [
+                (within_y && near(c[0], o.center[0] - hx), [-1.0, 0.0]),
+                (within_y && near(c[0], o.center[0] + hx), [1.0, 0.0]),
+                (within_x && near(c[1], o.center[1] - hy), [0.0, -1.0]),
+                (within_x && near(c[1], o.center[1] + hy), [0.0, 1.0]),
+            ];
+            on.extend(
+                faces
+                    .into_iter()
+                    .filter_map(|(is_on, away)| is_on.then_some(away)),
+            );
         }
-        let on: Vec<[f64; 2]> = mounts.into_iter().filter(|m| m.0).map(|m| m.1).collect();
         if on.is_empty() {
             return Err(FieldError::new(
                 "irs.center",

@@ -185,6 +185,28 @@ fn documented_routes() -> Vec<(String, String)> {
     routes
 }
 
+/// The contract states the number grammar of query strings as regex patterns; they are exactly
+/// the grammar the server's scanner implements (`input::NUMBER_PATTERN`), so the two cannot drift.
+#[test]
+fn openapi_query_patterns_are_the_servers_number_grammar() {
+    let text = std::fs::read_to_string(format!("{}/openapi.yaml", root())).unwrap();
+    let number = irs_planner::input::NUMBER_PATTERN;
+    let expected = [
+        format!("'^{number}$'"),
+        format!("'^(max|{number})$'"),
+        format!("'^{number},{number}$'"),
+    ];
+    let patterns: Vec<&str> = text
+        .lines()
+        .filter_map(|line| line.split("pattern: ").nth(1))
+        .map(|rest| rest.split(" }").next().unwrap())
+        .collect();
+    assert_eq!(patterns.len(), 4, "threshold ×2, start, goal");
+    for pattern in patterns {
+        assert!(expected.iter().any(|e| e == pattern), "{pattern}");
+    }
+}
+
 #[tokio::test]
 async fn openapi_paths_are_exactly_the_served_routes() {
     let mut served: Vec<(String, String)> = irs_planner::service::api::route_table()

@@ -374,19 +374,22 @@ function draw() {
   drawPath(ctx);
 }
 
+// The cells an obstacle occupies, grey: those whose centre lies in or on its footprint
+// (docs/model.md §1), i.e. the index ranges the footprint's edges round inwards to.
 function drawObstacles(ctx) {
   const g = state.map.grid;
+  const L = state.layout;
+  const eps = 1e-9;
+  const cells = (lo, hi, min, n) => [
+    Math.max(0, Math.ceil((lo - min) / g.resolution_m - eps)),
+    Math.min(n - 1, Math.floor((hi - min) / g.resolution_m + eps)),
+  ];
   ctx.fillStyle = "#808080";
   for (const o of state.scenario.obstacles || []) {
-    // Footprint, widened to the cells whose centres it covers (those cells are occupied).
-    const [x0, y1] = toPixel(o.center[0] - o.size[0] / 2, o.center[1] + o.size[1] / 2);
-    const [x1, y0] = toPixel(o.center[0] + o.size[0] / 2, o.center[1] - o.size[1] / 2);
-    const snap = (p, k) => state.layout[k] + Math.round((p - state.layout[k]) / state.layout.cell) * state.layout.cell;
-    const left = Math.max(state.layout.left, snap(x0 - state.layout.cell / 2, "left"));
-    const right = Math.min(state.layout.left + g.nx * state.layout.cell, snap(x1 + state.layout.cell / 2, "left"));
-    const top = Math.max(state.layout.top, snap(y1 - state.layout.cell / 2, "top"));
-    const bottom = Math.min(state.layout.top + g.ny * state.layout.cell, snap(y0 + state.layout.cell / 2, "top"));
-    ctx.fillRect(left, top, right - left, bottom - top);
+    const [i0, i1] = cells(o.center[0] - o.size[0] / 2, o.center[0] + o.size[0] / 2, g.x_min, g.nx);
+    const [j0, j1] = cells(o.center[1] - o.size[1] / 2, o.center[1] + o.size[1] / 2, g.y_min, g.ny);
+    if (i0 > i1 || j0 > j1) continue;
+    ctx.fillRect(L.left + i0 * L.cell, L.top + (g.ny - 1 - j1) * L.cell, (i1 - i0 + 1) * L.cell, (j1 - j0 + 1) * L.cell);
   }
 }
 
