@@ -13,11 +13,13 @@
 //! * Path losses L_AI and L_IM use the distance to the IRS centre, as the paper's scalar
 //!   L_AI, L_IM(q) do; LoS *phases* use exact (spherical) distances to each sub-surface centre
 //!   (`coherent`) or each element (`elements`).
-//! * A link is LoS unless its segment passes through an obstacle's interior (grazing is LoS);
-//!   the IRS links are tested from the IRS centre.
+//! * A link is LoS unless its segment passes through the interior of a box, a wall or the floor
+//!   plan's occupied pixels (grazing is LoS; [`crate::geometry`]); the IRS links are tested
+//!   from the IRS centre.
 //! * The IRS reflects only into its front half-space: a user on or behind the surface's plane
 //!   gets no IRS term at all (neither w̃ nor the scattered part of τ).
 
+use crate::geometry::Obstructions;
 use crate::scenario::{Grouping, Scenario};
 use nalgebra::{Complex, Vector3};
 use rand::Rng;
@@ -62,41 +64,6 @@ pub fn path_loss_db(distance_m: f64, carrier_ghz: f64, los: bool) -> f64 {
     }
 }
 
-/// An obstacle as a 3D box [lo, hi].
-#[derive(Debug, Clone, Copy)]
-struct Aabb {
-    lo: [f64; 3],
-    hi: [f64; 3],
-}
-
-/// True when the segment a→b passes through the open interior of `bx` (slab test with open
-/// intervals, so a segment that only grazes a face, edge or corner is not blocked).
-fn segment_hits_interior(a: &P3, b: &P3, bx: &Aabb) -> bool {
-    let mut t_low = 0.0f64;
-    let mut t_high = 1.0f64;
-    for axis in 0..3 {
-        let p = a[axis];
-        let d = b[axis] - a[axis];
-        if d == 0.0 {
-            if p <= bx.lo[axis] || p >= bx.hi[axis] {
-                return false;
-            }
-            continue;
-        }
-        let (t0, t1) = {
-            let t0 = (bx.lo[axis] - p) / d;
-            let t1 = (bx.hi[axis] - p) / d;
-            if t0 < t1 { (t0, t1) } else { (t1, t0) }
-        };
-        t_low = t_low.max(t0);
-        t_high = t_high.min(t1);
-        if t_high - t_low <= 1e-12 {
-            return false;
-        }
-    }
-    true
-}
-
 /// The IRS as the channel model sees it: its scattering points and the fixed AP–IRS link.
 #[derive(Debug, Clone)]
 struct IrsModel {
@@ -124,7 +91,8 @@ pub struct ChannelModel {
     carrier_ghz: f64,
     kappa: f64,
     ap: P3,
-    boxes: Vec<Aabb>,
+    /// Boxes, walls and the floor plan: what blocks a link.
+    obstructions: Obstructions,
     irs: Option<IrsModel>,
 }
 
@@ -141,28 +109,12 @@ impl ChannelModel {
     /// Builds the model of a validated scenario.
     pub fn new(scenario: &Scenario) -> ChannelModel {
         let lambda = scenario.wavelength_m();
-        let boxes = scenario
-            .obstacles
-            .iter()
-            .map(|o| Aabb {
-                lo: [
-                    o.center[0] - o.size[0] / 2.0,
-                    o.center[1] - o.size[1] / 2.0,
-                    0.0,
-                ],
-                hi: [
-                    o.center[0] + o.size[0] / 2.0,
-                    o.center[1] + o.size[1] / 2.0,
-                    o.height_m,
-                ],
-            })
-            .collect();
         let mut model = ChannelModel {
             wavelength_m: lambda,
             carrier_ghz: scenario.ap.carrier_ghz,
             kappa: 10f64.powf(scenario.channel.rician_k_db / 10.0),
             ap: P3::from(scenario.ap.position),
-            boxes,
+            obstructions: scenario.obstructions(),
             irs: None,
         };
         if let Some(irs) = &scenario.irs {
@@ -214,14 +166,11 @@ impl ChannelModel {
 
     /// True when the segment between two points passes through an obstacle's interior.
     pub fn is_blocked(&self, a: [f64; 3], b: [f64; 3]) -> bool {
-        let (a, b) = (P3::from(a), P3::from(b));
-        self.boxes
-            .iter()
-            .any(|bx| segment_hits_interior(&a, &b, bx))
+        self.obstructions.blocks(a, b)
     }
 
     fn link_budget(&self, a: &P3, b: &P3) -> LinkBudget {
-        let los = !self.boxes.iter().any(|bx| segment_hits_interior(a, b, bx));
+        let los = !self.obstructions.blocks((*a).into(), (*b).into());
         let pl = path_loss_db((a - b).norm(), self.carrier_ghz, los);
         LinkBudget {
             los,
@@ -442,35 +391,6 @@ mod tests {
         // Below 1 m the distance is clamped; NLoS never beats LoS.
         assert_eq!(path_loss_db(0.1, 2.0, true), path_loss_db(1.0, 2.0, true));
         assert!(path_loss_db(1.0, 2.0, false) >= path_loss_db(1.0, 2.0, true));
-    }
-
-    #[test]
-    fn blockage_needs_the_interior_grazing_is_los() {
-        let bx = Aabb {
-            lo: [0.0, 0.0, 0.0],
-            hi: [1.0, 1.0, 1.0],
-        };
-        let hit = |a: [f64; 3], b: [f64; 3]| segment_hits_interior(&P3::from(a), &P3::from(b), &bx);
-        assert!(hit([-1.0, 0.5, 0.5], [2.0, 0.5, 0.5]));
-        assert!(
-            !hit([-1.0, 0.5, 1.0], [2.0, 0.5, 1.0]),
-            "along the top face"
-        );
-        assert!(!hit([-1.0, 0.0, 0.0], [2.0, 0.0, 0.0]), "along an edge");
-        assert!(
-            hit([-1.0, -1.0, 0.5], [1.0, 1.0, 0.5]),
-            "diagonally through the box"
-        );
-        assert!(
-            !hit([-1.0, 0.0, 0.5], [1.0, 2.0, 0.5]),
-            "touching only the vertical edge at (0, 1)"
-        );
-        assert!(
-            !hit([0.5, 0.5, 1.0], [0.5, 5.0, 3.0]),
-            "leaving from the top face upwards"
-        );
-        assert!(hit([0.5, 0.5, 0.5], [5.0, 5.0, 5.0]), "starting inside");
-        assert!(!hit([2.0, 2.0, 0.5], [3.0, 3.0, 0.5]), "far away");
     }
 
     #[test]

@@ -38,6 +38,9 @@
 
 pub mod channel;
 pub mod cli;
+pub mod export;
+pub mod floorplan;
+pub mod geometry;
 pub mod input;
 pub mod montecarlo;
 pub mod numerics;

@@ -7,9 +7,13 @@
 //! time, so the canonical form — and therefore the content hash — is the same whether a default
 //! was written out or omitted.
 
+use crate::floorplan::{self, FloorPlan};
+use crate::geometry::{Aabb, Obstructions, Raster, Wall};
 use crate::input::{FieldError, present};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
+use std::path::Path;
+use std::sync::Arc;
 
 /// Speed of light (m/s), for λ = c / f_c.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
@@ -21,8 +25,10 @@ pub const MAX_SUBSURFACES: usize = 1024;
 pub const MAX_ELEMENTS: usize = 200_000;
 /// Largest number of static robots K; NOMA searches all (K+1)! decoding orders.
 pub const MAX_SRUS: usize = 4;
-/// Largest number of obstacles.
+/// Largest number of obstacles (boxes); each is tested against every link.
 pub const MAX_OBSTACLES: usize = 1000;
+/// Largest number of walls; each is tested against every link, like a box.
+pub const MAX_WALLS: usize = 1000;
 /// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit":
 /// loose enough for spans and normals typed with six significant digits.
 const TOL: f64 = 1e-6;
@@ -30,6 +36,11 @@ const TOL: f64 = 1e-6;
 /// How far (m) a point may sit from a wall or an obstacle face and still count as on it: well
 /// below any grid resolution, above the rounding of coordinates typed to the millimetre.
 const WALL_TOL_M: f64 = 1e-3;
+
+/// How far (m) behind and in front of an IRS on a wall or a floor-plan edge the mount check
+/// looks for something solid and for free space: twice [`WALL_TOL_M`], so a centre within that
+/// tolerance of the surface still finds it, far thinner than any wall or pixel.
+const MOUNT_PROBE_M: f64 = 2.0 * WALL_TOL_M;
 
 /// The scenarios compiled into every build (name, document): the paper's two set-ups and a
 /// small floor for quick tries. `scenarios/README.md` describes them.
@@ -60,6 +71,20 @@ pub struct Scenario {
     pub grid: GridSpec,
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
+    /// Straight walls at any angle (what a CAD plan gives). Left out of the canonical form when
+    /// empty, so scenarios written before walls existed keep their ids.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub walls: Vec<WallSpec>,
+    /// A ROS occupancy-grid map of the floor (see [`crate::floorplan`]).
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub floor_plan: Option<FloorPlan>,
+    /// The decoded floor plan, made once at validation and shared by every map built from it.
+    #[serde(skip)]
+    raster: Option<Arc<Raster>>,
     pub ap: AccessPoint,
     #[serde(
         default,
@@ -97,6 +122,16 @@ pub struct GridSpec {
 pub struct Obstacle {
     pub center: [f64; 2],
     pub size: [f64; 2],
+    pub height_m: f64,
+}
+
+/// A straight wall from `from` to `to` (its centre line), standing on the floor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallSpec {
+    pub from: [f64; 2],
+    pub to: [f64; 2],
+    pub thickness_m: f64,
     pub height_m: f64,
 }
 
@@ -287,15 +322,35 @@ impl Scenario {
 
     /// Parses and validates a scenario document.
     pub fn from_json(text: &str) -> Result<Scenario, FieldError> {
-        let mut scenario = deserialize_tracking_path(text)?;
+        let value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))?;
+        Scenario::from_value(value)
+    }
+
+    /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
+    pub fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
+        let mut scenario = deserialize_tracking_path(value)?;
         scenario.resolve_defaults();
         scenario.validate()?;
         Ok(scenario)
     }
 
-    /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
-    pub fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
-        Scenario::from_json(&value.to_string())
+    /// Reads a scenario file: a `floor_plan.map` in it names a map YAML relative to the file's
+    /// folder (see [`floorplan::resolve_map_reference`]).
+    pub fn from_file(path: &Path) -> Result<Scenario, FieldError> {
+        let text = std::fs::read_to_string(path).map_err(|e| FieldError::new("$", e))?;
+        let value: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))?;
+        Scenario::from_value_with_files(value, path.parent().unwrap_or(Path::new(".")))
+    }
+
+    /// Validates a document whose file references (`floor_plan.map`) are relative to `base`.
+    pub fn from_value_with_files(
+        mut value: serde_json::Value,
+        base: &Path,
+    ) -> Result<Scenario, FieldError> {
+        floorplan::resolve_map_reference(&mut value, base, &|p| std::fs::read(p))?;
+        Scenario::from_value(value)
     }
 
     /// λ = c / f_c (m).
@@ -304,6 +359,11 @@ impl Scenario {
     }
 
     fn resolve_defaults(&mut self) {
+        if let Some(plan) = &mut self.floor_plan
+            && plan.obstacle_height_m.is_none()
+        {
+            plan.obstacle_height_m = Some(self.room.ceiling_m);
+        }
         let lambda = self.wavelength_m();
         if let Some(irs) = &mut self.irs {
             if irs.sub_pitch_m.is_none() && lambda.is_finite() {
@@ -330,27 +390,36 @@ impl Scenario {
         }
     }
 
-    /// True when (x, y) lies inside or on the boundary of an obstacle footprint (docs/model.md
-    /// §1: such a cell is occupied).
-    pub fn is_occupied(&self, x: f64, y: f64) -> bool {
-        const EPS: f64 = 1e-9;
-        self.obstacles.iter().any(|o| {
-            (x - o.center[0]).abs() <= o.size[0] / 2.0 + EPS
-                && (y - o.center[1]).abs() <= o.size[1] / 2.0 + EPS
-        })
+    /// Everything standing on the floor (boxes, walls, the floor plan's occupied pixels), for
+    /// blockage and occupancy (docs/model.md §1).
+    pub fn obstructions(&self) -> Obstructions {
+        Obstructions {
+            boxes: self
+                .obstacles
+                .iter()
+                .map(|o| Aabb {
+                    lo: [
+                        o.center[0] - o.size[0] / 2.0,
+                        o.center[1] - o.size[1] / 2.0,
+                        0.0,
+                    ],
+                    hi: [
+                        o.center[0] + o.size[0] / 2.0,
+                        o.center[1] + o.size[1] / 2.0,
+                        o.height_m,
+                    ],
+                })
+                .collect(),
+            walls: self
+                .walls
+                .iter()
+                .map(|w| Wall::new(w.from, w.to, w.thickness_m, w.height_m))
+                .collect(),
+            raster: self.raster.clone(),
+        }
     }
 
-    /// True when a 3D point lies strictly inside an obstacle box.
-    pub fn is_inside_obstacle(&self, p: [f64; 3]) -> bool {
-        self.obstacles.iter().any(|o| {
-            (p[0] - o.center[0]).abs() < o.size[0] / 2.0
-                && (p[1] - o.center[1]).abs() < o.size[1] / 2.0
-                && p[2] > 0.0
-                && p[2] < o.height_m
-        })
-    }
-
-    fn validate(&self) -> Result<(), FieldError> {
+    fn validate(&mut self) -> Result<(), FieldError> {
         let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         let r = &self.room;
         for (field, v) in [
@@ -447,6 +516,28 @@ impl Scenario {
             }
         }
 
+        self.validate_walls()?;
+        if let Some(plan) = &self.floor_plan {
+            floorplan::check_fields(plan)?;
+            let raster = floorplan::decode(plan, r.ceiling_m)?;
+            let [[x0, x1], [y0, y1]] = raster.extent();
+            if x0 > r.x_min + WALL_TOL_M
+                || x1 < r.x_max - WALL_TOL_M
+                || y0 > r.y_min + WALL_TOL_M
+                || y1 < r.y_max - WALL_TOL_M
+            {
+                return Err(FieldError::new(
+                    "floor_plan",
+                    format!(
+                        "the map covers [{x0}, {x1}] × [{y0}, {y1}] m, not the whole room                          [{}, {}] × [{}, {}] m: set origin (and resolution) so that it does",
+                        r.x_min, r.x_max, r.y_min, r.y_max
+                    ),
+                ));
+            }
+            self.raster = Some(Arc::new(raster));
+        }
+        let obstructions = self.obstructions();
+
         let ap = &self.ap;
         finite_all("ap.position", &ap.position)?;
         finite("ap.tx_power_dbm", ap.tx_power_dbm)?;
@@ -459,7 +550,7 @@ impl Scenario {
             );
         }
         self.inside_room("ap.position", ap.position)?;
-        if self.is_inside_obstacle(ap.position) {
+        if obstructions.contains(ap.position) {
             return err("ap.position", "lies inside an obstacle");
         }
 
@@ -550,7 +641,7 @@ impl Scenario {
                     "the AP lies behind the IRS surface, so the IRS cannot reflect its signal",
                 );
             }
-            self.check_irs_mount(irs)?;
+            self.check_irs_mount(irs, &obstructions)?;
         }
 
         finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
@@ -579,7 +670,7 @@ impl Scenario {
             finite_all(&f("position"), &s.position)?;
             finite(&f("min_rate_bps_hz"), s.min_rate_bps_hz)?;
             self.inside_room(&f("position"), s.position)?;
-            if self.is_inside_obstacle(s.position) {
+            if obstructions.contains(s.position) {
                 return Err(FieldError::new(f("position"), "lies inside an obstacle"));
             }
             if s.min_rate_bps_hz < 0.0 || s.min_rate_bps_hz > 30.0 {
@@ -597,10 +688,49 @@ impl Scenario {
         Ok(())
     }
 
+    fn validate_walls(&self) -> Result<(), FieldError> {
+        let r = &self.room;
+        if self.walls.len() > MAX_WALLS {
+            return Err(FieldError::new(
+                "walls",
+                format!("more than {MAX_WALLS} walls"),
+            ));
+        }
+        for (k, w) in self.walls.iter().enumerate() {
+            let f = |s: &str| format!("walls[{k}].{s}");
+            finite_all(&f("from"), &w.from)?;
+            finite_all(&f("to"), &w.to)?;
+            finite(&f("thickness_m"), w.thickness_m)?;
+            finite(&f("height_m"), w.height_m)?;
+            if w.thickness_m <= 0.0 {
+                return Err(FieldError::new(f("thickness_m"), "must be positive"));
+            }
+            if w.height_m <= 0.0 {
+                return Err(FieldError::new(f("height_m"), "must be positive"));
+            }
+            if (w.to[0] - w.from[0]).hypot(w.to[1] - w.from[1]) < WALL_TOL_M {
+                return Err(FieldError::new(
+                    f("to"),
+                    "must differ from `from`: a wall needs a length",
+                ));
+            }
+            for (end, p) in [("from", w.from), ("to", w.to)] {
+                if p[0] < r.x_min - WALL_TOL_M
+                    || p[0] > r.x_max + WALL_TOL_M
+                    || p[1] < r.y_min - WALL_TOL_M
+                    || p[1] > r.y_max + WALL_TOL_M
+                {
+                    return Err(FieldError::new(f(end), "lies outside the room"));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// An IRS hangs on something: a wall of the room or a face of an obstacle, with its normal
     /// pointing away from that surface (into free space). One that floats in the room or faces
     /// into its own wall is almost always a typo in `center` or `normal`.
-    fn check_irs_mount(&self, irs: &Irs) -> Result<(), FieldError> {
+    fn check_irs_mount(&self, irs: &Irs, obstructions: &Obstructions) -> Result<(), FieldError> {
         let (c, n, r) = (irs.center, irs.normal, &self.room);
         let near = |a: f64, b: f64| (a - b).abs() <= WALL_TOL_M;
         // Each surface the centre lies on, as its direction into free space (along x or y).
@@ -633,11 +763,38 @@ impl Scenario {
                     .filter_map(|(is_on, away)| is_on.then_some(away)),
             );
         }
+        if on.is_empty() && !(self.walls.is_empty() && self.raster.is_none()) {
+            // Walls at any angle and floor-plan pixels: probe just behind and just in front of
+            // the surface along the normal's horizontal part.
+            let h = (n[0].hypot(n[1]), [n[0], n[1]]);
+            let (dx, dy) = (h.1[0] / h.0 * MOUNT_PROBE_M, h.1[1] / h.0 * MOUNT_PROBE_M);
+            let behind = obstructions.solid_at([c[0] - dx, c[1] - dy, c[2]]);
+            let front = obstructions.solid_at([c[0] + dx, c[1] + dy, c[2]]);
+            match (behind, front) {
+                (true, false) => return Ok(()),
+                (true, true) => {
+                    return Err(FieldError::new(
+                        "irs.center",
+                        "lies inside a wall or the floor plan's occupied pixels: put it on the \
+                         surface (for a floor plan, on a pixel edge at origin + k·resolution)",
+                    ));
+                }
+                (false, true) => {
+                    return Err(FieldError::new(
+                        "irs.normal",
+                        "the IRS faces into the wall it hangs on; the normal must point into \
+                         the room",
+                    ));
+                }
+                (false, false) => {}
+            }
+        }
         if on.is_empty() {
             return Err(FieldError::new(
                 "irs.center",
                 "the IRS is on no wall and no obstacle face: put its centre on a wall of the room \
-                 (e.g. y = room.y_min) or on an obstacle's side",
+                 (e.g. y = room.y_min), on an obstacle's or a wall's side, or on the edge of \
+                 the floor plan's occupied pixels",
             ));
         }
         if !on.iter().any(|d| d[0] * n[0] + d[1] * n[1] > 0.0) {
@@ -747,9 +904,8 @@ fn finite_all(field: &str, v: &[f64]) -> Result<(), FieldError> {
 
 /// Deserialises while tracking the JSON path, so serde's own errors (unknown or missing fields,
 /// wrong types) name the field too.
-fn deserialize_tracking_path(text: &str) -> Result<Scenario, FieldError> {
-    let mut deserializer = serde_json::Deserializer::from_str(text);
-    let scenario: Scenario = serde_path_to_error::deserialize(&mut deserializer).map_err(|e| {
+fn deserialize_tracking_path(value: serde_json::Value) -> Result<Scenario, FieldError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         let field = if path == "." || path.is_empty() {
             "$".to_string()
@@ -757,11 +913,7 @@ fn deserialize_tracking_path(text: &str) -> Result<Scenario, FieldError> {
             path
         };
         FieldError::new(field, e.into_inner())
-    })?;
-    deserializer.end().map_err(|e| {
-        FieldError::new("$", format!("trailing characters after the document: {e}"))
-    })?;
-    Ok(scenario)
+    })
 }
 
 #[cfg(test)]

@@ -92,7 +92,7 @@ pub struct RadioMap {
     /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
     /// (and, on rate maps, where no configuration meets every SRU's rate).
     pub values: Vec<f64>,
-    /// Per cell: true if an obstacle occupies it.
+    /// Per cell: true if an obstacle, a wall or the floor plan occupies its centre.
     pub occupied: Vec<bool>,
     pub cells: CellSolutions,
     /// Wall-clock build time (s).
@@ -143,11 +143,12 @@ pub fn build(
     let started = std::time::Instant::now();
     let grid = scenario.grid();
     let model = Arc::new(ChannelModel::new(scenario));
+    let obstructions = scenario.obstructions();
     let occupied: Vec<bool> = (0..grid.cells())
         .map(|k| {
             let (i, j) = grid.cell_of(k);
             let [x, y] = grid.centre(i, j);
-            scenario.is_occupied(x, y)
+            obstructions.covers(x, y)
         })
         .collect();
     progress.start(grid.cells());

@@ -139,10 +139,8 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         .collect();
     files.sort();
     for path in files {
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let scenario =
-            Scenario::from_json(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+            Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let (stored, created) = state
             .register_scenario(scenario, "file")
             .map_err(|e| e.problem.detail)?;

@@ -1,0 +1,574 @@
+//! What stands on the floor, as the channel model and the grid see it (docs/model.md §1): boxes,
+//! walls at any angle and an occupancy raster (a ROS floor plan), with the two questions asked
+//! of them: does a link's 3D segment pass through the *interior* of something (blockage), and
+//! does a grid cell's centre lie *in or on* something (occupancy).
+//!
+//! Both rules are the same for the three kinds, so a floor drawn as boxes, as walls or as pixels
+//! gives the same map:
+//! * blockage needs the open interior: a segment that only grazes a face, an edge or a corner is
+//!   LoS (a ray along the top of a shelf is not blocked by it);
+//! * occupancy is closed: a cell centre on the boundary is occupied (the robot keeps off the
+//!   edge).
+//!
+//! The raster is tested by walking the pixels the segment's 2D projection crosses, column by
+//! column along its major axis, so a link costs O(pixels crossed) whatever the number of walls
+//! drawn into the image.
+
+use nalgebra::Vector3;
+
+type P3 = Vector3<f64>;
+
+/// A segment overlapping a box for less than this fraction of its length only grazes it: well
+/// below any physical size (1e-12 of a 30 m link is 30 fm), above the rounding of the slab
+/// arithmetic.
+const GRAZE_T: f64 = 1e-12;
+
+/// Closeness (m) below which a point counts as on a box's boundary for occupancy, so centres
+/// typed to the nanometre on an edge are occupied as intended.
+const ON_BOUNDARY_M: f64 = 1e-9;
+
+/// A pixel coordinate this close (in pixels) to a whole number is taken as that number, so a
+/// point on a pixel edge written in metres (x = −7 with 0.05 m pixels is 59.999… pixels from
+/// the origin in floating point) is on the edge, exactly as the same point on a box's face is.
+/// 1e-9 px is a nanometre at 1 m pixels: far below anything a floor plan resolves.
+const SNAP_PX: f64 = 1e-9;
+
+/// An axis-aligned 3D box [lo, hi].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+}
+
+impl Aabb {
+    /// True when the segment a→b passes through the open interior (slab test with open
+    /// intervals, so a segment that only grazes a face, edge or corner is not blocked).
+    pub fn blocks(&self, a: &P3, b: &P3) -> bool {
+        let mut t_low = 0.0f64;
+        let mut t_high = 1.0f64;
+        for axis in 0..3 {
+            let p = a[axis];
+            let d = b[axis] - a[axis];
+            if d == 0.0 {
+                if p <= self.lo[axis] || p >= self.hi[axis] {
+                    return false;
+                }
+                continue;
+            }
+            let (t0, t1) = {
+                let t0 = (self.lo[axis] - p) / d;
+                let t1 = (self.hi[axis] - p) / d;
+                if t0 < t1 { (t0, t1) } else { (t1, t0) }
+            };
+            t_low = t_low.max(t0);
+            t_high = t_high.min(t1);
+            if t_high - t_low <= GRAZE_T {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// True when (x, y) lies in or on the footprint.
+    fn covers(&self, x: f64, y: f64) -> bool {
+        x >= self.lo[0] - ON_BOUNDARY_M
+            && x <= self.hi[0] + ON_BOUNDARY_M
+            && y >= self.lo[1] - ON_BOUNDARY_M
+            && y <= self.hi[1] + ON_BOUNDARY_M
+    }
+
+    /// True when the point lies strictly inside.
+    fn contains(&self, p: &P3) -> bool {
+        (0..3).all(|k| p[k] > self.lo[k] && p[k] < self.hi[k])
+    }
+}
+
+/// A straight wall of any direction: the footprint is the rectangle swept by a segment of
+/// thickness `2·half_thickness` centred on the line from `from` along `axis` for `length`, from
+/// the floor to `height`. In the wall's own frame (s along the wall, w across it, z up) it is
+/// the box [0, length] × [−t/2, t/2] × [0, height], so blockage is the box test in that frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wall {
+    from: [f64; 2],
+    /// Unit vector from `from` to the far end.
+    axis: [f64; 2],
+    local: Aabb,
+}
+
+impl Wall {
+    /// A wall from `from` to `to` (distinct points), `thickness` and `height` positive.
+    pub fn new(from: [f64; 2], to: [f64; 2], thickness: f64, height: f64) -> Wall {
+        let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
+        let length = dx.hypot(dy);
+        Wall {
+            from,
+            axis: [dx / length, dy / length],
+            local: Aabb {
+                lo: [0.0, -thickness / 2.0, 0.0],
+                hi: [length, thickness / 2.0, height],
+            },
+        }
+    }
+
+    /// (s, w, z) of a point in the wall's frame.
+    fn to_local(&self, p: &P3) -> P3 {
+        let (dx, dy) = (p[0] - self.from[0], p[1] - self.from[1]);
+        let [ax, ay] = self.axis;
+        P3::new(dx * ax + dy * ay, dy * ax - dx * ay, p[2])
+    }
+
+    fn blocks(&self, a: &P3, b: &P3) -> bool {
+        self.local.blocks(&self.to_local(a), &self.to_local(b))
+    }
+
+    fn covers(&self, x: f64, y: f64) -> bool {
+        let p = self.to_local(&P3::new(x, y, 0.0));
+        self.local.covers(p[0], p[1])
+    }
+
+    fn contains(&self, p: &P3) -> bool {
+        self.local.contains(&self.to_local(p))
+    }
+}
+
+/// An occupancy raster: `width × height` square pixels of side `resolution` (m), the lower-left
+/// corner of pixel (0, 0) at `origin`; pixel (c, r) spans [origin_x + c·res, origin_x + (c+1)·res]
+/// × [origin_y + r·res, …], so row 0 is the *bottom* of the map (the ROS convention, after the
+/// image's rows are flipped). An occupied pixel is a column from the floor to `obstacle_height`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Raster {
+    pub width: usize,
+    pub height: usize,
+    pub resolution: f64,
+    pub origin: [f64; 2],
+    pub obstacle_height: f64,
+    /// Row-major from the bottom row: pixel (c, r) is `occupied[r·width + c]`.
+    pub occupied: Vec<bool>,
+}
+
+impl Raster {
+    /// The map's extent [x_min, x_max] × [y_min, y_max] (m).
+    pub fn extent(&self) -> [[f64; 2]; 2] {
+        let [ox, oy] = self.origin;
+        [
+            [ox, ox + self.width as f64 * self.resolution],
+            [oy, oy + self.height as f64 * self.resolution],
+        ]
+    }
+
+    #[inline]
+    fn is_occupied(&self, c: i64, r: i64) -> bool {
+        c >= 0
+            && r >= 0
+            && (c as usize) < self.width
+            && (r as usize) < self.height
+            && self.occupied[r as usize * self.width + c as usize]
+    }
+
+    /// Pixel coordinates (u, v) of a point, each snapped to a whole number within [`SNAP_PX`].
+    #[inline]
+    fn to_pixels(&self, x: f64, y: f64) -> (f64, f64) {
+        let snap = |t: f64| {
+            let r = t.round();
+            if (t - r).abs() <= SNAP_PX { r } else { t }
+        };
+        (
+            snap((x - self.origin[0]) / self.resolution),
+            snap((y - self.origin[1]) / self.resolution),
+        )
+    }
+
+    /// The pixel indices whose closed extent contains coordinate t: both neighbours on an edge.
+    #[inline]
+    fn touching(t: f64) -> std::ops::RangeInclusive<i64> {
+        let f = t.floor() as i64;
+        if t == t.floor() { f - 1..=f } else { f..=f }
+    }
+
+    /// True when (x, y) lies in or on an occupied pixel.
+    pub fn covers(&self, x: f64, y: f64) -> bool {
+        let (u, v) = self.to_pixels(x, y);
+        Raster::touching(u).any(|c| Raster::touching(v).any(|r| self.is_occupied(c, r)))
+    }
+
+    /// True when the 2D point lies in the interior of the occupied region: every pixel whose
+    /// closed extent contains it is occupied (inside one pixel, on the edge between two, or on
+    /// the corner of four).
+    fn interior_at(&self, u: f64, v: f64) -> bool {
+        Raster::touching(u).all(|c| Raster::touching(v).all(|r| self.is_occupied(c, r)))
+    }
+
+    /// True when the point lies strictly inside an occupied column.
+    pub fn contains(&self, p: &P3) -> bool {
+        let (u, v) = self.to_pixels(p[0], p[1]);
+        p[2] > 0.0 && p[2] < self.obstacle_height && self.interior_at(u, v)
+    }
+
+    /// True when the segment a→b passes through the interior of the occupied region (the union
+    /// of the occupied columns). The part of the segment below the obstacle height is projected
+    /// onto the floor and its pixels are walked column by column along the major axis; a pixel
+    /// counts only where the projection crosses its open interior for a positive length, so
+    /// grazing an edge or a corner does not block. A projection lying exactly on a pixel edge
+    /// is inside the region only where the pixels on both sides are occupied.
+    pub fn blocks(&self, a: &P3, b: &P3) -> bool {
+        // The parameter range where 0 < z(t) < obstacle height.
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        let dz = b[2] - a[2];
+        if dz == 0.0 {
+            if a[2] <= 0.0 || a[2] >= self.obstacle_height {
+                return false;
+            }
+        } else {
+            let (s0, s1) = ((0.0 - a[2]) / dz, (self.obstacle_height - a[2]) / dz);
+            t0 = t0.max(s0.min(s1));
+            t1 = t1.min(s0.max(s1));
+        }
+        if t1 - t0 <= GRAZE_T {
+            return false;
+        }
+        let (ua, va) = self.to_pixels(a[0], a[1]);
+        let (ub, vb) = self.to_pixels(b[0], b[1]);
+        let (du, dv) = (ub - ua, vb - va);
+        // The clipped part's ends; unclipped ends keep their snapped values exactly.
+        let at = |t: f64, s: f64, d: f64, end: f64| {
+            if t == 0.0 {
+                s
+            } else if t == 1.0 {
+                end
+            } else {
+                s + d * t
+            }
+        };
+        let (p, q) = (
+            (at(t0, ua, du, ub), at(t0, va, dv, vb)),
+            (at(t1, ua, du, ub), at(t1, va, dv, vb)),
+        );
+        if du == 0.0 && dv == 0.0 {
+            return self.interior_at(ua, va);
+        }
+        if du.abs() >= dv.abs() {
+            self.walk(p, q, |c, r| self.is_occupied(c, r))
+        } else {
+            self.walk((p.1, p.0), (q.1, q.0), |c, r| self.is_occupied(r, c))
+        }
+    }
+
+    /// Walks the segment p→q (pixel coordinates, major axis first, |Δmajor| ≥ |Δminor| > or = 0)
+    /// column by column; `occupied(major, minor)` looks a pixel up.
+    fn walk(&self, p: (f64, f64), q: (f64, f64), occupied: impl Fn(i64, i64) -> bool) -> bool {
+        let (p, q) = if p.0 <= q.0 { (p, q) } else { (q, p) };
+        let slope = (q.1 - p.1) / (q.0 - p.0);
+        let minor_at = |m: f64| p.1 + (m - p.0) * slope;
+        let limit = self.width.max(self.height) as f64 + 1.0;
+        let first = p.0.floor().max(-1.0) as i64;
+        let last = (q.0.ceil().min(limit) as i64) - 1;
+        for c in first..=last {
+            let lo = p.0.max(c as f64);
+            let hi = q.0.min(c as f64 + 1.0);
+            if hi - lo <= SNAP_PX {
+                continue;
+            }
+            if slope == 0.0 && p.1 == p.1.floor() {
+                // Along a pixel edge: inside only where both sides are occupied.
+                let r = p.1 as i64;
+                if occupied(c, r - 1) && occupied(c, r) {
+                    return true;
+                }
+                continue;
+            }
+            let (m0, m1) = {
+                let (a, b) = (
+                    if lo == p.0 { p.1 } else { minor_at(lo) },
+                    if hi == q.0 { q.1 } else { minor_at(hi) },
+                );
+                if a <= b { (a, b) } else { (b, a) }
+            };
+            let r_first = (m0 + SNAP_PX).floor() as i64;
+            let r_last = (m1 - SNAP_PX).ceil() as i64 - 1;
+            if (r_first..=r_last).any(|r| occupied(c, r)) {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// Everything that stands on a floor: what the channel tests links against and what marks grid
+/// cells occupied.
+#[derive(Debug, Clone, Default)]
+pub struct Obstructions {
+    pub boxes: Vec<Aabb>,
+    pub walls: Vec<Wall>,
+    pub raster: Option<std::sync::Arc<Raster>>,
+}
+
+impl Obstructions {
+    /// True when the segment between two points passes through the interior of a box, a wall or
+    /// the raster's occupied region.
+    pub fn blocks(&self, a: [f64; 3], b: [f64; 3]) -> bool {
+        let (a, b) = (P3::from(a), P3::from(b));
+        self.boxes.iter().any(|bx| bx.blocks(&a, &b))
+            || self.walls.iter().any(|w| w.blocks(&a, &b))
+            || self.raster.as_ref().is_some_and(|r| r.blocks(&a, &b))
+    }
+
+    /// True when (x, y) lies in or on a footprint: such a grid cell is occupied.
+    pub fn covers(&self, x: f64, y: f64) -> bool {
+        self.boxes.iter().any(|bx| bx.covers(x, y))
+            || self.walls.iter().any(|w| w.covers(x, y))
+            || self.raster.as_ref().is_some_and(|r| r.covers(x, y))
+    }
+
+    /// True when a 3D point lies in or on something (closed): what an IRS may hang on.
+    pub fn solid_at(&self, p: [f64; 3]) -> bool {
+        let below = |h: f64| p[2] >= 0.0 && p[2] <= h + ON_BOUNDARY_M;
+        self.boxes
+            .iter()
+            .any(|bx| bx.covers(p[0], p[1]) && below(bx.hi[2]))
+            || self
+                .walls
+                .iter()
+                .any(|w| w.covers(p[0], p[1]) && below(w.local.hi[2]))
+            || self
+                .raster
+                .as_ref()
+                .is_some_and(|r| r.covers(p[0], p[1]) && below(r.obstacle_height))
+    }
+
+    /// True when a 3D point lies strictly inside something (an AP or a robot cannot be there).
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        let p = P3::from(p);
+        self.boxes.iter().any(|bx| bx.contains(&p))
+            || self.walls.iter().any(|w| w.contains(&p))
+            || self.raster.as_ref().is_some_and(|r| r.contains(&p))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn p(x: [f64; 3]) -> P3 {
+        P3::from(x)
+    }
+
+    #[test]
+    fn blockage_needs_the_interior_grazing_is_los() {
+        let bx = Aabb {
+            lo: [0.0, 0.0, 0.0],
+            hi: [1.0, 1.0, 1.0],
+        };
+        let hit = |a: [f64; 3], b: [f64; 3]| bx.blocks(&p(a), &p(b));
+        assert!(hit([-1.0, 0.5, 0.5], [2.0, 0.5, 0.5]));
+        assert!(
+            !hit([-1.0, 0.5, 1.0], [2.0, 0.5, 1.0]),
+            "along the top face"
+        );
+        assert!(!hit([-1.0, 0.0, 0.0], [2.0, 0.0, 0.0]), "along an edge");
+        assert!(
+            hit([-1.0, -1.0, 0.5], [1.0, 1.0, 0.5]),
+            "diagonally through the box"
+        );
+        assert!(
+            !hit([-1.0, 0.0, 0.5], [1.0, 2.0, 0.5]),
+            "touching only the vertical edge at (0, 1)"
+        );
+        assert!(
+            !hit([0.5, 0.5, 1.0], [0.5, 5.0, 3.0]),
+            "leaving from the top face upwards"
+        );
+        assert!(hit([0.5, 0.5, 0.5], [5.0, 5.0, 5.0]), "starting inside");
+        assert!(!hit([2.0, 2.0, 0.5], [3.0, 3.0, 0.5]), "far away");
+    }
+
+    /// A 4 × 3 raster of 1 m pixels at the origin with the given occupied (column, row) pixels.
+    fn raster(occupied: &[(usize, usize)], height: f64) -> Raster {
+        let mut r = Raster {
+            width: 4,
+            height: 3,
+            resolution: 1.0,
+            origin: [0.0, 0.0],
+            obstacle_height: height,
+            occupied: vec![false; 12],
+        };
+        for &(c, row) in occupied {
+            r.occupied[row * 4 + c] = true;
+        }
+        r
+    }
+
+    #[test]
+    fn raster_blockage_follows_the_box_rules() {
+        let r = raster(&[(1, 1)], 1.0);
+        let hit = |a: [f64; 3], b: [f64; 3]| r.blocks(&p(a), &p(b));
+        assert!(hit([0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), "through the pixel");
+        assert!(hit([2.5, 0.2, 0.5], [1.5, 2.8, 0.5]), "steep, through it");
+        assert!(!hit([0.0, 1.5, 1.0], [4.0, 1.5, 1.0]), "along its top");
+        assert!(
+            hit([0.0, 1.5, 1.5], [4.0, 1.5, 0.0]),
+            "descending through it"
+        );
+        assert!(
+            !hit([0.0, 1.5, 2.0], [4.0, 1.5, 0.0]),
+            "descending, above it until past it"
+        );
+        assert!(!hit([0.0, 1.5, 3.0], [4.0, 1.5, 1.2]), "above it");
+        assert!(
+            !hit([0.0, 1.0, 0.5], [4.0, 1.0, 0.5]),
+            "along its lower edge"
+        );
+        assert!(
+            hit([0.0, 0.0, 0.5], [3.0, 3.0, 0.5]),
+            "corner to corner through it"
+        );
+        assert!(
+            !hit([0.0, 2.0, 0.5], [2.0, 0.0, 0.5]),
+            "touching only its corner (1, 1)"
+        );
+        assert!(
+            !hit([1.0, 3.0, 0.5], [3.0, 1.0, 0.5]),
+            "touching only its corner (2, 2)"
+        );
+        // Two occupied pixels side by side: a segment along their shared edge is inside the
+        // region they form.
+        let two = raster(&[(1, 1), (1, 0)], 1.0);
+        assert!(two.blocks(&p([1.5, -1.0, 0.5]), &p([1.5, 4.0, 0.5])));
+        assert!(
+            two.blocks(&p([0.0, 1.0, 0.5]), &p([4.0, 1.0, 0.5])),
+            "along the seam"
+        );
+        assert!(
+            !r.blocks(&p([0.0, 1.0, 0.5]), &p([4.0, 1.0, 0.5])),
+            "seam with one side free"
+        );
+        // A vertical segment (a point in plan view).
+        assert!(r.blocks(&p([1.5, 1.5, 0.2]), &p([1.5, 1.5, 3.0])));
+        assert!(
+            !r.blocks(&p([1.0, 1.5, 0.2]), &p([1.0, 1.5, 3.0])),
+            "on its side"
+        );
+    }
+
+    #[test]
+    fn raster_occupancy_is_closed_and_interior_is_open() {
+        let r = raster(&[(1, 1)], 1.0);
+        assert!(r.covers(1.5, 1.5));
+        assert!(r.covers(1.0, 1.0), "on its corner");
+        assert!(r.covers(2.0 + 1e-12, 1.5), "on its edge, up to rounding");
+        assert!(!r.covers(0.5, 1.5));
+        assert!(r.contains(&p([1.5, 1.5, 0.5])));
+        assert!(!r.contains(&p([1.0, 1.5, 0.5])), "on its face");
+        assert!(!r.contains(&p([1.5, 1.5, 1.0])), "on its top");
+    }
+
+    #[test]
+    fn an_axis_aligned_wall_is_a_box() {
+        let wall = Wall::new([1.0, 2.0], [5.0, 2.0], 0.5, 1.5);
+        let bx = Aabb {
+            lo: [1.0, 1.75, 0.0],
+            hi: [5.0, 2.25, 1.5],
+        };
+        let segments = [
+            ([0.0, 0.0, 1.0], [6.0, 4.0, 1.0]),
+            ([3.0, 0.0, 1.0], [3.0, 1.75, 1.0]),
+            ([0.0, 1.75, 1.0], [6.0, 1.75, 1.0]),
+            ([0.0, 2.0, 2.0], [6.0, 2.0, 1.5]),
+            ([0.0, 3.0, 1.0], [2.0, 2.0, 0.0]),
+        ];
+        for (a, b) in segments {
+            assert_eq!(
+                wall.blocks(&p(a), &p(b)),
+                bx.blocks(&p(a), &p(b)),
+                "{a:?}→{b:?}"
+            );
+        }
+        assert!(wall.covers(1.0, 2.25) && !wall.covers(0.9, 2.0));
+        // At 45°: a wall from (0,0) to (2,2), 0.2 m thick, crossed by the other diagonal.
+        let diagonal = Wall::new([0.0, 0.0], [2.0, 2.0], 0.2, 1.0);
+        assert!(diagonal.blocks(&p([0.0, 2.0, 0.5]), &p([2.0, 0.0, 0.5])));
+        assert!(
+            !diagonal.blocks(&p([0.0, 2.0, 0.5]), &p([0.8, 1.2, 0.5])),
+            "stops short"
+        );
+        assert!(diagonal.covers(1.0, 1.0) && !diagonal.covers(1.0, 0.8));
+    }
+
+    /// Boxes on whole pixels, at least one pixel apart (touching boxes differ on purpose: a
+    /// segment along their common face is inside the raster's region but in neither box).
+    fn separated_boxes(
+        cells: &[(usize, usize, usize, usize, u8)],
+        width: usize,
+        height: usize,
+    ) -> Vec<(usize, usize, usize, usize, f64)> {
+        let mut taken = vec![false; width * height];
+        let mut kept = Vec::new();
+        for &(c, r, w, h, z) in cells {
+            let (c1, r1) = ((c + w).min(width), (r + h).min(height));
+            let clear = (c.saturating_sub(1)..(c1 + 1).min(width)).all(|x| {
+                (r.saturating_sub(1)..(r1 + 1).min(height)).all(|y| !taken[y * width + x])
+            });
+            if clear && c < c1 && r < r1 {
+                for x in c..c1 {
+                    for y in r..r1 {
+                        taken[y * width + x] = true;
+                    }
+                }
+                kept.push((c, r, c1, r1, f64::from(z)));
+            }
+        }
+        kept
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// The raster walk agrees with the box slab test on boxes drawn into a raster: random
+        /// rasters (size, origin, pixel size), random pixel-aligned boxes, and segments whose
+        /// ends are random or on pixel edges and corners (the degenerate cases).
+        #[test]
+        fn raster_blockage_equals_the_box_test(
+            width in 4usize..24, height in 4usize..24,
+            origin in (-8i32..8, -8i32..8),
+            resolution in prop::sample::select(vec![0.05, 0.1, 0.25, 0.5, 1.0]),
+            cells in prop::collection::vec((0usize..24, 0usize..24, 1usize..6, 1usize..6, 1u8..3), 1..6),
+            segments in prop::collection::vec(
+                ((0u32..97, 0u32..97, any::<bool>(), 0u32..40), (0u32..97, 0u32..97, any::<bool>(), 0u32..40)),
+                1..40),
+        ) {
+            let origin = [f64::from(origin.0) * 0.5, f64::from(origin.1) * 0.5];
+            let boxes: Vec<Aabb> = separated_boxes(&cells, width, height)
+                .into_iter()
+                .map(|(c0, r0, c1, r1, z)| Aabb {
+                    lo: [origin[0] + c0 as f64 * resolution, origin[1] + r0 as f64 * resolution, 0.0],
+                    hi: [origin[0] + c1 as f64 * resolution, origin[1] + r1 as f64 * resolution, z],
+                })
+                .collect();
+            // One height for the raster: keep only boxes of the first box's height.
+            let h = boxes.first().map_or(1.0, |b| b.hi[2]);
+            let boxes: Vec<Aabb> = boxes.into_iter().filter(|b| b.hi[2] == h).collect();
+            let mut raster = Raster {
+                width, height, resolution, origin, obstacle_height: h,
+                occupied: vec![false; width * height],
+            };
+            for (k, occ) in raster.occupied.iter_mut().enumerate() {
+                let (c, r) = (k % width, k / width);
+                let centre = [origin[0] + (c as f64 + 0.5) * resolution, origin[1] + (r as f64 + 0.5) * resolution];
+                *occ = boxes.iter().any(|b| b.covers(centre[0], centre[1]));
+            }
+            // Ends on a quarter-pixel lattice (edges and corners included) or jittered off it.
+            let point = |(i, j, jitter, z): (u32, u32, bool, u32)| {
+                let off = if jitter { 0.1234567 } else { 0.0 };
+                P3::new(
+                    origin[0] + (f64::from(i) / 4.0 - 0.5 + off) * resolution,
+                    origin[1] + (f64::from(j) / 4.0 - 0.5 + off * 0.7) * resolution,
+                    f64::from(z) * h / 20.0,
+                )
+            };
+            for (a, b) in segments {
+                let (a, b) = (point(a), point(b));
+                let by_boxes = boxes.iter().any(|bx| bx.blocks(&a, &b));
+                prop_assert_eq!(raster.blocks(&a, &b), by_boxes, "{:?} → {:?}", a, b);
+            }
+        }
+    }
+}
