@@ -1,9 +1,12 @@
-//! The command line: `serve` (the default), `map` and `plan`. `map` and `plan` print exactly the
-//! JSON bodies the API returns. Bad input exits with code 2 and a message naming the offending
+//! The command line: `serve` (the default), `map`, `plan`, `export` and `scenario`. `map` and
+//! `plan` print exactly the JSON bodies the API returns; `export` writes Nav2 masks and a NumPy
+//! array of a map; `scenario` prints a scenario file in the self-contained form the API takes
+//! (a floor plan's map file read and inlined). Bad input exits with code 2 and a message naming the offending
 //! field; an infeasible path is an answer (exit 0), not an error; a failure that is not the
 //! input's (the server cannot bind, a file cannot be written) exits with code 1.
 
-use crate::input::parse_point;
+use crate::export::{self, MaskKind};
+use crate::input::{parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::phases::PhaseMode;
 use crate::planner::{self, Threshold};
@@ -40,13 +43,53 @@ pub enum Command {
     Map(MapArgs),
     /// Plan a path on a radio map and print the path JSON body.
     Plan(PlanArgs),
+    /// Write a map's Nav2 keep-out and cost masks (PGM + YAML) and its values (.npy) to a folder.
+    Export(ExportArgs),
+    /// Print a scenario file as the self-contained JSON document the API takes (POST
+    /// /v1/scenarios): a floor plan's map YAML and image read and inlined.
+    Scenario(ScenarioArgs),
+}
+
+/// Where the scenario comes from: a file, and optionally a floor plan that sets or replaces the
+/// file's own.
+#[derive(Debug, Args)]
+pub struct ScenarioSource {
+    /// Scenario JSON file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// A ROS map YAML (Nav2 map_server format) that sets or replaces the scenario's floor plan.
+    #[arg(long, value_name = "MAP_YAML")]
+    pub floor_plan: Option<PathBuf>,
+    /// Height (m) of the floor plan's occupied pixels (default: the ceiling).
+    #[arg(long, value_name = "M", requires = "floor_plan", allow_hyphen_values = true, value_parser = parse_finite)]
+    pub obstacle_height: Option<f64>,
+}
+
+#[derive(Debug, Args)]
+pub struct ScenarioArgs {
+    #[command(flatten)]
+    pub source: ScenarioSource,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    #[command(flatten)]
+    pub map: MapArgs,
+    /// QoS threshold γ of the masks, in the map's unit (dB or bit/s/Hz).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
+    pub threshold: f64,
+    /// The value that costs 0 in the cost mask (default: the map's maximum).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
+    pub best: Option<f64>,
+    /// Folder to write keepout.{yaml,pgm}, cost.{yaml,pgm} and map.npy into (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
 }
 
 #[derive(Debug, Args)]
 pub struct MapArgs {
-    /// Scenario JSON file.
-    #[arg(long)]
-    pub scenario: PathBuf,
+    #[command(flatten)]
+    pub source: ScenarioSource,
     /// Map kind: gain (dB) or rate (bit/s/Hz).
     #[arg(long)]
     pub kind: MapKind,
@@ -129,11 +172,34 @@ impl From<Failure> for ExitCode {
     }
 }
 
-pub fn load_scenario(path: &Path) -> Result<Scenario, Failure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))?;
-    Scenario::from_json(&text)
-        .map_err(|e| Failure::input(format!("--scenario {}: {e}", path.display())))
+/// Reads the scenario a command names: its file, with `--floor-plan` (read relative to the
+/// working directory) setting or replacing the floor plan.
+pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
+    let path = &source.scenario;
+    let fail =
+        |e: &dyn std::fmt::Display| Failure::input(format!("--scenario {}: {e}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| fail(&e))?;
+    let mut document: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| fail(&format!("$: not a JSON document: {e}")))?;
+    if let Some(map_yaml) = &source.floor_plan {
+        let absolute = std::path::absolute(map_yaml)
+            .map_err(|e| Failure::input(format!("--floor-plan {}: {e}", map_yaml.display())))?;
+        let mut plan = serde_json::json!({ "map": absolute });
+        if let Some(h) = source.obstacle_height {
+            plan["obstacle_height_m"] = h.into();
+        }
+        match document.as_object_mut() {
+            Some(object) => object.insert("floor_plan".into(), plan),
+            None => return Err(fail(&"$: a scenario is a JSON object")),
+        };
+    }
+    let base = path.parent().unwrap_or(Path::new("."));
+    Scenario::from_value_with_files(document, base).map_err(|e| match &source.floor_plan {
+        Some(map_yaml) if e.field.starts_with("floor_plan") => {
+            Failure::input(format!("--floor-plan {}: {e}", map_yaml.display()))
+        }
+        _ => fail(&e),
+    })
 }
 
 fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
@@ -207,7 +273,7 @@ fn write_png(
 
 /// `irs-planner map …`
 pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
-    let scenario = load_scenario(&args.scenario)?;
+    let scenario = load_scenario(&args.source)?;
     let started = Instant::now();
     let map = build_map(args, &scenario)?;
     let body = Timed::since(started, map.body());
@@ -224,7 +290,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             "--monte-carlo: must lie in 1..={MAX_DRAWS}"
         )));
     }
-    let scenario = load_scenario(&args.map.scenario)?;
+    let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
     let started = Instant::now();
@@ -249,4 +315,42 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         _ => None,
     };
     print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))
+}
+
+/// `irs-planner export …`: the masks at `--threshold` and the values, written into `--out`;
+/// prints the files written, as JSON.
+pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
+    let scenario = load_scenario(&args.map.source)?;
+    let map = build_map(&args.map, &scenario)?;
+    let keepout = export::nav2_mask(&map, MaskKind::Keepout, args.threshold, None)
+        .map_err(|e| Failure::input(format!("--{e}")))?;
+    let cost = export::nav2_mask(&map, MaskKind::Cost, args.threshold, args.best)
+        .map_err(|e| Failure::input(format!("--{e}")))?;
+    let out = &args.out;
+    std::fs::create_dir_all(out)
+        .map_err(|e| Failure::runtime(format!("--out {}: {e}", out.display())))?;
+    let mut written = Vec::new();
+    let files = [
+        (keepout.yaml_name(), keepout.files.yaml.as_bytes()),
+        (keepout.pgm_name(), keepout.files.pgm.as_slice()),
+        (cost.yaml_name(), cost.files.yaml.as_bytes()),
+        (cost.pgm_name(), cost.files.pgm.as_slice()),
+        ("map.npy".to_string(), &export::npy(&map)),
+    ];
+    for (name, bytes) in files {
+        let path = out.join(&name);
+        std::fs::write(&path, bytes)
+            .map_err(|e| Failure::runtime(format!("--out {}: {e}", path.display())))?;
+        written.push(path.display().to_string());
+    }
+    print_json(&serde_json::json!({
+        "map_id": map.key.id(),
+        "threshold": args.threshold,
+        "files": written,
+    }))
+}
+
+/// `irs-planner scenario …`: the scenario as the API takes it.
+pub fn run_scenario(args: &ScenarioArgs) -> Result<(), Failure> {
+    print_json(&load_scenario(&args.source)?)
 }

@@ -11,6 +11,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Map(args)) => cli::run_map(&args),
         Some(Command::Plan(args)) => cli::run_plan(&args),
+        Some(Command::Export(args)) => cli::run_export(&args),
+        Some(Command::Scenario(args)) => cli::run_scenario(&args),
         Some(Command::Serve(args)) => serve(args),
         None => serve(ServeArgs::default()),
     };

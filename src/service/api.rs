@@ -5,6 +5,7 @@ use super::AppState;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
 use super::jobs::{JobView, MapRequestOutcome};
+use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
@@ -62,6 +63,8 @@ pub fn route_table() -> Vec<(
         ),
         ("/v1/maps/{map_id}/coverage", &["get"], get(coverage)),
         ("/v1/maps/{map_id}/image.png", &["get"], get(image)),
+        ("/v1/maps/{map_id}/nav2-mask", &["get"], get(nav2_mask)),
+        ("/v1/maps/{map_id}/values.npy", &["get"], get(values_npy)),
         ("/v1/jobs", &["get"], get(list_jobs)),
         (
             "/v1/jobs/{job_id}",
@@ -613,6 +616,82 @@ async fn image(
         )
     })?;
     Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
+}
+
+/// Rejects query parameters outside `allowed`, naming the first unknown one.
+fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), ApiError> {
+    match query.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(unknown) => Err(ApiError::invalid(
+            unknown.clone(),
+            "unknown query parameter",
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A Nav2 mask of the map at `threshold` (keep-out by default, or `mask=cost` with an optional
+/// `best`): its YAML and PGM in one tar archive.
+async fn nav2_mask(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(&query, &["threshold", "mask", "best"])?;
+    let number = |name: &'static str| {
+        query
+            .get(name)
+            .map(|text| parse_finite(text).map_err(|e| ApiError::invalid(name, e)))
+            .transpose()
+    };
+    let threshold = number("threshold")?.ok_or_else(|| {
+        ApiError::invalid("threshold", "the threshold query parameter is required")
+    })?;
+    let best = number("best")?;
+    let kind = query
+        .get("mask")
+        .map(|text| {
+            text.parse::<MaskKind>()
+                .map_err(|e| ApiError::invalid("mask", e))
+        })
+        .transpose()?
+        .unwrap_or_default();
+    let map = cached_map(&state, &map_id).await?;
+    let cells = map.grid.cells();
+    let archive = off_runtime_if_big(cells, move || {
+        export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
+    })
+    .await?
+    .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    let disposition = format!("attachment; filename=\"{map_id}-{}.tar\"", kind.stem());
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/x-tar".to_string()),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        archive,
+    )
+        .into_response())
+}
+
+/// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).
+async fn values_npy(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(&query, &[])?;
+    let map = cached_map(&state, &map_id).await?;
+    let cells = map.grid.cells();
+    let bytes = off_runtime_if_big(cells, move || export::npy(&map)).await?;
+    let disposition = format!("attachment; filename=\"{map_id}.npy\"");
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        bytes,
+    )
+        .into_response())
 }
 
 // ---------------------------------------------------------------- jobs

@@ -1,0 +1,157 @@
+//! Floors given as pixels and as walls give the maps their boxes give (docs/scenarios.md
+//! "Floor plans"): the paper floor drawn as a 0.05 m raster and as walls, cell by cell.
+
+use base64::Engine;
+use irs_planner::floorplan::{self, MapMode};
+use irs_planner::phases::PhaseMode;
+use irs_planner::planner::{self, Threshold};
+use irs_planner::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_planner::scenario::Scenario;
+
+fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
+    let key = MapKey::gain(&s.content_hash(), s, phases).unwrap();
+    radiomap::build(s, &key, &Progress::default()).unwrap()
+}
+
+/// The paper floor with its five boxes replaced by a floor plan: 400 × 400 pixels of 0.05 m
+/// from (−10, −10), a pixel occupied where its centre lies in a box, 1.3 m high.
+fn paper_as_raster() -> Scenario {
+    let boxes = Scenario::builtin("paper-single-user")
+        .unwrap()
+        .obstructions();
+    let (side, res) = (400usize, 0.05);
+    let mut values = vec![0i8; side * side];
+    for r in 0..side {
+        for c in 0..side {
+            let (x, y) = (
+                -10.0 + (c as f64 + 0.5) * res,
+                -10.0 + (r as f64 + 0.5) * res,
+            );
+            if boxes.covers(x, y) {
+                values[r * side + c] = 100;
+            }
+        }
+    }
+    let map = floorplan::encode_map(
+        &values,
+        side,
+        res,
+        [-10.0, -10.0],
+        MapMode::Trinary,
+        "p.pgm",
+    );
+    Scenario::builtin_with("paper-single-user", |v| {
+        v["obstacles"] = serde_json::json!([]);
+        v["floor_plan"] = serde_json::json!({
+            "image": base64::engine::general_purpose::STANDARD.encode(&map.pgm),
+            "resolution": res, "origin": [-10.0, -10.0, 0.0], "negate": 0,
+            "occupied_thresh": 0.65, "free_thresh": 0.25, "obstacle_height_m": 1.3,
+        });
+    })
+    .unwrap()
+    .unwrap()
+}
+
+fn assert_same_map(a: &RadioMap, b: &RadioMap, what: &str) {
+    assert_eq!(a.occupied, b.occupied, "{what}: occupied cells");
+    let mut worst = 0.0f64;
+    for (k, (x, y)) in a.values.iter().zip(&b.values).enumerate() {
+        assert_eq!(x.is_nan(), y.is_nan(), "{what}: cell {k}");
+        if x.is_finite() {
+            worst = worst.max((x - y).abs());
+        }
+    }
+    assert!(worst <= 1e-9, "{what}: largest difference {worst:e} dB");
+}
+
+/// Every cell of the raster floor equals the box floor to 1e-9 dB, in the continuous and the
+/// no-IRS maps, and the largest threshold from q_I to q_F stays −59.60 dB.
+#[test]
+fn the_paper_floor_as_pixels_gives_the_box_map() {
+    let boxes = Scenario::builtin("paper-single-user").unwrap();
+    let raster = paper_as_raster();
+    assert_ne!(boxes.content_hash(), raster.content_hash());
+    for phases in [PhaseMode::Continuous, PhaseMode::None] {
+        let (a, b) = (gain_map(&boxes, phases), gain_map(&raster, phases));
+        assert_same_map(&a, &b, &format!("{phases:?}"));
+    }
+    let map = gain_map(&raster, PhaseMode::Continuous);
+    let path = planner::plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 1.0).unwrap();
+    let max = path.max_feasible_threshold.unwrap();
+    assert!((max - -59.60).abs() < 0.005, "{max}");
+}
+
+/// The five boxes written as walls (one per box, along its x axis, as thick as the box is deep)
+/// give the box map: an axis-aligned wall is a box.
+#[test]
+fn the_paper_floor_as_walls_gives_the_box_map() {
+    let boxes = Scenario::builtin("paper-single-user").unwrap();
+    let walls = Scenario::builtin_with("paper-single-user", |v| {
+        let walls: Vec<serde_json::Value> = v["obstacles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| {
+                let (cx, cy) = (
+                    o["center"][0].as_f64().unwrap(),
+                    o["center"][1].as_f64().unwrap(),
+                );
+                let (sx, sy) = (
+                    o["size"][0].as_f64().unwrap(),
+                    o["size"][1].as_f64().unwrap(),
+                );
+                serde_json::json!({
+                    "from": [cx - sx / 2.0, cy], "to": [cx + sx / 2.0, cy],
+                    "thickness_m": sy, "height_m": o["height_m"],
+                })
+            })
+            .collect();
+        v["obstacles"] = serde_json::json!([]);
+        v["walls"] = walls.into();
+    })
+    .unwrap()
+    .unwrap();
+    assert_same_map(
+        &gain_map(&boxes, PhaseMode::Continuous),
+        &gain_map(&walls, PhaseMode::Continuous),
+        "walls",
+    );
+}
+
+/// A wall at 45° casts a shadow: cells behind it lose the direct link, cells beside it keep it.
+#[test]
+fn a_diagonal_wall_shadows_the_cells_behind_it() {
+    let s = Scenario::builtin_with("paper-single-user", |v| {
+        v["obstacles"] = serde_json::json!([]);
+        v["walls"] = serde_json::json!([
+            {"from": [-3.0, 3.0], "to": [3.0, -3.0], "thickness_m": 0.2, "height_m": 3.0}
+        ]);
+    })
+    .unwrap()
+    .unwrap();
+    let model = irs_planner::channel::ChannelModel::new(&s);
+    let ap = s.ap.position;
+    // The AP at (0, 10, 2): (−3, −3) sees it past the wall's end; (−1, −1) is behind it.
+    assert!(model.is_blocked(ap, [-1.0, -1.0, 1.0]));
+    assert!(!model.is_blocked(ap, [-6.0, -3.0, 1.0]));
+    let map = gain_map(&s, PhaseMode::None);
+    let g = map.grid;
+    let cell = |x: f64, y: f64| {
+        let (i, j) = g.snap(x, y).unwrap();
+        g.index(i, j)
+    };
+    assert!(map.occupied[cell(0.0, 0.0)] && !map.occupied[cell(1.0, 0.0)]);
+    // Against the open floor: the shadowed cell loses the LoS path loss advantage (2.4 dB at
+    // 11 m, 3GPP InF-SH), the cell past the wall's end loses nothing.
+    let open = gain_map(
+        &Scenario::builtin_with("paper-single-user", |v| {
+            v["obstacles"] = serde_json::json!([])
+        })
+        .unwrap()
+        .unwrap(),
+        PhaseMode::None,
+    );
+    let (behind, past) = (cell(-1.0, -1.0), cell(-6.0, -3.0));
+    assert!(map.values[behind] < open.values[behind] - 2.0);
+    assert_eq!(map.values[past], open.values[past]);
+}
