@@ -1,6 +1,7 @@
 //! Speed targets (README "Performance"): gain maps of the paper scenario in both groupings,
-//! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, and the
-//! per-cell cost of the `fast` solver and of the certificate.
+//! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, the per-cell
+//! cost of the `fast` solver and of the certificate, and the warehouse floor plan (decode +
+//! gain map at 0.25 m and 0.1 m, a path query on it).
 //!
 //! `cargo bench` runs everything; `cargo bench -- gain` a subset. Single-core figures come from
 //! `RAYON_NUM_THREADS=1 cargo bench`.
@@ -8,7 +9,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use irs_planner::channel::ChannelModel;
 use irs_planner::phases::PhaseMode;
-use irs_planner::planner::CellGraph;
+use irs_planner::planner::{self, CellGraph, Threshold};
 use irs_planner::radiomap::{self, MapKey, Progress};
 use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
@@ -98,5 +99,58 @@ fn rate_maps(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, gain_maps, large_grid, rate_maps);
+/// The warehouse scenario document with its floor plan read and inlined, at `resolution_m`.
+fn warehouse_document(resolution_m: f64) -> serde_json::Value {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/warehouse/warehouse.json");
+    let mut document: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    document["grid"]["resolution_m"] = resolution_m.into();
+    irs_planner::floorplan::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
+        std::fs::read(p)
+    })
+    .unwrap();
+    document
+}
+
+fn floors(c: &mut Criterion) {
+    let mut group = c.benchmark_group("warehouse");
+    group.sample_size(10);
+    // From the inline document (base64 PGM, 1200 × 800 pixels) to the built map: parsing,
+    // validation, image decoding and the gain map.
+    for (name, resolution) in [
+        ("decode_and_gain_map_241x161", 0.25),
+        ("decode_and_gain_map_601x401", 0.1),
+    ] {
+        let document = warehouse_document(resolution);
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let s = Scenario::from_value(black_box(document.clone())).unwrap();
+                let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
+                radiomap::build(&s, &key, &Progress::default()).unwrap()
+            })
+        });
+    }
+    let s = Scenario::from_value(warehouse_document(0.25)).unwrap();
+    let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
+    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    // From an office in the north-west to the south-east corner, through the racks.
+    let (start, goal) = ([-27.0, 16.0], [26.0, -16.0]);
+    for (name, threshold) in [
+        ("path_at_minus_76_db", Threshold::Value(-76.0)),
+        ("path_at_max_threshold", Threshold::Max),
+    ] {
+        assert!(
+            planner::plan(&map, start, goal, threshold, 1.0)
+                .unwrap()
+                .feasible
+        );
+        group.bench_function(name, |b| {
+            b.iter(|| planner::plan(black_box(&map), start, goal, threshold, 1.0).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, gain_maps, large_grid, rate_maps, floors);
 criterion_main!(benches);

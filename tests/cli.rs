@@ -266,3 +266,260 @@ fn serve_failures_are_runtime_errors_unless_the_input_is_bad() {
     assert!(err.contains("broken.json") && err.contains("room"), "{err}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+const WAREHOUSE: &str = "scenarios/warehouse/warehouse.json";
+
+/// A scratch folder for one test.
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("irs-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn json(text: &str) -> serde_json::Value {
+    serde_json::from_str(text).unwrap()
+}
+
+/// The warehouse's floor plan named in its file and given by `--floor-plan` to the same floor
+/// without one are the same scenario (the id hashes the pixels, not a path); `scenario` prints
+/// the inline form the API takes.
+#[test]
+fn floor_plans_come_from_scenario_files_or_the_flag() {
+    let (code, body, err) = run(&["map", "--scenario", WAREHOUSE, "--kind", "gain", "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    let from_file = json(&body);
+    assert_eq!(from_file["grid"]["nx"], 241);
+    assert_eq!(from_file["grid"]["ny"], 161);
+
+    let dir = scratch("flag");
+    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
+    bare.as_object_mut().unwrap().remove("floor_plan");
+    let bare_path = dir.join("bare.json");
+    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    let bare_path = bare_path.to_str().unwrap();
+    let (code, body, err) = run(&[
+        "map",
+        "--scenario",
+        bare_path,
+        "--floor-plan",
+        "scenarios/warehouse/map.yaml",
+        "--kind",
+        "gain",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json(&body)["map_id"], from_file["map_id"]);
+    // Another obstacle height is another floor.
+    let (code, body, _) = run(&[
+        "map",
+        "--scenario",
+        bare_path,
+        "--floor-plan",
+        "scenarios/warehouse/map.yaml",
+        "--obstacle-height",
+        "3",
+        "--kind",
+        "gain",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0);
+    assert_ne!(json(&body)["map_id"], from_file["map_id"]);
+
+    let (code, body, err) = run(&["scenario", "--scenario", WAREHOUSE]);
+    assert_eq!(code, 0, "{err}");
+    let inline = json(&body);
+    let plan = &inline["floor_plan"];
+    assert!(plan.get("map").is_none());
+    assert_eq!(plan["resolution"], 0.05);
+    assert_eq!(plan["obstacle_height_m"], 5.0, "the ceiling, spelled out");
+    assert!(
+        plan["image"].as_str().unwrap().starts_with("UDU"),
+        "base64 of \"P5\""
+    );
+}
+
+/// Bad map files exit 2 naming the field, whether the scenario names them or the flag does.
+#[test]
+fn bad_map_files_exit_2_naming_the_field() {
+    let dir = scratch("bad-maps");
+    let yaml = |image: &str, extra: &str| {
+        format!(
+            "image: {image}\nresolution: 0.5\norigin: [-30.0, -20.0, 0.0]\nnegate: 0\n\
+             occupied_thresh: 0.65\nfree_thresh: 0.25\n{extra}"
+        )
+    };
+    // 120 × 80 pixels of 0.5 m cover the warehouse room.
+    let mut good = b"P5\n120 80\n255\n".to_vec();
+    good.extend(std::iter::repeat_n(254u8, 120 * 80));
+    let files: Vec<(&str, Vec<u8>, String)> = vec![
+        (
+            "truncated",
+            good[..good.len() - 100].to_vec(),
+            yaml("truncated.pgm", ""),
+        ),
+        (
+            "magic",
+            b"P6\n1 1\n255\n\0\0\0".to_vec(),
+            yaml("magic.pgm", ""),
+        ),
+        (
+            "deep",
+            b"P5\n1 1\n65535\n\0\0".to_vec(),
+            yaml("deep.pgm", ""),
+        ),
+        (
+            "short",
+            b"P5\n120 80\n255\n\xfe\xfe".to_vec(),
+            yaml("short.pgm", ""),
+        ),
+        (
+            "small",
+            b"P5\n10 10\n255\n"
+                .iter()
+                .copied()
+                .chain([254u8; 100])
+                .collect(),
+            yaml("small.pgm", ""),
+        ),
+        (
+            "nokey",
+            good.clone(),
+            yaml("nokey.pgm", "").replace("resolution: 0.5\n", ""),
+        ),
+        (
+            "yaw",
+            good.clone(),
+            yaml("yaw.pgm", "").replace("0.0]", "0.3]"),
+        ),
+    ];
+    let expected = [
+        ("truncated", "floor_plan.image"),
+        ("magic", "floor_plan.image"),
+        ("deep", "16-bit"),
+        ("short", "floor_plan.image"),
+        ("small", "floor_plan: the map covers"),
+        ("nokey", "resolution"),
+        ("yaw", "floor_plan.origin"),
+    ];
+    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
+    bare.as_object_mut().unwrap().remove("floor_plan");
+    bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
+    let bare_path = dir.join("bare.json");
+    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    for ((name, image, text), (_, needle)) in files.iter().zip(expected) {
+        std::fs::write(dir.join(format!("{name}.pgm")), image).unwrap();
+        let map_yaml = dir.join(format!("{name}.yaml"));
+        std::fs::write(&map_yaml, text).unwrap();
+        let (code, _, err) = run(&[
+            "map",
+            "--scenario",
+            bare_path.to_str().unwrap(),
+            "--floor-plan",
+            map_yaml.to_str().unwrap(),
+            "--kind",
+            "gain",
+            "--quiet",
+        ]);
+        assert_eq!(code, 2, "{name}: {err}");
+        assert!(
+            err.contains("--floor-plan") && err.contains(needle),
+            "{name}: {err}"
+        );
+    }
+    // The good image on the same floor works.
+    std::fs::write(dir.join("good.pgm"), &good).unwrap();
+    std::fs::write(dir.join("good.yaml"), yaml("good.pgm", "")).unwrap();
+    let (code, _, err) = run(&[
+        "map",
+        "--scenario",
+        bare_path.to_str().unwrap(),
+        "--floor-plan",
+        dir.join("good.yaml").to_str().unwrap(),
+        "--kind",
+        "gain",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+}
+
+/// `export` writes the two masks and the array; the keep-out mask, read back as the floor plan
+/// of the same room, marks exactly the cells below the threshold (and the occupied ones).
+#[test]
+fn export_writes_masks_that_read_back_as_floor_plans() {
+    let dir = scratch("export");
+    let out = dir.join("out");
+    let (code, body, err) = run(&[
+        "export",
+        "--scenario",
+        WAREHOUSE,
+        "--kind",
+        "gain",
+        "--quiet",
+        "--threshold",
+        "-70",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json(&body)["files"].as_array().unwrap().len(), 5);
+    for name in [
+        "keepout.yaml",
+        "keepout.pgm",
+        "cost.yaml",
+        "cost.pgm",
+        "map.npy",
+    ] {
+        assert!(out.join(name).is_file(), "{name}");
+    }
+    let (_, map_body, _) = run(&["map", "--scenario", WAREHOUSE, "--kind", "gain", "--quiet"]);
+    let map = json(&map_body);
+    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
+    bare.as_object_mut().unwrap().remove("floor_plan");
+    // A 1 cm mask is nothing to hang the IRS on: put it on the room's east wall.
+    bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
+    let bare_path = dir.join("bare.json");
+    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    let (code, again, err) = run(&[
+        "map",
+        "--scenario",
+        bare_path.to_str().unwrap(),
+        "--floor-plan",
+        out.join("keepout.yaml").to_str().unwrap(),
+        "--obstacle-height",
+        "0.01",
+        "--kind",
+        "gain",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let again = json(&again);
+    let cells = |m: &serde_json::Value| -> Vec<Option<f64>> {
+        m["values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|row| row.as_array().unwrap().iter().map(|v| v.as_f64()))
+            .collect()
+    };
+    let expected: Vec<bool> = cells(&map)
+        .iter()
+        .map(|v| !v.is_some_and(|v| v >= -70.0))
+        .collect();
+    let got: Vec<bool> = cells(&again).iter().map(|v| v.is_none()).collect();
+    assert_eq!(got, expected);
+    let (code, _, err) = run(&[
+        "export",
+        "--scenario",
+        WAREHOUSE,
+        "--kind",
+        "gain",
+        "--quiet",
+        "--threshold",
+        "-30",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--best"), "{err}");
+}
