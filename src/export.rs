@@ -231,7 +231,6 @@ mod tests {
         let threshold = -70.0;
         let mask = nav2_mask(&map, MaskKind::Cost, threshold, None).unwrap();
         let plan = crate::floorplan::FloorPlan {
-            map: None,
             image: String::new(),
             resolution: map.grid.resolution_m,
             origin: [0.0; 3],

@@ -89,9 +89,6 @@ impl<'de> Deserialize<'de> for Negate {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FloorPlan {
-    /// Only in scenario files, and gone once resolved: the map YAML's path.
-    #[serde(default, deserialize_with = "crate::input::present", skip_serializing)]
-    pub map: Option<String>,
     /// The image file (PGM P2/P5 or PNG, 8-bit grey), base64.
     pub image: String,
     /// Pixel side (m).
@@ -223,14 +220,6 @@ pub fn decode(plan: &FloorPlan, ceiling_m: f64) -> Result<Raster, FieldError> {
 /// Checks the fields of a floor plan that do not need the image.
 pub fn check_fields(plan: &FloorPlan) -> Result<(), FieldError> {
     let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
-    if plan.map.is_some() {
-        return err(
-            "floor_plan.map",
-            "a map file is read only where files are: in a scenario file given to the CLI or \
-             found by `serve` at start-up; over HTTP send the map's fields and its image inline \
-             (`irs-planner scenario FILE` prints that form)",
-        );
-    }
     if !(plan.resolution.is_finite() && plan.resolution > 0.0) {
         return err(
             "floor_plan.resolution",
@@ -265,6 +254,20 @@ pub fn check_fields(plan: &FloorPlan) -> Result<(), FieldError> {
         return err("floor_plan.obstacle_height_m", "must be positive");
     }
     Ok(())
+}
+
+/// Rejects a file reference left in a document that was not read from a file (an HTTP body):
+/// the server reads no files on a client's behalf.
+pub fn reject_map_reference(document: &serde_json::Value) -> Result<(), FieldError> {
+    match document.get("floor_plan").and_then(|p| p.get("map")) {
+        Some(_) => Err(FieldError::new(
+            "floor_plan.map",
+            "a map file is read only where files are: in a scenario file given to the CLI or \
+             found by `serve` at start-up; over HTTP send the map's fields and its image inline \
+             (`irs-planner scenario --scenario FILE` prints that form)",
+        )),
+        None => Ok(()),
+    }
 }
 
 /// Reads a file for [`resolve_map_reference`].
@@ -422,7 +425,6 @@ mod tests {
 
     fn plan(image: &[u8]) -> FloorPlan {
         FloorPlan {
-            map: None,
             image: b64(image),
             resolution: 0.5,
             origin: [-1.0, -2.0, 0.0],
@@ -526,12 +528,11 @@ mod tests {
 
     #[test]
     fn field_checks_name_the_field() {
-        let cases: [(fn(&mut FloorPlan), &str); 5] = [
+        let cases: [(fn(&mut FloorPlan), &str); 4] = [
             (|p| p.origin[2] = 0.5, "floor_plan.origin"),
             (|p| p.resolution = 0.0, "floor_plan.resolution"),
             (|p| p.free_thresh = 0.7, "floor_plan.free_thresh"),
             (|p| p.occupied_thresh = 1.5, "floor_plan.occupied_thresh"),
-            (|p| p.map = Some("x.yaml".into()), "floor_plan.map"),
         ];
         for (mutate, field) in cases {
             let mut p = plan(P5);

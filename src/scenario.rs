@@ -329,6 +329,7 @@ impl Scenario {
 
     /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
     pub fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
+        floorplan::reject_map_reference(&value)?;
         let mut scenario = deserialize_tracking_path(value)?;
         scenario.resolve_defaults();
         scenario.validate()?;

@@ -201,7 +201,7 @@ fn openapi_query_patterns_are_the_servers_number_grammar() {
         .filter_map(|line| line.split("pattern: ").nth(1))
         .map(|rest| rest.split(" }").next().unwrap())
         .collect();
-    assert_eq!(patterns.len(), 4, "threshold ×2, start, goal");
+    assert_eq!(patterns.len(), 6, "threshold ×3, start, goal, best");
     for pattern in patterns {
         assert!(expected.iter().any(|e| e == pattern), "{pattern}");
     }
@@ -902,4 +902,146 @@ async fn map_image_is_a_png_with_the_path() {
         "invalid_field",
     );
     assert_eq!(body["field"], "goal");
+}
+
+/// The warehouse's floor plan through the API: registered inline as `irs-planner scenario`
+/// prints it (the same scenario and map ids as the CLI's), a gain map, its Nav2 masks as tar
+/// archives and its values as .npy. A file reference or a bad image is 422 naming the field,
+/// and nothing is registered.
+#[tokio::test]
+async fn floor_plans_and_exports_over_http() {
+    let server = start(&[]);
+    let cli = |args: &[&str]| -> Value {
+        let out = Command::new(env!("CARGO_BIN_EXE_irs-planner"))
+            .args(args)
+            .current_dir(root())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let file = "scenarios/warehouse/warehouse.json";
+    let doc = cli(&["scenario", "--scenario", file]);
+    let cli_map = cli(&["map", "--scenario", file, "--kind", "gain", "--quiet"]);
+    let (status, registered) = server.post("/v1/scenarios", doc.clone()).await;
+    assert_eq!(status, StatusCode::CREATED, "{registered}");
+    assert_eq!(registered["id"], cli_map["key"]["scenario_id"]);
+    let (status, map) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario_id": registered["id"], "kind": "gain"}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{map}");
+    assert_eq!(map["map_id"], cli_map["map_id"]);
+    let map_url = format!(
+        "{}/v1/maps/{}",
+        server.base,
+        map["map_id"].as_str().unwrap()
+    );
+
+    let fetch = |url: String| {
+        let client = server.client.clone();
+        async move {
+            let resp = client.get(url).send().await.unwrap();
+            let status = resp.status();
+            let kind = resp.headers()["content-type"].to_str().unwrap().to_string();
+            (status, kind, resp.bytes().await.unwrap().to_vec())
+        }
+    };
+    for (query, stem) in [
+        ("threshold=-70", "keepout"),
+        ("threshold=-70&mask=cost&best=-50", "cost"),
+    ] {
+        let (status, kind, bytes) = fetch(format!("{map_url}/nav2-mask?{query}")).await;
+        assert_eq!(
+            (status, kind.as_str()),
+            (StatusCode::OK, "application/x-tar")
+        );
+        let mut archive = tar::Archive::new(bytes.as_slice());
+        let mut entries: Vec<(String, Vec<u8>)> = Vec::new();
+        for entry in archive.entries().unwrap() {
+            let mut entry = entry.unwrap();
+            let mut data = Vec::new();
+            std::io::Read::read_to_end(&mut entry, &mut data).unwrap();
+            entries.push((entry.path().unwrap().display().to_string(), data));
+        }
+        assert_eq!(entries[0].0, format!("{stem}.yaml"));
+        assert_eq!(entries[1].0, format!("{stem}.pgm"));
+        let yaml = String::from_utf8(entries[0].1.clone()).unwrap();
+        assert!(
+            yaml.contains("resolution: 0.25") && yaml.contains("-30.125"),
+            "{yaml}"
+        );
+        assert!(entries[1].1.starts_with(b"P5\n241 161"));
+    }
+    let (status, kind, bytes) = fetch(format!("{map_url}/values.npy")).await;
+    assert_eq!(
+        (status, kind.as_str()),
+        (StatusCode::OK, "application/octet-stream")
+    );
+    let npy = npyz::NpyFile::new(bytes.as_slice()).unwrap();
+    assert_eq!(npy.shape(), [241, 161]);
+
+    for (query, field) in [
+        ("", "threshold"),
+        ("threshold=-70&mask=speed", "mask"),
+        ("threshold=-70&best=-50", "best"),
+        ("threshold=-70&mask=cost&best=-80", "best"),
+        ("threshold=x", "threshold"),
+        ("threshold=-70&colour=1", "colour"),
+    ] {
+        let (status, body) = server
+            .get(&format!(
+                "/v1/maps/{}/nav2-mask?{query}",
+                map["map_id"].as_str().unwrap()
+            ))
+            .await;
+        problem(
+            status,
+            &body,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+        );
+        assert_eq!(body["field"], field, "{query}: {body}");
+    }
+
+    let (_, before) = server.get("/v1/scenarios").await;
+    let count = before["scenarios"].as_array().unwrap().len();
+    let mut by_reference = doc.clone();
+    by_reference["floor_plan"] = json!({"map": "map.yaml"});
+    let (status, body) = server.post("/v1/scenarios", by_reference).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_scenario",
+    );
+    assert_eq!(body["field"], "floor_plan.map");
+    let mut colour = doc.clone();
+    colour["floor_plan"]["image"] = "UDYKMSAxCjI1NQoAAAA=".into(); // "P6\n1 1\n255\n\0\0\0"
+    let (status, body) = server.post("/v1/scenarios", colour).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_scenario",
+    );
+    assert_eq!(body["field"], "floor_plan.image");
+    let mut yawed = doc;
+    yawed["floor_plan"]["origin"] = json!([-30.0, -20.0, 0.1]);
+    let (status, body) = server.post("/v1/scenarios", yawed).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_scenario",
+    );
+    assert_eq!(body["field"], "floor_plan.origin");
+    let (_, after) = server.get("/v1/scenarios").await;
+    assert_eq!(after["scenarios"].as_array().unwrap().len(), count);
 }

@@ -30,8 +30,9 @@ pub struct ServeArgs {
     /// Log format on stderr.
     #[arg(long, env = "IRS_LOG_FORMAT", value_enum, default_value = "text")]
     pub log_format: LogFormat,
-    /// Largest request body in KiB (413 above).
-    #[arg(long, env = "IRS_MAX_BODY_KB", default_value_t = 1024)]
+    /// Largest request body in KiB (413 above). A floor plan travels inside the scenario as
+    /// base64: the warehouse's 1200 × 800 PGM is 1.3 MB of it, a 4096² map 22 MB.
+    #[arg(long, env = "IRS_MAX_BODY_KB", default_value_t = 8192)]
     pub max_body_kb: usize,
     /// Largest number of registered scenarios (507 above).
     #[arg(long, env = "IRS_MAX_SCENARIOS", default_value_t = 1000)]
