@@ -1070,6 +1070,129 @@ mod tests {
         assert!(e.reason.contains("invalid length"), "{e}");
     }
 
+    /// The canonical form of a scenario without walls or a floor plan does not mention them,
+    /// so ids from before they existed stand (this id is the paper floor's since the start).
+    #[test]
+    fn scenarios_without_walls_or_floor_plans_keep_their_ids() {
+        let s = Scenario::builtin("paper-single-user").unwrap();
+        let canonical = s.canonical_json();
+        assert!(!canonical.contains("walls") && !canonical.contains("floor_plan"));
+        assert_eq!(s.content_hash(), "0f9d7233fc2ba13d34e5b5949a3e75f6");
+    }
+
+    #[test]
+    fn walls_are_checked_field_by_field() {
+        let wall = |edit: fn(&mut serde_json::Value)| {
+            mutated(|v| {
+                v["walls"] = serde_json::json!([
+                    {"from": [0.5, 1.0], "to": [1.5, 1.0], "thickness_m": 0.2, "height_m": 2.0}
+                ]);
+                edit(&mut v["walls"][0]);
+            })
+        };
+        let cases: [(fn(&mut serde_json::Value), &str); 5] = [
+            (|w| w["thickness_m"] = 0.into(), "walls[0].thickness_m"),
+            (|w| w["height_m"] = (-1).into(), "walls[0].height_m"),
+            (|w| w["to"] = w["from"].clone(), "walls[0].to"),
+            (
+                |w| w["from"] = serde_json::json!([-3.0, 1.0]),
+                "walls[0].from",
+            ),
+            (
+                |w| w["from"] = serde_json::json!([0.5, 1.0, 0.0]),
+                "walls[0].from",
+            ),
+        ];
+        for (edit, field) in cases {
+            assert_eq!(wall(edit).field, field);
+        }
+    }
+
+    /// An IRS may hang on a wall at any angle, facing away from it; inside the wall, facing it
+    /// or floating beside it is rejected naming the field.
+    #[test]
+    fn an_irs_may_hang_on_a_diagonal_wall() {
+        // A wall from (1, 1) to (3, 3), 0.2 m thick: its north-west face passes through
+        // (2, 2) + 0.1·(−1, 1)/√2.
+        let h = 0.1 / 2f64.sqrt();
+        let with_irs = |centre: [f64; 2], normal: [f64; 2]| {
+            let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+            v["obstacles"] = serde_json::json!([]);
+            v["walls"] = serde_json::json!([
+                {"from": [1.0, 1.0], "to": [3.0, 3.0], "thickness_m": 0.2, "height_m": 2.5}
+            ]);
+            v["ap"]["position"] = serde_json::json!([0.5, 3.5, 2.0]);
+            v["irs"]["center"] = serde_json::json!([centre[0], centre[1], 1.5]);
+            v["irs"]["normal"] = serde_json::json!([normal[0], normal[1], 0.0]);
+            Scenario::from_json(&v.to_string())
+        };
+        let n = [-(0.5f64.sqrt()), 0.5f64.sqrt()];
+        assert!(with_irs([2.0 - h, 2.0 + h], n).is_ok());
+        let field = |r: Result<Scenario, FieldError>| r.unwrap_err().field;
+        assert_eq!(
+            field(with_irs([2.0, 2.0], n)),
+            "irs.center",
+            "inside the wall"
+        );
+        assert_eq!(
+            field(with_irs([2.0 - 3.0 * h, 2.0 + 3.0 * h], n)),
+            "irs.center",
+            "in the air"
+        );
+        // On the south-east face, facing north-west: into the wall (and the AP is behind it, so
+        // the AP check speaks first unless the AP moves).
+        let e = with_irs([2.0 + h, 2.0 - h], n).unwrap_err();
+        assert_eq!(e.field, "irs.normal", "{e}");
+    }
+
+    #[test]
+    fn floor_plan_errors_name_the_field() {
+        use base64::Engine;
+        let image = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
+        // 12 × 8 white pixels of 0.5 m from the room's corner cover the 6 m × 4 m room.
+        let mut white = b"P5\n12 8\n255\n".to_vec();
+        white.extend([254u8; 96]);
+        let plan = serde_json::json!({
+            "image": image(&white), "resolution": 0.5, "origin": [0.0, 0.0, 0.0], "negate": 0,
+            "occupied_thresh": 0.65, "free_thresh": 0.25,
+        });
+        let with_plan = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+            v["floor_plan"] = plan.clone();
+            edit(&mut v["floor_plan"]);
+            Scenario::from_json(&v.to_string())
+        };
+        let s = with_plan(&|_| {}).unwrap();
+        assert_eq!(s.floor_plan.as_ref().unwrap().obstacle_height_m, Some(3.0));
+        let cases: [(&dyn Fn(&mut serde_json::Value), &str); 7] = [
+            (
+                &|p| p["origin"] = serde_json::json!([0.0, 0.0]),
+                "floor_plan.origin",
+            ),
+            (
+                &|p| p["origin"] = serde_json::json!([0.5, 0.0, 0.0]),
+                "floor_plan",
+            ),
+            (&|p| p["resolution"] = 0.25.into(), "floor_plan"),
+            (&|p| p["image"] = "AAAA".into(), "floor_plan.image"),
+            (&|p| p["negate"] = 2.into(), "floor_plan.negate"),
+            (
+                &|p| p["unknown_as"] = "maybe".into(),
+                "floor_plan.unknown_as",
+            ),
+            (
+                &|p| p["obstacle_height_m"] = 0.into(),
+                "floor_plan.obstacle_height_m",
+            ),
+        ];
+        for (edit, field) in cases {
+            assert_eq!(with_plan(edit).unwrap_err().field, field);
+        }
+        let e =
+            Scenario::from_value(serde_json::json!({"floor_plan": {"map": "m.yaml"}})).unwrap_err();
+        assert_eq!(e.field, "floor_plan.map");
+    }
+
     #[test]
     fn snap_rejects_points_outside_the_room() {
         let s = Scenario::from_json(SMALL).unwrap();

@@ -348,10 +348,14 @@ function draw() {
   const span = high > low ? high - low : 1;
   const image = ctx.createImageData(nx * L.cell, ny * L.cell);
   const dimming = state.layer === "value" && state.threshold !== null;
+  // A gain map has a value in every free cell, so its nulls are exactly the occupied cells
+  // (boxes, walls, floor-plan pixels): grey. On rate maps a null may also be a cell where no
+  // configuration serves every SRU: black.
+  const empty = state.map.key.kind === "gain" ? [128, 128, 128] : [0, 0, 0];
   for (let i = 0; i < nx; i++) {
     for (let j = 0; j < ny; j++) {
       const v = values[i][j];
-      let rgb = v === null ? [0, 0, 0] : VIRIDIS[Math.round(Math.min(Math.max((v - low) / span, 0), 1) * 255)];
+      let rgb = v === null ? empty : VIRIDIS[Math.round(Math.min(Math.max((v - low) / span, 0), 1) * 255)];
       if (v !== null && dimming && v < state.threshold) rgb = rgb.map((c) => Math.floor(c * DIM));
       const x0 = i * L.cell;
       const y0 = (ny - 1 - j) * L.cell;
