@@ -123,7 +123,7 @@ pub fn nav2_mask(
                     .filter(|v| v.is_finite())
                     .fold(f64::NAN, f64::max),
             };
-            if !(best > threshold) {
+            if best.is_nan() || best <= threshold {
                 return Err(FieldError::new(
                     "best",
                     format!(
@@ -219,7 +219,7 @@ mod tests {
         let key = MapKey::gain("u", &imported, PhaseMode::Continuous).unwrap();
         let again = build(&imported, &key, &Progress::default()).unwrap();
         let expected: Vec<bool> = (0..map.grid.cells())
-            .map(|k| map.occupied[k] || !(map.values[k] >= threshold))
+            .map(|k| map.occupied[k] || map.values[k].is_nan() || map.values[k] < threshold)
             .collect();
         assert!(expected.iter().any(|&o| o) && expected.iter().any(|&o| !o));
         assert_eq!(again.occupied, expected);

@@ -357,8 +357,9 @@ pub struct EncodedMap {
 
 /// Writes `values` (Nav2 cell values, row-major from the *bottom* row, `width` per row) as a PGM
 /// and its YAML (`image: {image_name}`), with the map's resolution and origin. `trinary` maps
-/// (values 0 and 100 only) use map_saver's pixels (254 free, 0 occupied) and thresholds 0.65 /
-/// 0.25; `scale` maps (values 0…100, a cost or speed mask) use `free_thresh 0, occupied_thresh
+/// (values 0, 100 and −1) use map_saver's pixels (254 free, 0 occupied, 205 unknown) with
+/// thresholds 0.65 / 0.196: ROS's map_saver pair, under which 205 (occ 50/255 = 0.19608) reads
+/// back as unknown — with Nav2's default free_thresh 0.25 it would read back as free; `scale` maps (values 0…100, a cost or speed mask) use `free_thresh 0, occupied_thresh
 /// 1` as Nav2's speed-filter masks do, with the pixel 255 − 2.55·v rounded, which Nav2's
 /// `rint(occ·100)` maps back to v exactly.
 pub fn encode_map(
@@ -399,7 +400,7 @@ pub fn encode_map(
         .expect("encoding into memory cannot fail");
     let (occupied_thresh, free_thresh) = match mode {
         MapMode::Scale => (1.0, 0.0),
-        _ => (0.65, 0.25),
+        _ => (0.65, 0.196),
     };
     let yaml = serde_saphyr::to_string(&MapYaml {
         image: image_name.to_string(),
@@ -528,7 +529,8 @@ mod tests {
 
     #[test]
     fn field_checks_name_the_field() {
-        let cases: [(fn(&mut FloorPlan), &str); 4] = [
+        type Edit = fn(&mut FloorPlan);
+        let cases: [(Edit, &str); 4] = [
             (|p| p.origin[2] = 0.5, "floor_plan.origin"),
             (|p| p.resolution = 0.0, "floor_plan.resolution"),
             (|p| p.free_thresh = 0.7, "floor_plan.free_thresh"),
@@ -630,16 +632,19 @@ mod tests {
         let grey = decode_grey(&bytes).unwrap();
         let back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
         assert_eq!(back, values);
-        let keepout: Vec<i8> = (0..12).map(|k| if k % 3 == 0 { 100 } else { 0 }).collect();
+        let keepout: Vec<i8> = (0..12).map(|k| [100, 0, -1][k % 3]).collect();
         let trinary = encode_map(&keepout, 4, 0.5, [0.0, 0.0], MapMode::Trinary, "k.pgm");
+        let yaml: MapYaml = serde_saphyr::from_str(&trinary.yaml).unwrap();
         let p = FloorPlan {
             image: b64(&trinary.pgm),
+            free_thresh: yaml.free_thresh,
+            occupied_thresh: yaml.occupied_thresh,
             ..plan(P5)
         };
-        let r = decode(&p, 2.0).unwrap();
-        assert_eq!(
-            r.occupied,
-            keepout.iter().map(|&v| v == 100).collect::<Vec<_>>()
-        );
+        let grey = decode_grey(&trinary.pgm).unwrap();
+        let mut back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
+        // Image rows run from the top: flip them back to map rows.
+        back = back.chunks(4).rev().flatten().copied().collect();
+        assert_eq!(back, keepout, "occupied, free and unknown read back");
     }
 }

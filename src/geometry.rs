@@ -111,23 +111,24 @@ impl Wall {
     }
 
     /// (s, w, z) of a point in the wall's frame.
-    fn to_local(&self, p: &P3) -> P3 {
+    fn local_coordinates(&self, p: &P3) -> P3 {
         let (dx, dy) = (p[0] - self.from[0], p[1] - self.from[1]);
         let [ax, ay] = self.axis;
         P3::new(dx * ax + dy * ay, dy * ax - dx * ay, p[2])
     }
 
     fn blocks(&self, a: &P3, b: &P3) -> bool {
-        self.local.blocks(&self.to_local(a), &self.to_local(b))
+        self.local
+            .blocks(&self.local_coordinates(a), &self.local_coordinates(b))
     }
 
     fn covers(&self, x: f64, y: f64) -> bool {
-        let p = self.to_local(&P3::new(x, y, 0.0));
+        let p = self.local_coordinates(&P3::new(x, y, 0.0));
         self.local.covers(p[0], p[1])
     }
 
     fn contains(&self, p: &P3) -> bool {
-        self.local.contains(&self.to_local(p))
+        self.local.contains(&self.local_coordinates(p))
     }
 }
 
@@ -229,6 +230,10 @@ impl Raster {
         let (ua, va) = self.to_pixels(a[0], a[1]);
         let (ub, vb) = self.to_pixels(b[0], b[1]);
         let (du, dv) = (ub - ua, vb - va);
+        if du == 0.0 && dv == 0.0 {
+            // Vertical: a point in plan view.
+            return self.interior_at(ua, va);
+        }
         // The clipped part's ends; unclipped ends keep their snapped values exactly.
         let at = |t: f64, s: f64, d: f64, end: f64| {
             if t == 0.0 {
@@ -243,9 +248,6 @@ impl Raster {
             (at(t0, ua, du, ub), at(t0, va, dv, vb)),
             (at(t1, ua, du, ub), at(t1, va, dv, vb)),
         );
-        if du == 0.0 && dv == 0.0 {
-            return self.interior_at(ua, va);
-        }
         if du.abs() >= dv.abs() {
             self.walk(p, q, |c, r| self.is_occupied(c, r))
         } else {
@@ -253,8 +255,10 @@ impl Raster {
         }
     }
 
-    /// Walks the segment p→q (pixel coordinates, major axis first, |Δmajor| ≥ |Δminor| > or = 0)
-    /// column by column; `occupied(major, minor)` looks a pixel up.
+    /// Walks the segment p→q, given as (major, minor) pixel coordinates with |Δmajor| ≥ |Δminor|
+    /// and Δmajor ≠ 0, one major-axis column at a time: in each column the segment spans at most
+    /// two or three minor-axis pixels. `occupied(major, minor)` looks a pixel up; pixels outside
+    /// the raster are free.
     fn walk(&self, p: (f64, f64), q: (f64, f64), occupied: impl Fn(i64, i64) -> bool) -> bool {
         let (p, q) = if p.0 <= q.0 { (p, q) } else { (q, p) };
         let slope = (q.1 - p.1) / (q.0 - p.0);

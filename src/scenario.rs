@@ -1090,7 +1090,8 @@ mod tests {
                 edit(&mut v["walls"][0]);
             })
         };
-        let cases: [(fn(&mut serde_json::Value), &str); 5] = [
+        type Edit = fn(&mut serde_json::Value);
+        let cases: [(Edit, &str); 5] = [
             (|w| w["thickness_m"] = 0.into(), "walls[0].thickness_m"),
             (|w| w["height_m"] = (-1).into(), "walls[0].height_m"),
             (|w| w["to"] = w["from"].clone(), "walls[0].to"),
@@ -1164,7 +1165,8 @@ mod tests {
         };
         let s = with_plan(&|_| {}).unwrap();
         assert_eq!(s.floor_plan.as_ref().unwrap().obstacle_height_m, Some(3.0));
-        let cases: [(&dyn Fn(&mut serde_json::Value), &str); 7] = [
+        type Edit<'a> = &'a dyn Fn(&mut serde_json::Value);
+        let cases: [(Edit, &str); 7] = [
             (
                 &|p| p["origin"] = serde_json::json!([0.0, 0.0]),
                 "floor_plan.origin",
