@@ -9,8 +9,13 @@
 //! * w̃_n = √(L_AI K_AI/(K_AI+1)) √(L_IM K_IM/(K_IM+1)) · Σ_{elements of n} e^{−j2π(d_A,e + d_e,U)/λ},
 //! * τ = L_AM/(K_AM+1) + L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
 //!
+//! With several IRSs the model generalises exactly: w̃ is the surfaces' vectors concatenated in
+//! scenario order and τ sums the scattered power of every path, λ(θ) = |h̃ + Σ_s w̃_sᵀθ_s|² + τ.
+//! Paths via two surfaces (IRS → IRS) are not modelled: each is a product of two path gains
+//! over the already weak single-bounce ones.
+//!
 //! Choices the paper leaves open (also in the README):
-//! * Path losses L_AI and L_IM use the distance to the IRS centre, as the paper's scalar
+//! * Path losses L_AI and L_IM use the distance to each IRS's centre, as the paper's scalar
 //!   L_AI, L_IM(q) do; LoS *phases* use exact (spherical) distances to each sub-surface centre
 //!   (`coherent`) or each element (`elements`).
 //! * A link is LoS unless its segment passes through the interior of a box, a wall or the floor
@@ -20,7 +25,7 @@
 //!   gets no IRS term at all (neither w̃ nor the scattered part of τ).
 
 use crate::geometry::Obstructions;
-use crate::scenario::{Grouping, Scenario};
+use crate::scenario::{Grouping, Irs, SPEED_OF_LIGHT, Scenario};
 use nalgebra::{Complex, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -64,12 +69,14 @@ pub fn path_loss_db(distance_m: f64, carrier_ghz: f64, los: bool) -> f64 {
     }
 }
 
-/// The IRS as the channel model sees it: its scattering points and the fixed AP–IRS link.
+/// One IRS as the channel model sees it: its scattering points and the fixed AP–IRS link.
 #[derive(Debug, Clone)]
 struct IrsModel {
     centre: P3,
     normal: P3,
-    /// N.
+    /// Where this surface's sub-surfaces start in the concatenated vectors w̃ and θ.
+    offset: usize,
+    /// N_s, this surface's sub-surfaces.
     subsurfaces: usize,
     /// Scattering points: sub-surface centres (`coherent`) or elements (`elements`); the points
     /// of sub-surface n are `points[n·per_sub .. (n+1)·per_sub]`.
@@ -77,11 +84,14 @@ struct IrsModel {
     per_sub: usize,
     /// How many elements each point stands for: N̄ (`coherent`) or 1 (`elements`).
     weight: f64,
-    /// M.
+    /// M_s, this surface's elements.
     elements: usize,
     /// d(AP, point) for every point.
     ap_distance: Vec<f64>,
     ap_link: LinkBudget,
+    /// False when this AP is on or behind the surface's plane: the surface then reflects
+    /// nothing of it (with several APs a surface may face only some of them).
+    faces_ap: bool,
 }
 
 /// The deterministic part of the model for one scenario; cheap to share across threads.
@@ -93,7 +103,10 @@ pub struct ChannelModel {
     ap: P3,
     /// Boxes, walls and the floor plan: what blocks a link.
     obstructions: Obstructions,
-    irs: Option<IrsModel>,
+    /// The IRSs in scenario order; their sub-surfaces are numbered one after the other.
+    surfaces: Vec<IrsModel>,
+    /// N = Σ_s N_s.
+    subsurfaces: usize,
 }
 
 /// (h̃, τ) of one location; w̃ is written into a caller's buffer so hot loops do not allocate.
@@ -106,62 +119,82 @@ pub struct DirectAndScattered {
 }
 
 impl ChannelModel {
-    /// Builds the model of a validated scenario.
+    /// Builds the model of a validated scenario, for its first AP.
     pub fn new(scenario: &Scenario) -> ChannelModel {
-        let lambda = scenario.wavelength_m();
+        ChannelModel::for_ap(scenario, 0)
+    }
+
+    /// Builds the model of a validated scenario as AP `ap` (an index into
+    /// [`Scenario::access_points`]) sees it: that AP's position and carrier, every IRS.
+    pub fn for_ap(scenario: &Scenario, ap: usize) -> ChannelModel {
+        let access_point = &scenario.access_points()[ap];
         let mut model = ChannelModel {
-            wavelength_m: lambda,
-            carrier_ghz: scenario.ap.carrier_ghz,
+            wavelength_m: SPEED_OF_LIGHT / (access_point.carrier_ghz * 1e9),
+            carrier_ghz: access_point.carrier_ghz,
             kappa: 10f64.powf(scenario.channel.rician_k_db / 10.0),
-            ap: P3::from(scenario.ap.position),
+            ap: P3::from(access_point.position),
             obstructions: scenario.obstructions(),
-            irs: None,
+            surfaces: Vec::new(),
+            subsurfaces: 0,
         };
-        if let Some(irs) = &scenario.irs {
-            let centre = P3::from(irs.center);
-            let normal = P3::from(irs.normal).normalize();
-            // Wall axes: horizontal u_h = ẑ × n (normalised), vertical u_v = n × u_h.
-            let u_h = P3::z().cross(&normal).normalize();
-            let u_v = normal.cross(&u_h);
-            let pitch = irs.sub_pitch_m.expect("defaults resolved");
-            let n_bar = irs.elements_per_sub;
-            let mut points = Vec::new();
-            let (per_sub, weight) = match irs.grouping {
-                Grouping::Coherent => (1, n_bar as f64),
-                Grouping::Elements => (n_bar, 1.0),
-            };
-            let element_pitch = irs.element_pitch_m.unwrap_or(0.0);
-            for ix in 0..irs.nx_sub {
-                for iz in 0..irs.nz_sub {
-                    let sub_centre = centre
-                        + u_h * ((ix as f64 - (irs.nx_sub as f64 - 1.0) / 2.0) * pitch)
-                        + u_v * ((iz as f64 - (irs.nz_sub as f64 - 1.0) / 2.0) * pitch);
-                    for k in 0..per_sub {
-                        let offset = (k as f64 - (per_sub as f64 - 1.0) / 2.0) * element_pitch;
-                        points.push(sub_centre + u_h * offset);
-                    }
-                }
-            }
-            let ap_distance = points.iter().map(|p| (p - model.ap).norm()).collect();
-            let ap_link = model.link_budget(&model.ap.clone(), &centre);
-            model.irs = Some(IrsModel {
-                centre,
-                normal,
-                subsurfaces: irs.subsurfaces(),
-                points,
-                per_sub,
-                weight,
-                elements: irs.elements(),
-                ap_distance,
-                ap_link,
-            });
+        for irs in scenario.surfaces() {
+            let surface = model.surface(irs, model.subsurfaces);
+            model.subsurfaces += surface.subsurfaces;
+            model.surfaces.push(surface);
         }
         model
     }
 
-    /// N, the length of w̃ and θ (0 without an IRS).
+    /// The model of one IRS whose sub-surfaces start at `offset` in the concatenated vectors.
+    fn surface(&self, irs: &Irs, offset: usize) -> IrsModel {
+        let centre = P3::from(irs.center);
+        let normal = P3::from(irs.normal).normalize();
+        // Wall axes: horizontal u_h = ẑ × n (normalised), vertical u_v = n × u_h.
+        let u_h = P3::z().cross(&normal).normalize();
+        let u_v = normal.cross(&u_h);
+        let pitch = irs.sub_pitch_m.expect("defaults resolved");
+        let n_bar = irs.elements_per_sub;
+        let mut points = Vec::new();
+        let (per_sub, weight) = match irs.grouping {
+            Grouping::Coherent => (1, n_bar as f64),
+            Grouping::Elements => (n_bar, 1.0),
+        };
+        let element_pitch = irs.element_pitch_m.unwrap_or(0.0);
+        for ix in 0..irs.nx_sub {
+            for iz in 0..irs.nz_sub {
+                let sub_centre = centre
+                    + u_h * ((ix as f64 - (irs.nx_sub as f64 - 1.0) / 2.0) * pitch)
+                    + u_v * ((iz as f64 - (irs.nz_sub as f64 - 1.0) / 2.0) * pitch);
+                for k in 0..per_sub {
+                    let along = (k as f64 - (per_sub as f64 - 1.0) / 2.0) * element_pitch;
+                    points.push(sub_centre + u_h * along);
+                }
+            }
+        }
+        let ap_distance = points.iter().map(|p| (p - self.ap).norm()).collect();
+        IrsModel {
+            centre,
+            normal,
+            offset,
+            subsurfaces: irs.subsurfaces(),
+            points,
+            per_sub,
+            weight,
+            elements: irs.elements(),
+            ap_distance,
+            ap_link: self.link_budget(&self.ap, &centre),
+            faces_ap: (self.ap - centre).dot(&normal) > 0.0,
+        }
+    }
+
+    /// N, the length of w̃ and θ: every surface's sub-surfaces (0 without an IRS).
     pub fn subsurfaces(&self) -> usize {
-        self.irs.as_ref().map_or(0, |i| i.subsurfaces)
+        self.subsurfaces
+    }
+
+    /// N_s of each surface in scenario order: how θ splits into the surfaces' phase vectors.
+    pub fn surface_lengths(&self) -> Vec<usize> {
+        self.surfaces.iter().map(|s| s.subsurfaces).collect()
     }
 
     /// True when the segment between two points passes through an obstacle's interior.
@@ -187,14 +220,18 @@ impl ChannelModel {
         C64::new(c, s)
     }
 
-    /// The IRS–user link budget, or `None` when the user is not in front of the IRS.
+    /// The IRS–user link budget, or `None` when the surface cannot serve the user: the user is
+    /// not in front of it, or the AP is not.
     fn irs_user_link(&self, irs: &IrsModel, user: &P3) -> Option<LinkBudget> {
-        ((user - irs.centre).dot(&irs.normal) > 0.0).then(|| self.link_budget(&irs.centre, user))
+        (irs.faces_ap && (user - irs.centre).dot(&irs.normal) > 0.0)
+            .then(|| self.link_budget(&irs.centre, user))
     }
 
-    /// Evaluates (h̃, w̃, τ) at `user`. `w` must have length N; it is filled with w̃ (zeros when
-    /// `with_irs` is false or the IRS cannot serve this location). Without the IRS, τ holds only
-    /// the direct link's scattered power: the "no IRS" benchmark of the paper's Section IV.
+    /// Evaluates (h̃, w̃, τ) at `user`. `w` must have length N; it is filled with w̃, the
+    /// surfaces' coefficients one after the other (zeros when `with_irs` is false or where a
+    /// surface cannot serve this location). τ sums the direct link's scattered power and every
+    /// surface's (Lemma 1 per surface; the scattered parts of different paths are independent).
+    /// Without the IRS τ holds only the direct link's: the "no IRS" benchmark of Section IV.
     pub fn evaluate(&self, user: [f64; 3], with_irs: bool, w: &mut [C64]) -> DirectAndScattered {
         debug_assert_eq!(w.len(), self.subsurfaces());
         let q = P3::from(user);
@@ -202,35 +239,39 @@ impl ChannelModel {
         let h = self.los_phase((q - self.ap).norm()) * direct.los_amplitude();
         let mut tau = direct.scattered_power();
         w.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
-        let Some(irs) = self.irs.as_ref().filter(|_| with_irs) else {
+        if !with_irs {
             return DirectAndScattered { h, tau };
-        };
-        let Some(user_link) = self.irs_user_link(irs, &q) else {
-            return DirectAndScattered { h, tau };
-        };
-        let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
-        // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
-        tau += irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
-            / ((ka + 1.0) * (ku + 1.0));
-        let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
-        if amplitude > 0.0 {
-            for (n, wn) in w.iter_mut().enumerate() {
-                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
-                let mut sum = C64::new(0.0, 0.0);
-                for (p, d_ap) in irs.points[range.clone()]
-                    .iter()
-                    .zip(&irs.ap_distance[range])
-                {
-                    sum += self.los_phase(d_ap + (q - p).norm());
+        }
+        for irs in &self.surfaces {
+            let Some(user_link) = self.irs_user_link(irs, &q) else {
+                continue;
+            };
+            let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
+            // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
+            tau +=
+                irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
+                    / ((ka + 1.0) * (ku + 1.0));
+            let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
+            if amplitude > 0.0 {
+                let own = &mut w[irs.offset..irs.offset + irs.subsurfaces];
+                for (n, wn) in own.iter_mut().enumerate() {
+                    let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                    let mut sum = C64::new(0.0, 0.0);
+                    for (p, d_ap) in irs.points[range.clone()]
+                        .iter()
+                        .zip(&irs.ap_distance[range])
+                    {
+                        sum += self.los_phase(d_ap + (q - p).norm());
+                    }
+                    *wn = sum * amplitude;
                 }
-                *wn = sum * amplitude;
             }
         }
         DirectAndScattered { h, tau }
     }
 
-    /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 11) at `user`, in [0, 2π), for every sub-surface (`out` has
-    /// length N). With `coherent` grouping w̃_n is a positive amplitude times
+    /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 11) at `user`, in [0, 2π), for every sub-surface of every
+    /// surface (`out` has length N). With `coherent` grouping w̃_n is a positive amplitude times
     /// e^{−j2π(d_A,n + d_n,U)/λ}, so its angle follows from the two distances without any
     /// trigonometry; with `elements` it is the angle of the element sum. Where a term vanishes
     /// (an NLoS link, a user behind the IRS) its angle is taken as 0: every θ is then optimal.
@@ -243,34 +284,36 @@ impl ChannelModel {
         } else {
             0.0
         };
-        let Some(irs) = self.irs.as_ref() else { return };
-        let cascade_los = self
-            .irs_user_link(irs, &q)
-            .is_some_and(|l| l.los && irs.ap_link.los);
-        for (n, theta) in out.iter_mut().enumerate() {
-            let w_angle = if !cascade_los {
-                0.0
-            } else if irs.per_sub == 1 {
-                angle_of_distance(irs.ap_distance[n] + (q - irs.points[n]).norm())
-            } else {
-                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
-                let sum: C64 = irs.points[range.clone()]
-                    .iter()
-                    .zip(&irs.ap_distance[range])
-                    .map(|(p, d_ap)| self.los_phase(d_ap + (q - p).norm()))
-                    .sum();
-                if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
-            };
-            *theta = (h_angle - w_angle).rem_euclid(TAU);
+        for irs in &self.surfaces {
+            let cascade_los = self
+                .irs_user_link(irs, &q)
+                .is_some_and(|l| l.los && irs.ap_link.los);
+            let own = &mut out[irs.offset..irs.offset + irs.subsurfaces];
+            for (n, theta) in own.iter_mut().enumerate() {
+                let w_angle = if !cascade_los {
+                    0.0
+                } else if irs.per_sub == 1 {
+                    angle_of_distance(irs.ap_distance[n] + (q - irs.points[n]).norm())
+                } else {
+                    let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                    let sum: C64 = irs.points[range.clone()]
+                        .iter()
+                        .zip(&irs.ap_distance[range])
+                        .map(|(p, d_ap)| self.los_phase(d_ap + (q - p).norm()))
+                        .sum();
+                    if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
+                };
+                *theta = (h_angle - w_angle).rem_euclid(TAU);
+            }
         }
     }
 
-    /// Draws instantaneous channels c_u = h_u + Σ_e θ_{n(e)} r_{u,e} g_e for several users at once
-    /// from the per-element Rician model (paper eqs. 1–4), independent of the closed form above:
-    /// the Monte Carlo reference for Lemma 1 and for the exact expected rates (paper Fig. 10).
-    /// The AP–IRS channel g is common to all users of a draw, as it is physically.
-    /// `theta` is the phase vector (length N) or `None` for the no-IRS benchmark; `visit` is called
-    /// once per draw with one coefficient per user.
+    /// Draws instantaneous channels c_u = h_u + Σ_s Σ_e θ_{n(e)} r_{u,e} g_e for several users
+    /// at once from the per-element Rician model (paper eqs. 1–4), independent of the closed
+    /// form above: the Monte Carlo reference for Lemma 1 and for the exact expected rates
+    /// (paper Fig. 10). Each surface's AP–IRS channel g is common to all users of a draw, as it
+    /// is physically. `theta` is the concatenated phase vector (length N) or `None` for the
+    /// no-IRS benchmark; `visit` is called once per draw with one coefficient per user.
     pub fn sample_channels<R: Rng + ?Sized>(
         &self,
         users: &[[f64; 3]],
@@ -279,61 +322,78 @@ impl ChannelModel {
         rng: &mut R,
         mut visit: impl FnMut(&[C64]),
     ) {
+        /// One reflecting element: its surface, its sub-surface in the concatenated θ, and the
+        /// scattering point carrying its LoS phase (every element of a coherent sub-surface
+        /// sits at the sub-surface centre).
+        struct Element {
+            surface: usize,
+            sub: usize,
+            point: usize,
+        }
         struct UserStats {
             h_los: C64,
             h_scatter: f64,
-            /// Per element: LoS IRS→user coefficient √(L K/(K+1)) e^{−j2π d/λ}, or none.
+            /// Per element: LoS IRS→user coefficient √(L K/(K+1)) e^{−j2π d/λ} (zero for the
+            /// elements of surfaces the user is not in front of).
             r_los: Vec<C64>,
-            r_scatter: f64,
-            irs: bool,
+            /// Per surface: the scattered amplitude, or `None` when the user is behind it.
+            r_scatter: Vec<Option<f64>>,
         }
-        let irs = self.irs.as_ref().filter(|_| theta.is_some());
+        let surfaces: &[IrsModel] = if theta.is_some() { &self.surfaces } else { &[] };
         let rot: Vec<C64> = theta.map_or(Vec::new(), |t| {
             t.iter().map(|&p| C64::from_polar(1.0, p)).collect()
         });
-        // Per element: which sub-surface it belongs to and which scattering point carries its
-        // LoS phase (every element of a coherent sub-surface sits at the sub-surface centre).
-        let element_point = |e: usize, irs: &IrsModel| -> usize {
-            let n_bar = irs.elements / irs.subsurfaces;
-            if irs.per_sub == 1 { e / n_bar } else { e }
-        };
+        let elements: Vec<Element> = surfaces
+            .iter()
+            .enumerate()
+            .flat_map(|(s, irs)| {
+                let n_bar = irs.elements / irs.subsurfaces;
+                (0..irs.elements).map(move |e| Element {
+                    surface: s,
+                    sub: irs.offset + e / n_bar,
+                    point: if irs.per_sub == 1 { e / n_bar } else { e },
+                })
+            })
+            .collect();
         let stats: Vec<UserStats> = users
             .iter()
             .map(|u| {
                 let q = P3::from(*u);
                 let direct = self.link_budget(&self.ap, &q);
-                let h_los = self.los_phase((q - self.ap).norm()) * direct.los_amplitude();
-                let mut s = UserStats {
-                    h_los,
+                let links: Vec<Option<LinkBudget>> = surfaces
+                    .iter()
+                    .map(|irs| self.irs_user_link(irs, &q))
+                    .collect();
+                UserStats {
+                    h_los: self.los_phase((q - self.ap).norm()) * direct.los_amplitude(),
                     h_scatter: direct.scattered_power().sqrt(),
-                    r_los: Vec::new(),
-                    r_scatter: 0.0,
-                    irs: false,
-                };
-                if let Some(irs) = irs
-                    && let Some(link) = self.irs_user_link(irs, &q)
-                {
-                    s.irs = true;
-                    s.r_scatter = link.scattered_power().sqrt();
-                    s.r_los = (0..irs.elements)
-                        .map(|e| {
-                            let p = irs.points[element_point(e, irs)];
-                            self.los_phase((q - p).norm()) * link.los_amplitude()
+                    r_los: elements
+                        .iter()
+                        .map(|el| {
+                            links[el.surface].map_or(C64::new(0.0, 0.0), |link| {
+                                let p = surfaces[el.surface].points[el.point];
+                                self.los_phase((q - p).norm()) * link.los_amplitude()
+                            })
                         })
-                        .collect();
+                        .collect(),
+                    r_scatter: links
+                        .iter()
+                        .map(|l| l.map(|l| l.scattered_power().sqrt()))
+                        .collect(),
                 }
-                s
             })
             .collect();
-        let g_los: Vec<C64> = irs.map_or(Vec::new(), |irs| {
-            (0..irs.elements)
-                .map(|e| {
-                    let pt = element_point(e, irs);
-                    self.los_phase(irs.ap_distance[pt]) * irs.ap_link.los_amplitude()
-                })
-                .collect()
-        });
-        let g_scatter = irs.map_or(0.0, |i| i.ap_link.scattered_power().sqrt());
+        let g_los: Vec<C64> = elements
+            .iter()
+            .map(|el| {
+                let irs = &surfaces[el.surface];
+                self.los_phase(irs.ap_distance[el.point]) * irs.ap_link.los_amplitude()
+            })
+            .collect();
+        let g_scatter: Vec<f64> = surfaces
+            .iter()
+            .map(|irs| irs.ap_link.scattered_power().sqrt())
+            .collect();
         let cn = |rng: &mut R| -> C64 {
             let re: f64 = StandardNormal.sample(rng);
             let im: f64 = StandardNormal.sample(rng);
@@ -342,20 +402,19 @@ impl ChannelModel {
         let mut g = vec![C64::new(0.0, 0.0); g_los.len()];
         let mut c = vec![C64::new(0.0, 0.0); users.len()];
         for _ in 0..draws {
-            for (ge, gl) in g.iter_mut().zip(&g_los) {
-                *ge = gl + cn(rng) * g_scatter;
+            for ((ge, gl), el) in g.iter_mut().zip(&g_los).zip(&elements) {
+                *ge = gl + cn(rng) * g_scatter[el.surface];
             }
             for (cu, s) in c.iter_mut().zip(&stats) {
                 *cu = s.h_los + cn(rng) * s.h_scatter;
-                if let (true, Some(irs)) = (s.irs, irs) {
-                    let n_bar = irs.elements / irs.subsurfaces;
-                    let mut reflected = C64::new(0.0, 0.0);
-                    for (e, (ge, rl)) in g.iter().zip(&s.r_los).enumerate() {
-                        let r = rl + cn(rng) * s.r_scatter;
-                        reflected += rot[e / n_bar] * r * ge;
+                let mut reflected = C64::new(0.0, 0.0);
+                for ((el, ge), rl) in elements.iter().zip(&g).zip(&s.r_los) {
+                    if let Some(scatter) = s.r_scatter[el.surface] {
+                        let r = rl + cn(rng) * scatter;
+                        reflected += rot[el.sub] * r * ge;
                     }
-                    *cu += reflected;
                 }
+                *cu += reflected;
             }
             visit(&c);
         }
@@ -400,24 +459,32 @@ mod tests {
         let mut w = vec![C64::new(0.0, 0.0); m.subsurfaces()];
         let q = [1.0, 1.0, 1.0];
         let d = m.evaluate(q, false, &mut w);
-        let pl = path_loss_db((P3::from(q) - P3::from(s.ap.position)).norm(), 2.0, true);
+        let pl = path_loss_db((P3::from(q) - P3::from(s.ap().position)).norm(), 2.0, true);
         assert!(((d.h.norm_sqr() + d.tau) / 10f64.powf(-pl / 10.0) - 1.0).abs() < 1e-12);
         assert!(w.iter().all(|x| x.norm() == 0.0));
     }
 
     /// Lemma 1: λ(θ) equals the Monte Carlo mean of |c|² for random θ, with the direct link LoS
-    /// and NLoS, in both groupings. The sample mean must lie within 4 standard errors.
+    /// and NLoS, in both groupings, with one IRS and with two. The sample mean must lie within 4 standard errors.
     #[test]
     fn expected_gain_matches_monte_carlo_mean() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        for grouping in [Grouping::Coherent, Grouping::Elements] {
-            let s = Scenario::small_test_grouped(grouping);
+        let floors = [Grouping::Coherent, Grouping::Elements]
+            .into_iter()
+            .flat_map(|g| {
+                [
+                    Scenario::small_test_grouped(g),
+                    Scenario::small_test_two_surfaces(g),
+                ]
+            });
+        for s in floors {
+            let grouping = s.surfaces()[0].grouping;
             let m = ChannelModel::new(&s);
             // (1, 1) sees the AP; the other two are behind the 1.5 m box.
             let points = [[1.0, 1.0, 1.0], [3.6, 2.0, 1.0], [4.0, 3.0, 0.5]];
             let mut saw_nlos = false;
             for q in points {
-                saw_nlos |= m.is_blocked(s.ap.position, q);
+                saw_nlos |= m.is_blocked(s.ap().position, q);
                 let theta: Vec<f64> = (0..m.subsurfaces())
                     .map(|_| rng.random::<f64>() * TAU)
                     .collect();
@@ -446,7 +513,7 @@ mod tests {
     fn irs_does_not_serve_users_behind_it() {
         let s = small();
         let m = ChannelModel::new(&s);
-        let irs = m.irs.as_ref().unwrap();
+        let irs = &m.surfaces[0];
         assert!(m.irs_user_link(irs, &P3::new(3.0, -0.5, 1.0)).is_none());
         assert!(m.irs_user_link(irs, &P3::new(3.0, 0.5, 1.0)).is_some());
     }

@@ -72,11 +72,15 @@ pub fn check_path(
     draws: usize,
     seed: u64,
 ) -> MonteCarloReport {
-    let channel = ChannelModel::new(scenario);
+    // Gain maps: each waypoint is checked against the AP serving it. Rate maps have one AP.
+    let channels: Vec<ChannelModel> = (0..scenario.access_points().len())
+        .map(|ap| ChannelModel::for_ap(scenario, ap))
+        .collect();
+    let channel = &channels[0];
     let height = scenario.mru.antenna_height_m;
     // The SRUs' channels do not depend on the waypoint: evaluate them once per path.
     let with_irs = map.key.phases != PhaseMode::None;
-    let srus = sru_part(&channel, scenario, with_irs);
+    let srus = sru_part(channel, scenario, with_irs);
     let waypoints: Vec<WaypointCheck> = path
         .waypoints
         .par_iter()
@@ -84,14 +88,20 @@ pub fn check_path(
         .map(|(k, wp)| {
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed.wrapping_add(k as u64));
             let mru = [wp.x, wp.y, height];
-            let theta = &wp.config.irs_phases_rad;
+            let theta = wp.config.concatenated_phases();
             let theta_opt = (!theta.is_empty()).then_some(theta.as_slice());
             let users = match &map.cells {
                 CellSolutions::Gain { .. } => {
                     let mut power_gain = MeanEstimate::default();
-                    channel.sample_channels(&[mru], theta_opt, draws, &mut rng, |c| {
-                        power_gain.add(c[0].norm_sqr());
-                    });
+                    channels[wp.config.ap].sample_channels(
+                        &[mru],
+                        theta_opt,
+                        draws,
+                        &mut rng,
+                        |c| {
+                            power_gain.add(c[0].norm_sqr());
+                        },
+                    );
                     let (mean, se) = (power_gain.mean(), power_gain.std_error());
                     let mean_db = 10.0 * mean.log10();
                     vec![UserCheck {
@@ -111,7 +121,7 @@ pub fn check_path(
                         .power_w
                         .as_ref()
                         .expect("rate waypoints carry powers");
-                    let problem = cell_problem(&channel, mru, &srus, with_irs);
+                    let problem = cell_problem(channel, mru, &srus, with_irs);
                     let mut v: Vec<_> = theta.iter().map(|&t| C64::from_polar(1.0, t)).collect();
                     v.push(C64::new(1.0, 0.0));
                     let mut lambdas = vec![0.0; model.users()];

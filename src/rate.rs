@@ -95,8 +95,8 @@ impl RateModel {
         let targets: Vec<f64> = scenario.srus.iter().map(|s| s.min_rate_bps_hz).collect();
         RateModel::new(
             access,
-            dbm_to_watts(scenario.ap.tx_power_dbm),
-            dbm_to_watts(scenario.ap.noise_dbm),
+            dbm_to_watts(scenario.ap().tx_power_dbm),
+            dbm_to_watts(scenario.ap().noise_dbm),
             &targets,
         )
     }

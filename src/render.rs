@@ -435,7 +435,8 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
         canvas.fill(x - 1, y - 1, w + 2, glyph as i64 + 2, BACKGROUND);
         canvas.text(x, y, text, s, INK);
     };
-    if let Some(irs) = &scenario.irs {
+    let several = scenario.surfaces().len() > 1;
+    for (k, irs) in scenario.surfaces().iter().enumerate() {
         // The surface as a bar along its wall (at least three cells long, to stay visible).
         let n = irs.normal;
         let along = [-n[1], n[0]];
@@ -453,20 +454,32 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
             canvas.disk(px, py, radius * 0.6, IRS);
         }
         let (px, py) = layout.point(map, irs.center[0], irs.center[1]);
-        marker_label(canvas, px, py - glyph, "IRS");
+        let label = if several {
+            format!("IRS {k}")
+        } else {
+            "IRS".to_string()
+        };
+        marker_label(canvas, px, py - glyph, &label);
     }
-    let ap = scenario.ap.position;
-    let (px, py) = layout.point(map, ap[0], ap[1]);
-    let r = radius.round() as i64;
-    canvas.fill(
-        px as i64 - r - 1,
-        py as i64 - r - 1,
-        2 * r + 3,
-        2 * r + 3,
-        INK,
-    );
-    canvas.fill(px as i64 - r, py as i64 - r, 2 * r + 1, 2 * r + 1, DEVICE);
-    marker_label(canvas, px, py, "AP");
+    let aps = scenario.access_points();
+    for (k, ap) in aps.iter().enumerate() {
+        let (px, py) = layout.point(map, ap.position[0], ap.position[1]);
+        let r = radius.round() as i64;
+        canvas.fill(
+            px as i64 - r - 1,
+            py as i64 - r - 1,
+            2 * r + 3,
+            2 * r + 3,
+            INK,
+        );
+        canvas.fill(px as i64 - r, py as i64 - r, 2 * r + 1, 2 * r + 1, DEVICE);
+        let label = if aps.len() > 1 {
+            format!("AP {k}")
+        } else {
+            "AP".to_string()
+        };
+        marker_label(canvas, px, py, &label);
+    }
     for (k, sru) in scenario.srus.iter().enumerate() {
         let (px, py) = layout.point(map, sru.position[0], sru.position[1]);
         canvas.disk(px, py, radius + 1.0, INK);
@@ -515,7 +528,10 @@ mod tests {
         let mid = &answer.waypoints[answer.waypoints.len() / 2];
         assert_eq!(cell(mid.i, mid.j), PATH);
         // The AP marker is drawn at the AP, the SRU's at the SRU.
-        let (ai, aj) = map.grid.snap(s.ap.position[0], s.ap.position[1]).unwrap();
+        let (ai, aj) = map
+            .grid
+            .snap(s.ap().position[0], s.ap().position[1])
+            .unwrap();
         assert_eq!(cell(ai, aj), DEVICE);
         // The colour bar runs from the brightest colour at the top to the darkest at the bottom,
         // and the axes carry ink (tick labels) left of and below the plot.

@@ -19,10 +19,15 @@ use std::sync::Arc;
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 /// Largest grid a scenario may define: a 1001 × 1001 map (≈ 8 MB of values).
 pub const MAX_GRID_CELLS: usize = 1001 * 1001;
-/// Largest number of IRS sub-surfaces N (phase vector length).
+/// Largest number of IRS sub-surfaces N (phase vector length), all surfaces together.
 pub const MAX_SUBSURFACES: usize = 1024;
-/// Largest number of IRS elements M = N · N̄.
+/// Largest number of IRS elements M = N · N̄, all surfaces together.
 pub const MAX_ELEMENTS: usize = 200_000;
+/// Largest number of access points on one floor: a gain map evaluates every cell once per AP.
+pub const MAX_APS: usize = 8;
+/// Largest number of IRSs on one floor: each adds a blockage test and a path-loss evaluation
+/// per cell; 16 covers a hall with a surface on every pillar face we have seen planned.
+pub const MAX_SURFACES: usize = 16;
 /// Largest number of static robots K; NOMA searches all (K+1)! decoding orders.
 pub const MAX_SRUS: usize = 4;
 /// Largest number of obstacles (boxes); each is tested against every link.
@@ -85,13 +90,30 @@ pub struct Scenario {
     /// The decoded floor plan, made once at validation and shared by every map built from it.
     #[serde(skip)]
     raster: Option<Arc<Raster>>,
-    pub ap: AccessPoint,
+    /// The access point (the paper's set-up) …
     #[serde(
         default,
         deserialize_with = "present",
         skip_serializing_if = "Option::is_none"
     )]
-    pub irs: Option<Irs>,
+    ap: Option<AccessPoint>,
+    /// … or several, each on its own channel (docs/model.md §3). As with the IRSs, one AP is
+    /// kept and written as `ap`, so a one-AP scenario has the same id whichever way it was
+    /// written. Read them with [`Scenario::access_points`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    aps: Vec<AccessPoint>,
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
+    irs: Option<Irs>,
+    /// Several IRSs, each with its own pose, sub-surfaces and grouping (docs/model.md §2). One
+    /// surface is kept (and written in the canonical form) as `irs`, two or more as `irss`, so
+    /// a one-IRS scenario has the same id whichever way it was written. Read them with
+    /// [`Scenario::surfaces`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    irss: Vec<Irs>,
     pub mru: Mru,
     #[serde(default)]
     pub srus: Vec<Sru>,
@@ -333,6 +355,12 @@ impl Scenario {
         let mut scenario = deserialize_tracking_path(value)?;
         scenario.resolve_defaults();
         scenario.validate()?;
+        if scenario.irss.len() == 1 {
+            scenario.irs = scenario.irss.pop();
+        }
+        if scenario.aps.len() == 1 {
+            scenario.ap = scenario.aps.pop();
+        }
         Ok(scenario)
     }
 
@@ -354,9 +382,61 @@ impl Scenario {
         Scenario::from_value(value)
     }
 
-    /// λ = c / f_c (m).
+    /// The IRSs, in scenario order (empty without one); their phase vectors are concatenated
+    /// in this order (docs/model.md §2).
+    pub fn surfaces(&self) -> &[Irs] {
+        match &self.irs {
+            Some(one) => std::slice::from_ref(one),
+            None => &self.irss,
+        }
+    }
+
+    /// The access points, in scenario order (at least one).
+    pub fn access_points(&self) -> &[AccessPoint] {
+        match &self.ap {
+            Some(one) => std::slice::from_ref(one),
+            None => &self.aps,
+        }
+    }
+
+    /// The first access point: its carrier sets λ for the IRS's default pitch, and it is the
+    /// AP of rate maps (which take one AP).
+    pub fn ap(&self) -> &AccessPoint {
+        &self.access_points()[0]
+    }
+
+    /// The same scenario with other access points, validated again.
+    pub fn with_access_points(&self, aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
+        let mut document = serde_json::to_value(self).expect("a scenario always serialises");
+        let object = document.as_object_mut().expect("a scenario is an object");
+        object.remove("ap");
+        object.insert(
+            "aps".into(),
+            serde_json::to_value(aps).expect("APs serialise"),
+        );
+        Scenario::from_value(document)
+    }
+
+    /// The same scenario with other surfaces, validated again.
+    pub fn with_surfaces(&self, surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
+        let mut document = serde_json::to_value(self).expect("a scenario always serialises");
+        let object = document.as_object_mut().expect("a scenario is an object");
+        object.remove("irs");
+        object.remove("irss");
+        if !surfaces.is_empty() {
+            object.insert(
+                "irss".into(),
+                serde_json::to_value(surfaces).expect("surfaces serialise"),
+            );
+        }
+        Scenario::from_value(document)
+    }
+
+    /// λ = c / f_c (m) of the first AP's carrier.
     pub fn wavelength_m(&self) -> f64 {
-        SPEED_OF_LIGHT / (self.ap.carrier_ghz * 1e9)
+        self.access_points()
+            .first()
+            .map_or(f64::NAN, |ap| SPEED_OF_LIGHT / (ap.carrier_ghz * 1e9))
     }
 
     fn resolve_defaults(&mut self) {
@@ -366,7 +446,7 @@ impl Scenario {
             plan.obstacle_height_m = Some(self.room.ceiling_m);
         }
         let lambda = self.wavelength_m();
-        if let Some(irs) = &mut self.irs {
+        for irs in self.irs.iter_mut().chain(self.irss.iter_mut()) {
             if irs.sub_pitch_m.is_none() && lambda.is_finite() {
                 irs.sub_pitch_m = Some(lambda / 2.0);
             }
@@ -539,110 +619,94 @@ impl Scenario {
         }
         let obstructions = self.obstructions();
 
-        let ap = &self.ap;
-        finite_all("ap.position", &ap.position)?;
-        finite("ap.tx_power_dbm", ap.tx_power_dbm)?;
-        finite("ap.noise_dbm", ap.noise_dbm)?;
-        finite("ap.carrier_ghz", ap.carrier_ghz)?;
-        if !(ap.carrier_ghz > 0.0 && ap.carrier_ghz <= 100.0) {
-            return err(
-                "ap.carrier_ghz",
-                "must lie in (0, 100] GHz, the 3GPP InF model's range",
-            );
+        let access_points: Vec<(String, &AccessPoint)> = match (&self.ap, self.aps.as_slice()) {
+            (Some(_), [_, ..]) => {
+                return err(
+                    "aps",
+                    "give one access point as `ap` or a list as `aps`, not both",
+                );
+            }
+            (None, []) => {
+                return err(
+                    "ap",
+                    "missing: give the access point as `ap` (or several as `aps`)",
+                );
+            }
+            (Some(one), []) => vec![("ap".to_string(), one)],
+            (None, many) => many
+                .iter()
+                .enumerate()
+                .map(|(k, ap)| (format!("aps[{k}]"), ap))
+                .collect(),
+        };
+        if self.aps.len() > MAX_APS {
+            return Err(FieldError::new(
+                "aps",
+                format!("more than {MAX_APS} access points"),
+            ));
         }
-        self.inside_room("ap.position", ap.position)?;
-        if obstructions.contains(ap.position) {
-            return err("ap.position", "lies inside an obstacle");
+        for (at, ap) in &access_points {
+            let f = |s: &str| format!("{at}.{s}");
+            finite_all(&f("position"), &ap.position)?;
+            finite(&f("tx_power_dbm"), ap.tx_power_dbm)?;
+            finite(&f("noise_dbm"), ap.noise_dbm)?;
+            finite(&f("carrier_ghz"), ap.carrier_ghz)?;
+            if !(ap.carrier_ghz > 0.0 && ap.carrier_ghz <= 100.0) {
+                return err(
+                    &f("carrier_ghz"),
+                    "must lie in (0, 100] GHz, the 3GPP InF model's range",
+                );
+            }
+            self.inside_room(&f("position"), ap.position)?;
+            if obstructions.contains(ap.position) {
+                return err(&f("position"), "lies inside an obstacle");
+            }
         }
 
-        if let Some(irs) = &self.irs {
-            finite_all("irs.center", &irs.center)?;
-            finite_all("irs.normal", &irs.normal)?;
-            self.inside_room("irs.center", irs.center)?;
-            let n = irs.normal;
-            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            if (norm - 1.0).abs() > TOL {
-                return Err(FieldError::new(
-                    "irs.normal",
-                    format!("must be a unit vector (its length is {norm})"),
-                ));
-            }
-            if n[2].abs() > 1.0 - 1e-6 {
-                return err(
-                    "irs.normal",
-                    "must not be vertical: the IRS hangs on a wall",
-                );
-            }
-            if irs.nx_sub == 0 {
-                return err("irs.nx_sub", "must be at least 1");
-            }
-            if irs.nz_sub == 0 {
-                return err("irs.nz_sub", "must be at least 1");
-            }
-            if irs.elements_per_sub == 0 {
-                return err("irs.elements_per_sub", "must be at least 1");
-            }
-            // Checked products: N and M are derived from user input, and a wrapped product
-            // (2^32 × 2^32 = 0 in release builds) would pass a plain comparison.
-            let subsurfaces = irs.nx_sub.checked_mul(irs.nz_sub);
-            if subsurfaces.is_none_or(|n| n > MAX_SUBSURFACES) {
-                return Err(FieldError::new(
-                    "irs.nx_sub",
-                    format!(
-                        "N = nx_sub·nz_sub = {}·{} exceeds the limit of {MAX_SUBSURFACES}",
-                        irs.nx_sub, irs.nz_sub
-                    ),
-                ));
-            }
-            let elements = subsurfaces.and_then(|n| n.checked_mul(irs.elements_per_sub));
-            if elements.is_none_or(|m| m > MAX_ELEMENTS) {
-                return Err(FieldError::new(
-                    "irs.elements_per_sub",
-                    format!(
-                        "M = N·N̄ = {}·{} exceeds the limit of {MAX_ELEMENTS}",
-                        irs.nx_sub * irs.nz_sub,
-                        irs.elements_per_sub
-                    ),
-                ));
-            }
-            let pitch = irs.sub_pitch_m.unwrap_or(f64::NAN);
-            finite("irs.sub_pitch_m", pitch)?;
-            if pitch <= 0.0 {
-                return err("irs.sub_pitch_m", "must be positive");
-            }
-            match (irs.grouping, irs.element_pitch_m) {
-                (Grouping::Coherent, Some(_)) => {
-                    return err(
-                        "irs.element_pitch_m",
-                        "applies only to grouping \"elements\"",
-                    );
-                }
-                (Grouping::Elements, Some(e)) => {
-                    finite("irs.element_pitch_m", e)?;
-                    if e <= 0.0 {
-                        return err("irs.element_pitch_m", "must be positive");
-                    }
-                    if e * irs.elements_per_sub as f64 > pitch * (1.0 + TOL) {
-                        return err(
-                            "irs.element_pitch_m",
-                            "a row of elements_per_sub elements at this pitch is wider than sub_pitch_m: sub-surfaces would overlap",
-                        );
-                    }
-                }
-                _ => {}
-            }
-            let ahead = |p: [f64; 3]| {
-                (p[0] - irs.center[0]) * n[0]
-                    + (p[1] - irs.center[1]) * n[1]
-                    + (p[2] - irs.center[2]) * n[2]
-            };
-            if ahead(ap.position) <= 0.0 {
-                return err(
-                    "irs.normal",
-                    "the AP lies behind the IRS surface, so the IRS cannot reflect its signal",
-                );
-            }
-            self.check_irs_mount(irs, &obstructions)?;
+        if self.irs.is_some() && !self.irss.is_empty() {
+            return err(
+                "irss",
+                "give one surface as `irs` or a list as `irss`, not both",
+            );
+        }
+        let surfaces: Vec<(String, &Irs)> = match &self.irs {
+            Some(one) => vec![("irs".to_string(), one)],
+            None => self
+                .irss
+                .iter()
+                .enumerate()
+                .map(|(k, irs)| (format!("irss[{k}]"), irs))
+                .collect(),
+        };
+        if self.irss.len() > MAX_SURFACES {
+            return Err(FieldError::new(
+                "irss",
+                format!("more than {MAX_SURFACES} surfaces"),
+            ));
+        }
+        let (mut total_n, mut total_m) = (0usize, 0usize);
+        for (at, irs) in &surfaces {
+            self.validate_irs(irs, at, &obstructions)?;
+            // Each surface's own products are checked (and so cannot wrap); the sums of at most
+            // a few such bounded terms cannot wrap either.
+            total_n += irs.subsurfaces();
+            total_m += irs.elements();
+        }
+        if total_n > MAX_SUBSURFACES {
+            return Err(FieldError::new(
+                "irss",
+                format!(
+                    "the surfaces have N = {total_n} sub-surfaces in all, above the limit of {MAX_SUBSURFACES}"
+                ),
+            ));
+        }
+        if total_m > MAX_ELEMENTS {
+            return Err(FieldError::new(
+                "irss",
+                format!(
+                    "the surfaces have M = {total_m} elements in all, above the limit of {MAX_ELEMENTS}"
+                ),
+            ));
         }
 
         finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
@@ -689,6 +753,110 @@ impl Scenario {
         Ok(())
     }
 
+    /// Checks one surface; `at` is its JSON path (`irs` or `irss[k]`).
+    fn validate_irs(
+        &self,
+        irs: &Irs,
+        at: &str,
+        obstructions: &Obstructions,
+    ) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
+        finite_all(&format!("{at}.center"), &irs.center)?;
+        finite_all(&format!("{at}.normal"), &irs.normal)?;
+        self.inside_room(&format!("{at}.center"), irs.center)?;
+        let n = irs.normal;
+        let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if (norm - 1.0).abs() > TOL {
+            return Err(FieldError::new(
+                format!("{at}.normal"),
+                format!("must be a unit vector (its length is {norm})"),
+            ));
+        }
+        if n[2].abs() > 1.0 - 1e-6 {
+            return err(
+                &format!("{at}.normal"),
+                "must not be vertical: the IRS hangs on a wall",
+            );
+        }
+        if irs.nx_sub == 0 {
+            return err(&format!("{at}.nx_sub"), "must be at least 1");
+        }
+        if irs.nz_sub == 0 {
+            return err(&format!("{at}.nz_sub"), "must be at least 1");
+        }
+        if irs.elements_per_sub == 0 {
+            return err(&format!("{at}.elements_per_sub"), "must be at least 1");
+        }
+        // Checked products: N and M are derived from user input, and a wrapped product
+        // (2^32 × 2^32 = 0 in release builds) would pass a plain comparison.
+        let subsurfaces = irs.nx_sub.checked_mul(irs.nz_sub);
+        if subsurfaces.is_none_or(|n| n > MAX_SUBSURFACES) {
+            return Err(FieldError::new(
+                format!("{at}.nx_sub"),
+                format!(
+                    "N = nx_sub·nz_sub = {}·{} exceeds the limit of {MAX_SUBSURFACES}",
+                    irs.nx_sub, irs.nz_sub
+                ),
+            ));
+        }
+        let elements = subsurfaces.and_then(|n| n.checked_mul(irs.elements_per_sub));
+        if elements.is_none_or(|m| m > MAX_ELEMENTS) {
+            return Err(FieldError::new(
+                format!("{at}.elements_per_sub"),
+                format!(
+                    "M = N·N̄ = {}·{} exceeds the limit of {MAX_ELEMENTS}",
+                    irs.nx_sub * irs.nz_sub,
+                    irs.elements_per_sub
+                ),
+            ));
+        }
+        let pitch = irs.sub_pitch_m.unwrap_or(f64::NAN);
+        finite(&format!("{at}.sub_pitch_m"), pitch)?;
+        if pitch <= 0.0 {
+            return err(&format!("{at}.sub_pitch_m"), "must be positive");
+        }
+        match (irs.grouping, irs.element_pitch_m) {
+            (Grouping::Coherent, Some(_)) => {
+                return err(
+                    &format!("{at}.element_pitch_m"),
+                    "applies only to grouping \"elements\"",
+                );
+            }
+            (Grouping::Elements, Some(e)) => {
+                finite(&format!("{at}.element_pitch_m"), e)?;
+                if e <= 0.0 {
+                    return err(&format!("{at}.element_pitch_m"), "must be positive");
+                }
+                if e * irs.elements_per_sub as f64 > pitch * (1.0 + TOL) {
+                    return err(
+                        &format!("{at}.element_pitch_m"),
+                        "a row of elements_per_sub elements at this pitch is wider than sub_pitch_m: sub-surfaces would overlap",
+                    );
+                }
+            }
+            _ => {}
+        }
+        let ahead = |p: [f64; 3]| {
+            (p[0] - irs.center[0]) * n[0]
+                + (p[1] - irs.center[1]) * n[1]
+                + (p[2] - irs.center[2]) * n[2]
+        };
+        // With several APs a surface may turn its back on some (it serves only those in
+        // front of it); one that faces none of them is almost always a typo.
+        if self
+            .access_points()
+            .iter()
+            .all(|ap| ahead(ap.position) <= 0.0)
+        {
+            return err(
+                &format!("{at}.normal"),
+                "the AP lies behind the IRS surface, so the IRS cannot reflect its signal",
+            );
+        }
+        self.check_irs_mount(irs, at, obstructions)?;
+        Ok(())
+    }
+
     fn validate_walls(&self) -> Result<(), FieldError> {
         let r = &self.room;
         if self.walls.len() > MAX_WALLS {
@@ -731,7 +899,12 @@ impl Scenario {
     /// An IRS hangs on something: a wall of the room or a face of an obstacle, with its normal
     /// pointing away from that surface (into free space). One that floats in the room or faces
     /// into its own wall is almost always a typo in `center` or `normal`.
-    fn check_irs_mount(&self, irs: &Irs, obstructions: &Obstructions) -> Result<(), FieldError> {
+    fn check_irs_mount(
+        &self,
+        irs: &Irs,
+        at: &str,
+        obstructions: &Obstructions,
+    ) -> Result<(), FieldError> {
         let (c, n, r) = (irs.center, irs.normal, &self.room);
         let near = |a: f64, b: f64| (a - b).abs() <= WALL_TOL_M;
         // Each surface the centre lies on, as its direction into free space (along x or y).
@@ -775,14 +948,14 @@ impl Scenario {
                 (true, false) => return Ok(()),
                 (true, true) => {
                     return Err(FieldError::new(
-                        "irs.center",
+                        format!("{at}.center"),
                         "lies inside a wall or the floor plan's occupied pixels: put it on the \
                          surface (for a floor plan, on a pixel edge at origin + k·resolution)",
                     ));
                 }
                 (false, true) => {
                     return Err(FieldError::new(
-                        "irs.normal",
+                        format!("{at}.normal"),
                         "the IRS faces into the wall it hangs on; the normal must point into \
                          the room",
                     ));
@@ -792,7 +965,7 @@ impl Scenario {
         }
         if on.is_empty() {
             return Err(FieldError::new(
-                "irs.center",
+                format!("{at}.center"),
                 "the IRS is on no wall and no obstacle face: put its centre on a wall of the room \
                  (e.g. y = room.y_min), on an obstacle's or a wall's side, or on the edge of \
                  the floor plan's occupied pixels",
@@ -800,7 +973,7 @@ impl Scenario {
         }
         if !on.iter().any(|d| d[0] * n[0] + d[1] * n[1] > 0.0) {
             return Err(FieldError::new(
-                "irs.normal",
+                format!("{at}.normal"),
                 "the IRS faces into the surface it hangs on; the normal must point into the room",
             ));
         }
@@ -838,6 +1011,22 @@ impl Scenario {
 
 #[cfg(test)]
 impl Scenario {
+    /// The built-in small floor with a second IRS on its east wall (a test fixture).
+    pub(crate) fn small_test_two_surfaces(grouping: Grouping) -> Scenario {
+        let name = serde_json::to_value(grouping).expect("groupings serialise");
+        Scenario::builtin_with("small-test", |v| {
+            let mut first = v.as_object_mut().unwrap().remove("irs").unwrap();
+            first["grouping"] = name.clone();
+            let second = serde_json::json!({
+                "center": [6.0, 2.0, 1.8], "normal": [-1.0, 0.0, 0.0],
+                "nx_sub": 3, "nz_sub": 1, "elements_per_sub": 2, "grouping": name,
+            });
+            v["irss"] = serde_json::json!([first, second]);
+        })
+        .expect("built in")
+        .expect("a valid two-surface variant")
+    }
+
     /// The built-in small floor with its IRS's elements grouped as given (a test fixture).
     pub(crate) fn small_test_grouped(grouping: Grouping) -> Scenario {
         let name = serde_json::to_value(grouping).expect("groupings serialise");
@@ -1078,6 +1267,49 @@ mod tests {
         let canonical = s.canonical_json();
         assert!(!canonical.contains("walls") && !canonical.contains("floor_plan"));
         assert_eq!(s.content_hash(), "0f9d7233fc2ba13d34e5b5949a3e75f6");
+    }
+
+    /// A one-element `irss` is the same scenario as `irs`: same canonical form, same id.
+    #[test]
+    fn one_surface_is_one_surface_however_it_is_written() {
+        let as_object = Scenario::builtin("small-test").unwrap();
+        let as_list = Scenario::builtin_with("small-test", |v| {
+            let irs = v.as_object_mut().unwrap().remove("irs").unwrap();
+            v["irss"] = serde_json::json!([irs]);
+        })
+        .unwrap()
+        .unwrap();
+        assert_eq!(as_list.canonical_json(), as_object.canonical_json());
+        assert_eq!(as_list, as_object);
+        let two = Scenario::small_test_two_surfaces(Grouping::Coherent);
+        assert_eq!(two.surfaces().len(), 2);
+        assert!(two.canonical_json().contains("\"irss\":["));
+        let again = Scenario::from_json(&two.canonical_json()).unwrap();
+        assert_eq!(again.content_hash(), two.content_hash());
+    }
+
+    #[test]
+    fn surfaces_are_checked_one_by_one_and_together() {
+        let two = |edit: fn(&mut serde_json::Value)| {
+            let mut v = serde_json::to_value(Scenario::small_test_two_surfaces(Grouping::Coherent))
+                .unwrap();
+            edit(&mut v);
+            Scenario::from_value(v).unwrap_err()
+        };
+        type Edit = fn(&mut serde_json::Value);
+        let cases: [(Edit, &str); 4] = [
+            (
+                |v| v["irss"][1]["center"] = serde_json::json!([5.0, 2.0, 1.8]),
+                "irss[1].center",
+            ),
+            (|v| v["irss"][0]["nx_sub"] = 0.into(), "irss[0].nx_sub"),
+            (|v| v["irs"] = v["irss"][0].clone(), "irss"),
+            (|v| v["irss"][1]["nx_sub"] = 1021.into(), "irss"),
+        ];
+        for (edit, field) in cases {
+            let e = two(edit);
+            assert_eq!(e.field, field, "{e}");
+        }
     }
 
     #[test]

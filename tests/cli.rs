@@ -41,7 +41,10 @@ fn plan_prints_the_path_body() {
     assert_eq!(body["threshold"], body["max_feasible_threshold"]);
     let waypoints = body["waypoints"].as_array().unwrap();
     assert_eq!(waypoints.first().unwrap()["i"], 1);
-    assert_eq!(waypoints[0]["irs_phases_rad"].as_array().unwrap().len(), 4);
+    // One IRS: one phase vector, of its N = 4 sub-surfaces.
+    let phases = waypoints[0]["irs_phases_rad"].as_array().unwrap();
+    assert_eq!(phases.len(), 1);
+    assert_eq!(phases[0].as_array().unwrap().len(), 4);
     let distance = body["distance_m"].as_f64().unwrap();
     assert!((body["travel_time_s"].as_f64().unwrap() - distance / 0.5).abs() < 1e-9);
 }

@@ -130,7 +130,7 @@ fn a_diagonal_wall_shadows_the_cells_behind_it() {
     .unwrap()
     .unwrap();
     let model = irs_planner::channel::ChannelModel::new(&s);
-    let ap = s.ap.position;
+    let ap = s.ap().position;
     // The AP at (0, 10, 2): (−3, −3) sees it past the wall's end; (−1, −1) is behind it.
     assert!(model.is_blocked(ap, [-1.0, -1.0, 1.0]));
     assert!(!model.is_blocked(ap, [-6.0, -3.0, 1.0]));

@@ -361,7 +361,8 @@ async fn rate_map_job_reports_progress_and_serves_paths_with_powers() {
         .await;
     assert_eq!(status, StatusCode::OK, "{path}");
     let wp = &path["waypoints"][0];
-    assert_eq!(wp["irs_phases_rad"].as_array().unwrap().len(), 60);
+    assert_eq!(wp["irs_phases_rad"][0].as_array().unwrap().len(), 60);
+    assert_eq!(wp["irs_phases_rad"].as_array().unwrap().len(), 1);
     assert_eq!(wp["power_w"].as_array().unwrap().len(), 2);
     assert_eq!(wp["decoding_order"].as_array().unwrap().len(), 2);
     let (_, body) = server

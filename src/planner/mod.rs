@@ -81,6 +81,17 @@ pub struct Waypoint {
     pub config: CellConfig,
 }
 
+/// Where a path changes its serving AP (several APs): between waypoint `waypoint − 1` and
+/// `waypoint`, at (x, y) — the first waypoint served by `to`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Handover {
+    pub waypoint: usize,
+    pub x: f64,
+    pub y: f64,
+    pub from: usize,
+    pub to: usize,
+}
+
 /// The answer to a path query; the same body from the CLI and the API.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PathAnswer {
@@ -97,6 +108,8 @@ pub struct PathAnswer {
     pub start: Endpoint,
     pub goal: Endpoint,
     pub waypoints: Vec<Waypoint>,
+    /// The handovers along the path, in order (empty with one AP).
+    pub handovers: Vec<Handover>,
 }
 
 /// One point of a threshold sweep (paper Figs. 7 and 9).
@@ -184,6 +197,7 @@ pub fn plan(
         start,
         goal,
         waypoints: Vec::new(),
+        handovers: Vec::new(),
     };
     if let Ok(path) = result {
         answer.distance_m = Some(path.distance_m);
@@ -202,6 +216,19 @@ pub fn plan(
                     value: map.values[c],
                     config: map.cell_config(c),
                 }
+            })
+            .collect();
+        answer.handovers = answer
+            .waypoints
+            .windows(2)
+            .enumerate()
+            .filter(|(_, pair)| pair[0].config.ap != pair[1].config.ap)
+            .map(|(k, pair)| Handover {
+                waypoint: k + 1,
+                x: pair[1].x,
+                y: pair[1].y,
+                from: pair[0].config.ap,
+                to: pair[1].config.ap,
             })
             .collect();
     }

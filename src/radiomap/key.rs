@@ -64,11 +64,13 @@ impl MapKey {
     ) -> Result<MapKey, FieldError> {
         let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         // Without an IRS the only mode is `none`, so that is the default there.
-        let phases = phases.unwrap_or(match scenario.irs {
-            Some(_) => PhaseMode::Continuous,
-            None => PhaseMode::None,
+        let has_irs = !scenario.surfaces().is_empty();
+        let phases = phases.unwrap_or(if has_irs {
+            PhaseMode::Continuous
+        } else {
+            PhaseMode::None
         });
-        if scenario.irs.is_none() && phases != PhaseMode::None {
+        if !has_irs && phases != PhaseMode::None {
             return err(
                 "phases",
                 "the scenario has no IRS: send \"none\" (or leave phases out)",
@@ -85,6 +87,19 @@ impl MapKey {
                 (None, None)
             }
             MapKind::Rate => {
+                if scenario.access_points().len() > 1 {
+                    // docs/model.md §4: the IRSs have one phase vector for all APs at once, so
+                    // the MRU's choice of AP reconfigures the surfaces under the other APs'
+                    // static robots and breaks their rate guarantees; the per-AP NOMA/OMA model
+                    // does not capture that coupling.
+                    return err(
+                        "aps",
+                        "rate maps take one access point: with several, the IRS phases chosen \
+                         for the MRU's AP would also set the channels of the other APs' static \
+                         robots, whose rates the map guarantees; build a gain map, or one rate \
+                         map per AP",
+                    );
+                }
                 if scenario.srus.is_empty() {
                     return err(
                         "kind",
@@ -188,8 +203,10 @@ mod tests {
 
     #[test]
     fn scenarios_without_an_irs_default_to_no_phases() {
-        let mut s = Scenario::builtin("small-test").unwrap();
-        s.irs = None;
+        let s = Scenario::builtin("small-test")
+            .unwrap()
+            .with_surfaces(Vec::new())
+            .unwrap();
         let key = MapKey::new("x", &s, MapKind::Gain, None, None, None).unwrap();
         assert_eq!(key.phases, PhaseMode::None);
         let e = MapKey::gain("x", &s, PhaseMode::Continuous).unwrap_err();

@@ -62,9 +62,13 @@ pub struct Cancelled;
 /// What a map keeps per cell to answer "how do I configure the IRS (and the AP) here?".
 #[derive(Debug, Clone)]
 pub enum CellSolutions {
-    /// Gain maps: θ* is recomputed per waypoint from the channel model (see [`gain`]).
+    /// Gain maps: θ* is recomputed per waypoint from the serving AP's channel model (see
+    /// [`gain`]).
     Gain {
-        model: Arc<ChannelModel>,
+        /// One model per AP, in scenario order.
+        models: Vec<Arc<ChannelModel>>,
+        /// The AP serving each cell (empty with one AP).
+        serving: Vec<u8>,
         antenna_height_m: f64,
     },
     /// Rate maps: the solver's argmax per cell (phases, power split, order, certificate).
@@ -74,8 +78,10 @@ pub enum CellSolutions {
 /// The configuration to apply at one waypoint.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CellConfig {
-    /// θ_n in [0, 2π), N values (empty without IRS).
-    pub irs_phases_rad: Vec<f64>,
+    /// The AP serving this cell (an index into the scenario's APs; 0 with one AP).
+    pub ap: usize,
+    /// θ in [0, 2π) per IRS, in scenario order (N_s values each; empty for phases `none`).
+    pub irs_phases_rad: Vec<Vec<f64>>,
     /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub power_w: Option<Vec<f64>>,
@@ -99,21 +105,47 @@ pub struct RadioMap {
     pub build_seconds: f64,
 }
 
+/// Splits a concatenated phase vector into the surfaces' vectors (lengths N_s in order).
+pub(crate) fn per_surface(flat: &[f64], lengths: &[usize]) -> Vec<Vec<f64>> {
+    if flat.is_empty() {
+        return Vec::new();
+    }
+    let mut rest = flat;
+    lengths
+        .iter()
+        .map(|&n| {
+            let (own, tail) = rest.split_at(n);
+            rest = tail;
+            own.to_vec()
+        })
+        .collect()
+}
+
+impl CellConfig {
+    /// The phases of every surface concatenated (the vector θ the channel model takes).
+    pub fn concatenated_phases(&self) -> Vec<f64> {
+        self.irs_phases_rad.concat()
+    }
+}
+
 impl RadioMap {
     /// The configuration achieving `values[index]`.
     pub fn cell_config(&self, index: usize) -> CellConfig {
         match &self.cells {
             CellSolutions::Gain {
-                model,
+                models,
+                serving,
                 antenna_height_m,
             } => {
                 let (i, j) = self.grid.cell_of(index);
                 let [x, y] = self.grid.centre(i, j);
+                let ap = serving.get(index).map_or(0, |&k| usize::from(k));
+                let model = &models[ap];
                 CellConfig {
-                    irs_phases_rad: gain::waypoint_phases(
-                        model,
-                        [x, y, *antenna_height_m],
-                        self.key.phases,
+                    ap,
+                    irs_phases_rad: per_surface(
+                        &gain::waypoint_phases(model, [x, y, *antenna_height_m], self.key.phases),
+                        &model.surface_lengths(),
                     ),
                     power_w: None,
                     decoding_order: None,
@@ -127,7 +159,7 @@ impl RadioMap {
     pub fn size_bytes(&self) -> usize {
         let base = self.values.len() * 9 + 256;
         match &self.cells {
-            CellSolutions::Gain { .. } => base,
+            CellSolutions::Gain { serving, .. } => base + serving.len(),
             CellSolutions::Rate(r) => base + r.size_bytes(),
         }
     }
@@ -142,7 +174,6 @@ pub fn build(
 ) -> Result<RadioMap, Cancelled> {
     let started = std::time::Instant::now();
     let grid = scenario.grid();
-    let model = Arc::new(ChannelModel::new(scenario));
     let obstructions = scenario.obstructions();
     let occupied: Vec<bool> = (0..grid.cells())
         .map(|k| {
@@ -155,14 +186,21 @@ pub fn build(
     let (values, cells) = match key.kind {
         MapKind::Gain => {
             let height = scenario.mru.antenna_height_m;
-            let values = gain::gain_values(&model, &grid, &occupied, height, key.phases, progress)?;
+            let models: Vec<ChannelModel> = (0..scenario.access_points().len())
+                .map(|ap| ChannelModel::for_ap(scenario, ap))
+                .collect();
+            let (values, serving) =
+                gain::gain_values(&models, &grid, &occupied, height, key.phases, progress)?;
             let cells = CellSolutions::Gain {
-                model,
+                models: models.into_iter().map(Arc::new).collect(),
+                serving,
                 antenna_height_m: height,
             };
             (values, cells)
         }
         MapKind::Rate => {
+            // Rate maps take one AP (MapKey::new rejects several).
+            let model = ChannelModel::new(scenario);
             let (values, rate) =
                 rate_cells::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
             (values, CellSolutions::Rate(rate))

@@ -16,6 +16,8 @@ pub struct RateCells {
     pub upper_bound: Vec<f64>,
     /// N, phases per cell (0 for `none`).
     subsurfaces: usize,
+    /// N_s of each surface, to split a cell's phases per surface.
+    surface_lengths: Vec<usize>,
     phases: Vec<f64>,
     power_w: Vec<f64>,
     order: Vec<u8>,
@@ -27,7 +29,11 @@ impl RateCells {
         let users = self.model.users();
         let n = self.subsurfaces;
         CellConfig {
-            irs_phases_rad: self.phases[index * n..(index + 1) * n].to_vec(),
+            ap: 0,
+            irs_phases_rad: super::per_surface(
+                &self.phases[index * n..(index + 1) * n],
+                &self.surface_lengths,
+            ),
             power_w: Some(self.power_w[index * users..(index + 1) * users].to_vec()),
             decoding_order: (self.model.access == Access::Noma)
                 .then(|| self.model.order_labels(self.order[index] as usize)),
@@ -131,6 +137,7 @@ pub(super) fn build_rate_cells(
     let cells = RateCells {
         upper_bound: upper,
         subsurfaces: n,
+        surface_lengths: channel.surface_lengths(),
         phases,
         power_w: power,
         order,

@@ -75,7 +75,7 @@ async function chooseScenario(id) {
   const { data } = await api("GET", `/v1/scenarios/${id}`);
   state.scenarioId = id;
   state.scenario = data.scenario;
-  const hasIrs = Boolean(data.scenario.irs);
+  const hasIrs = Boolean(data.scenario.irs || (data.scenario.irss || []).length);
   $("phases").value = hasIrs ? $("phases").value : "none";
   for (const option of $("phases").options) option.disabled = !hasIrs && option.value !== "none";
   const hasSrus = (data.scenario.srus || []).length > 0;
@@ -480,8 +480,9 @@ function drawMarker(ctx, x, y, shape, fill, label) {
 
 function drawDevices(ctx) {
   const s = state.scenario;
-  const irs = s.irs;
-  if (irs) {
+  // One surface is written `irs`, several `irss` (the canonical form).
+  const surfaces = s.irs ? [s.irs] : s.irss || [];
+  surfaces.forEach((irs, k) => {
     const along = [-irs.normal[1], irs.normal[0]];
     const norm = Math.hypot(...along) || 1;
     const half = Math.max((irs.nx_sub * (irs.sub_pitch_m || 0)) / 2, 1.5 * state.map.grid.resolution_m);
@@ -494,9 +495,10 @@ function drawDevices(ctx) {
     ctx.moveTo(ax, ay);
     ctx.lineTo(bx, by);
     ctx.stroke();
-    drawMarker(ctx, irs.center[0], irs.center[1], "circle", "#e600e6", "IRS");
-  }
-  drawMarker(ctx, s.ap.position[0], s.ap.position[1], "square", "#fff", "AP");
+    drawMarker(ctx, irs.center[0], irs.center[1], "circle", "#e600e6", surfaces.length > 1 ? `IRS ${k}` : "IRS");
+  });
+  const aps = s.ap ? [s.ap] : s.aps || [];
+  aps.forEach((ap, k) => drawMarker(ctx, ap.position[0], ap.position[1], "square", "#fff", aps.length > 1 ? `AP ${k}` : "AP"));
   (s.srus || []).forEach((sru, k) => drawMarker(ctx, sru.position[0], sru.position[1], "circle", "#fff", `SRU${k}`));
 }
 
@@ -539,12 +541,15 @@ function showTooltip(w, px, py) {
   const lines = [`(${w.x}, ${w.y}) m: ${w.value.toFixed(3)} ${unit}`];
   if (w.power_w) lines.push(`powers (W): ${w.power_w.map((p) => p.toExponential(2)).join(", ")}`);
   if (w.decoding_order) lines.push(`decoding order: ${w.decoding_order.join(" → ")}`);
-  lines.push(`IRS phases: ${w.irs_phases_rad.length} values in [0, 2π)`);
+  // One phase vector per IRS, in scenario order.
+  const surfaces = w.irs_phases_rad;
+  const sizes = surfaces.map((phases) => phases.length);
+  lines.push(surfaces.length ? `IRS phases: ${sizes.join(" + ")} values in [0, 2π)` : "IRS phases: none");
   tip.replaceChildren(...lines.map((t) => Object.assign(document.createElement("div"), { textContent: t })));
-  if (w.irs_phases_rad.length) {
+  for (const phases of surfaces.filter((p) => p.length)) {
     // The phases as a small bar plot, one bar per sub-surface (height θ_n / 2π).
     const plot = document.createElement("canvas");
-    const n = w.irs_phases_rad.length;
+    const n = phases.length;
     plot.width = Math.min(240, Math.max(60, n * 4));
     plot.height = 40;
     const c = plot.getContext("2d");
@@ -552,7 +557,7 @@ function showTooltip(w, px, py) {
     c.fillRect(0, 0, plot.width, plot.height);
     c.fillStyle = "#3b528b";
     const barWidth = plot.width / n;
-    w.irs_phases_rad.forEach((theta, k) => {
+    phases.forEach((theta, k) => {
       const h = (theta / (2 * Math.PI)) * plot.height;
       c.fillRect(k * barWidth, plot.height - h, Math.max(1, barWidth - 1), h);
     });
