@@ -152,5 +152,40 @@ fn floors(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, gain_maps, large_grid, rate_maps, floors);
+/// Every 0.5 m of the paper floor's four walls (164 IRS poses, 123 valid), ranked by the largest
+/// threshold q_I → q_F.
+fn placement(c: &mut Criterion) {
+    use irs_planner::placement::{self, Candidates, Objective, Search, Segment, What};
+    let base = Scenario::builtin("paper-single-user").unwrap();
+    let corners = [[-10.0, -10.0], [10.0, -10.0], [10.0, 10.0], [-10.0, 10.0]];
+    let search = Search {
+        what: What::Irs,
+        index: 0,
+        candidates: Candidates {
+            poses: Vec::new(),
+            positions: Vec::new(),
+            walls: (0..4)
+                .map(|k| Segment {
+                    from: corners[k],
+                    to: corners[(k + 1) % 4],
+                })
+                .collect(),
+            step_m: Some(0.5),
+            height_m: None,
+        },
+        objective: Objective::MaxThreshold {
+            start: [-10.0, 0.0],
+            goal: [10.0, 0.0],
+        },
+        phases: None,
+    };
+    let mut group = c.benchmark_group("placement");
+    group.sample_size(10);
+    group.bench_function("paper_walls_164_candidates_max_threshold", |b| {
+        b.iter(|| placement::place(black_box(&base), &search, &Progress::default()).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, gain_maps, large_grid, rate_maps, floors, placement);
 criterion_main!(benches);

@@ -234,40 +234,71 @@ impl ChannelModel {
     /// Without the IRS τ holds only the direct link's: the "no IRS" benchmark of Section IV.
     pub fn evaluate(&self, user: [f64; 3], with_irs: bool, w: &mut [C64]) -> DirectAndScattered {
         debug_assert_eq!(w.len(), self.subsurfaces());
+        let mut total = self.direct(user);
+        if !with_irs {
+            w.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
+            return total;
+        }
+        for (s, irs) in self.surfaces.iter().enumerate() {
+            total.tau +=
+                self.surface_terms(s, user, &mut w[irs.offset..irs.offset + irs.subsurfaces]);
+        }
+        total
+    }
+
+    /// h̃ and the direct link's scattered power at `user`: λ without any IRS.
+    pub fn direct(&self, user: [f64; 3]) -> DirectAndScattered {
         let q = P3::from(user);
         let direct = self.link_budget(&self.ap, &q);
-        let h = self.los_phase((q - self.ap).norm()) * direct.los_amplitude();
-        let mut tau = direct.scattered_power();
-        w.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
-        if !with_irs {
-            return DirectAndScattered { h, tau };
+        DirectAndScattered {
+            h: self.los_phase((q - self.ap).norm()) * direct.los_amplitude(),
+            tau: direct.scattered_power(),
         }
-        for irs in &self.surfaces {
-            let Some(user_link) = self.irs_user_link(irs, &q) else {
-                continue;
-            };
-            let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
-            // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
-            tau +=
-                irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
-                    / ((ka + 1.0) * (ku + 1.0));
-            let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
-            if amplitude > 0.0 {
-                let own = &mut w[irs.offset..irs.offset + irs.subsurfaces];
-                for (n, wn) in own.iter_mut().enumerate() {
-                    let range = n * irs.per_sub..(n + 1) * irs.per_sub;
-                    let mut sum = C64::new(0.0, 0.0);
-                    for (p, d_ap) in irs.points[range.clone()]
-                        .iter()
-                        .zip(&irs.ap_distance[range])
-                    {
-                        sum += self.los_phase(d_ap + (q - p).norm());
-                    }
-                    *wn = sum * amplitude;
+    }
+
+    /// The number of IRSs.
+    pub fn surface_count(&self) -> usize {
+        self.surfaces.len()
+    }
+
+    /// Surface `s`'s part of the channel at `user`: fills `w` (length N_s) with its w̃_s and
+    /// returns its scattered power τ_s (zeros when it cannot serve the user), so that
+    /// λ(θ) = |h̃ + Σ_s w̃_sᵀθ_s|² + τ_direct + Σ_s τ_s.
+    pub fn surface_terms(&self, s: usize, user: [f64; 3], w: &mut [C64]) -> f64 {
+        let irs = &self.surfaces[s];
+        debug_assert_eq!(w.len(), irs.subsurfaces);
+        w.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
+        let q = P3::from(user);
+        let Some(user_link) = self.irs_user_link(irs, &q) else {
+            return 0.0;
+        };
+        let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
+        let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
+        if amplitude > 0.0 {
+            for (n, wn) in w.iter_mut().enumerate() {
+                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                let mut sum = C64::new(0.0, 0.0);
+                for (p, d_ap) in irs.points[range.clone()]
+                    .iter()
+                    .zip(&irs.ap_distance[range])
+                {
+                    sum += self.los_phase(d_ap + (q - p).norm());
                 }
+                *wn = sum * amplitude;
             }
         }
-        DirectAndScattered { h, tau }
+        // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
+        irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
+            / ((ka + 1.0) * (ku + 1.0))
+    }
+
+    /// ∠h̃ at `q` as eq. 11 uses it: 0 where the direct link is NLoS (h̃ = 0).
+    fn direct_angle(&self, q: &P3) -> f64 {
+        if self.link_budget(&self.ap, q).los {
+            -TAU * ((q - self.ap).norm() / self.wavelength_m).fract()
+        } else {
+            0.0
+        }
     }
 
     /// θ*_n = ∠h̃ − ∠w̃_n (paper eq. 11) at `user`, in [0, 2π), for every sub-surface of every
@@ -278,33 +309,44 @@ impl ChannelModel {
     pub fn optimal_phases(&self, user: [f64; 3], out: &mut [f64]) {
         debug_assert_eq!(out.len(), self.subsurfaces());
         let q = P3::from(user);
-        let angle_of_distance = |d: f64| -TAU * (d / self.wavelength_m).fract();
-        let h_angle = if self.link_budget(&self.ap, &q).los {
-            angle_of_distance((q - self.ap).norm())
-        } else {
-            0.0
-        };
+        let h_angle = self.direct_angle(&q);
         for irs in &self.surfaces {
-            let cascade_los = self
-                .irs_user_link(irs, &q)
-                .is_some_and(|l| l.los && irs.ap_link.los);
-            let own = &mut out[irs.offset..irs.offset + irs.subsurfaces];
-            for (n, theta) in own.iter_mut().enumerate() {
-                let w_angle = if !cascade_los {
-                    0.0
-                } else if irs.per_sub == 1 {
-                    angle_of_distance(irs.ap_distance[n] + (q - irs.points[n]).norm())
-                } else {
-                    let range = n * irs.per_sub..(n + 1) * irs.per_sub;
-                    let sum: C64 = irs.points[range.clone()]
-                        .iter()
-                        .zip(&irs.ap_distance[range])
-                        .map(|(p, d_ap)| self.los_phase(d_ap + (q - p).norm()))
-                        .sum();
-                    if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
-                };
-                *theta = (h_angle - w_angle).rem_euclid(TAU);
-            }
+            self.surface_phases(
+                irs,
+                &q,
+                h_angle,
+                &mut out[irs.offset..irs.offset + irs.subsurfaces],
+            );
+        }
+    }
+
+    /// θ* of eq. 11 for surface `s` alone (`out` has length N_s): its slice of
+    /// [`ChannelModel::optimal_phases`].
+    pub fn surface_optimal_phases(&self, s: usize, user: [f64; 3], out: &mut [f64]) {
+        let q = P3::from(user);
+        self.surface_phases(&self.surfaces[s], &q, self.direct_angle(&q), out);
+    }
+
+    fn surface_phases(&self, irs: &IrsModel, q: &P3, h_angle: f64, out: &mut [f64]) {
+        let angle_of_distance = |d: f64| -TAU * (d / self.wavelength_m).fract();
+        let cascade_los = self
+            .irs_user_link(irs, q)
+            .is_some_and(|l| l.los && irs.ap_link.los);
+        for (n, theta) in out.iter_mut().enumerate() {
+            let w_angle = if !cascade_los {
+                0.0
+            } else if irs.per_sub == 1 {
+                angle_of_distance(irs.ap_distance[n] + (q - irs.points[n]).norm())
+            } else {
+                let range = n * irs.per_sub..(n + 1) * irs.per_sub;
+                let sum: C64 = irs.points[range.clone()]
+                    .iter()
+                    .zip(&irs.ap_distance[range])
+                    .map(|(p, d_ap)| self.los_phase(d_ap + (q - p).norm()))
+                    .sum();
+                if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
+            };
+            *theta = (h_angle - w_angle).rem_euclid(TAU);
         }
     }
 

@@ -9,6 +9,7 @@ use crate::export::{self, MaskKind};
 use crate::input::{parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::phases::PhaseMode;
+use crate::placement::{self, Candidates, Objective, PlaceError, Pose, Search, Segment, What};
 use crate::planner::{self, Threshold};
 use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
 use crate::rate::Access;
@@ -48,6 +49,78 @@ pub enum Command {
     /// Print a scenario file as the self-contained JSON document the API takes (POST
     /// /v1/scenarios): a floor plan's map YAML and image read and inlined.
     Scenario(ScenarioArgs),
+    /// Rank candidate poses of an IRS (or positions of the AP) by an objective on their gain
+    /// maps and print the ranking (the body of POST /v1/placements).
+    Place(PlaceArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct PlaceArgs {
+    #[command(flatten)]
+    pub source: ScenarioSource,
+    /// What moves: irs or ap.
+    #[arg(long, default_value = "irs", value_parser = crate::input::parse_name::<What>)]
+    pub what: What,
+    /// Which IRS (or AP) of the scenario moves, in scenario order.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// A wall to sample candidates along, "x0,y0:x1,y1" (repeatable; needs --step).
+    #[arg(long = "wall", value_name = "FROM:TO", allow_hyphen_values = true, value_parser = parse_wall)]
+    pub walls: Vec<Segment>,
+    /// Spacing (m) of the wall samples.
+    #[arg(long, value_parser = parse_finite)]
+    pub step: Option<f64>,
+    /// Height (m) of the wall samples (default: the moving device's present height).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
+    pub height: Option<f64>,
+    /// An explicit IRS pose "x,y,z:nx,ny,nz" (repeatable).
+    #[arg(long = "pose", value_name = "CENTER:NORMAL", allow_hyphen_values = true, value_parser = parse_pose)]
+    pub poses: Vec<Pose>,
+    /// An explicit AP position "x,y,z" (repeatable).
+    #[arg(long = "position", value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = crate::input::parse_point3)]
+    pub positions: Vec<[f64; 3]>,
+    /// The objective: coverage (needs --threshold), max_threshold (needs --start, --goal) or
+    /// distance (needs all three).
+    #[arg(long)]
+    pub objective: String,
+    /// QoS threshold γ (dB) of the coverage and distance objectives.
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
+    pub threshold: Option<f64>,
+    /// Start point "X,Y" (m) of the path objectives.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub start: Option<[f64; 2]>,
+    /// Goal point "X,Y" (m) of the path objectives.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub goal: Option<[f64; 2]>,
+    /// IRS phases of the gain maps: continuous or a number of bits (default continuous).
+    #[arg(long)]
+    pub phases: Option<PhaseMode>,
+    /// Draw the best candidate's map as a PNG into this file.
+    #[arg(long, value_name = "FILE")]
+    pub png: Option<PathBuf>,
+    /// No progress bar on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn parse_wall(text: &str) -> Result<Segment, String> {
+    let (from, to) = text
+        .split_once(':')
+        .ok_or_else(|| format!("expected \"x0,y0:x1,y1\", got {text:?}"))?;
+    Ok(Segment {
+        from: parse_point(from)?,
+        to: parse_point(to)?,
+    })
+}
+
+fn parse_pose(text: &str) -> Result<Pose, String> {
+    let (center, normal) = text
+        .split_once(':')
+        .ok_or_else(|| format!("expected \"x,y,z:nx,ny,nz\", got {text:?}"))?;
+    Ok(Pose {
+        center: crate::input::parse_point3(center)?,
+        normal: crate::input::parse_point3(normal)?,
+    })
 }
 
 /// Where the scenario comes from: a file, and optionally a floor plan that sets or replaces the
@@ -214,17 +287,30 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
     )
     .map_err(|e| Failure::input(format!("--{}", e)))?;
     let progress = Progress::default();
+    let result = with_progress_bar(&progress, args.quiet, "map", "cells", || {
+        radiomap::build(scenario, &key, &progress)
+    });
+    result.map_err(|e| Failure::runtime(e.to_string()))
+}
+
+/// Runs `work` while a thread draws `progress` as a bar on stderr (unless `quiet`).
+fn with_progress_bar<T>(
+    progress: &Progress,
+    quiet: bool,
+    what: &str,
+    unit: &str,
+    work: impl FnOnce() -> T,
+) -> T {
     let done = std::sync::atomic::AtomicBool::new(false);
-    let result = std::thread::scope(|scope| {
-        let bar_thread = (!args.quiet).then(|| {
-            let (progress, done) = (&progress, &done);
+    std::thread::scope(|scope| {
+        let bar_thread = (!quiet).then(|| {
+            let done = &done;
+            let template =
+                format!("{{spinner}} {what} {{bar:40}} {{pos}}/{{len}} {unit} ({{eta}})");
             scope.spawn(move || {
                 let bar = indicatif::ProgressBar::new(0);
                 bar.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "{spinner} map {bar:40} {pos}/{len} cells ({eta})",
-                    )
-                    .expect("valid template"),
+                    indicatif::ProgressStyle::with_template(&template).expect("valid template"),
                 );
                 while !done.load(std::sync::atomic::Ordering::Relaxed) {
                     bar.set_length(progress.cells_total() as u64);
@@ -234,14 +320,13 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
                 bar.finish_and_clear();
             })
         });
-        let result = radiomap::build(scenario, &key, &progress);
+        let result = work();
         done.store(true, std::sync::atomic::Ordering::Relaxed);
         if let Some(t) = bar_thread {
             let _ = t.join();
         }
         result
-    });
-    result.map_err(|e| Failure::runtime(e.to_string()))
+    })
 }
 
 fn print_json(value: &impl Serialize) -> Result<(), Failure> {
@@ -353,4 +438,82 @@ pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
 /// `irs-planner scenario …`: the scenario as the API takes it.
 pub fn run_scenario(args: &ScenarioArgs) -> Result<(), Failure> {
     print_json(&load_scenario(&args.source)?)
+}
+
+/// `irs-planner place …`
+pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
+    let scenario = load_scenario(&args.source)?;
+    let objective = match (
+        args.objective.as_str(),
+        args.threshold,
+        args.start,
+        args.goal,
+    ) {
+        ("coverage", Some(threshold), None, None) => Objective::Coverage { threshold },
+        ("max_threshold", None, Some(start), Some(goal)) => Objective::MaxThreshold { start, goal },
+        ("distance", Some(threshold), Some(start), Some(goal)) => Objective::Distance {
+            threshold,
+            start,
+            goal,
+        },
+        (name @ ("coverage" | "max_threshold" | "distance"), ..) => {
+            return Err(Failure::input(format!(
+                "--objective {name}: coverage takes --threshold; max_threshold --start and \
+                 --goal; distance all three"
+            )));
+        }
+        (other, ..) => {
+            return Err(Failure::input(format!(
+                "--objective: expected coverage, max_threshold or distance, got {other:?}"
+            )));
+        }
+    };
+    let search = Search {
+        what: args.what,
+        index: args.index,
+        candidates: Candidates {
+            poses: args.poses.clone(),
+            positions: args.positions.clone(),
+            walls: args.walls.clone(),
+            step_m: args.step,
+            height_m: args.height,
+        },
+        objective,
+        phases: args.phases,
+    };
+    let started = Instant::now();
+    let progress = Progress::default();
+    let placement = with_progress_bar(&progress, args.quiet, "placement", "cells", || {
+        placement::place(&scenario, &search, &progress)
+    })
+    .map_err(|e| match e {
+        PlaceError::Invalid(e) => Failure::input(format!("--{e}")),
+        PlaceError::Cancelled(e) => Failure::runtime(e.to_string()),
+    })?;
+    if let (Some(file), Some(best)) = (&args.png, placement.scenarios.first()) {
+        let key = MapKey::gain(&best.content_hash(), best, placement.answer.phases)
+            .map_err(|e| Failure::input(format!("--{e}")))?;
+        let map = radiomap::build(best, &key, &Progress::default())
+            .map_err(|e| Failure::runtime(e.to_string()))?;
+        let options = match placement.answer.objective {
+            Objective::MaxThreshold { start, goal } | Objective::Distance { start, goal, .. } => {
+                let threshold = match placement.answer.objective {
+                    Objective::Distance { threshold, .. } => Threshold::Value(threshold),
+                    _ => Threshold::Max,
+                };
+                let path = planner::plan(&map, start, goal, threshold, best.mru.v_max_mps)
+                    .map_err(|e| Failure::input(format!("--{e}")))?;
+                RenderOptions::for_path(&map, &path)
+            }
+            Objective::Coverage { threshold } => RenderOptions {
+                threshold: Some(threshold),
+                ..RenderOptions::default()
+            },
+        };
+        let bytes = render::png(&map, best, &options)
+            .ok_or_else(|| Failure::runtime("the picture would be too large"))?;
+        std::fs::write(file, bytes)
+            .map_err(|e| Failure::input(format!("--png {}: {e}", file.display())))?;
+    }
+    print_json(&Timed::since(started, placement.answer))
 }

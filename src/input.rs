@@ -111,6 +111,14 @@ pub fn parse_point(text: &str) -> Result<[f64; 2], String> {
     }
 }
 
+/// Parses `"x,y,z"` (a position in metres, or a direction).
+pub fn parse_point3(text: &str) -> Result<[f64; 3], String> {
+    match text.split(',').collect::<Vec<_>>().as_slice() {
+        [x, y, z] => Ok([parse_finite(x)?, parse_finite(y)?, parse_finite(z)?]),
+        _ => Err(format!("expected \"x,y,z\", got {text:?}")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -45,6 +45,7 @@ pub mod input;
 pub mod montecarlo;
 pub mod numerics;
 pub mod phases;
+pub mod placement;
 pub mod planner;
 pub mod radiomap;
 pub mod rate;

@@ -13,6 +13,7 @@ fn main() -> ExitCode {
         Some(Command::Plan(args)) => cli::run_plan(&args),
         Some(Command::Export(args)) => cli::run_export(&args),
         Some(Command::Scenario(args)) => cli::run_scenario(&args),
+        Some(Command::Place(args)) => cli::run_place(&args),
         Some(Command::Serve(args)) => serve(args),
         None => serve(ServeArgs::default()),
     };

@@ -417,6 +417,38 @@ impl Scenario {
         Scenario::from_value(document)
     }
 
+    /// The same scenario with surface `index` replaced by `irs`, validated again (a placement
+    /// candidate). Cheaper than a new document: the floor plan is not decoded again.
+    pub fn with_surface(&self, index: usize, irs: Irs) -> Result<Scenario, FieldError> {
+        let mut next = self.clone();
+        match (&mut next.irs, index) {
+            (Some(one), 0) => *one = irs,
+            _ => {
+                *next.irss.get_mut(index).ok_or_else(|| {
+                    FieldError::new("index", "the scenario has no IRS of that index")
+                })? = irs
+            }
+        }
+        next.resolve_defaults();
+        next.validate()?;
+        Ok(next)
+    }
+
+    /// The same scenario with access point `index` moved to `position`, validated again.
+    pub fn with_ap_at(&self, index: usize, position: [f64; 3]) -> Result<Scenario, FieldError> {
+        let mut next = self.clone();
+        let ap = match (&mut next.ap, index) {
+            (Some(one), 0) => one,
+            _ => next
+                .aps
+                .get_mut(index)
+                .ok_or_else(|| FieldError::new("index", "the scenario has no AP of that index"))?,
+        };
+        ap.position = position;
+        next.validate()?;
+        Ok(next)
+    }
+
     /// The same scenario with other surfaces, validated again.
     pub fn with_surfaces(&self, surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
         let mut document = serde_json::to_value(self).expect("a scenario always serialises");
@@ -598,7 +630,8 @@ impl Scenario {
         }
 
         self.validate_walls()?;
-        if let Some(plan) = &self.floor_plan {
+        // A scenario derived from a validated one (`with_surface`) keeps its decoded raster.
+        if let Some(plan) = self.floor_plan.as_ref().filter(|_| self.raster.is_none()) {
             floorplan::check_fields(plan)?;
             let raster = floorplan::decode(plan, r.ceiling_m)?;
             let [[x0, x1], [y0, y1]] = raster.extent();
@@ -610,7 +643,7 @@ impl Scenario {
                 return Err(FieldError::new(
                     "floor_plan",
                     format!(
-                        "the map covers [{x0}, {x1}] × [{y0}, {y1}] m, not the whole room                          [{}, {}] × [{}, {}] m: set origin (and resolution) so that it does",
+                        "the map covers [{x0}, {x1}] × [{y0}, {y1}] m, not the whole room [{}, {}] × [{}, {}] m: set origin (and resolution) so that it does",
                         r.x_min, r.x_max, r.y_min, r.y_max
                     ),
                 ));

@@ -1046,3 +1046,120 @@ async fn floor_plans_and_exports_over_http() {
     let (_, after) = server.get("/v1/scenarios").await;
     assert_eq!(after["scenarios"].as_array().unwrap().len(), count);
 }
+
+/// Placement over HTTP: a small search answers while the request waits, its best candidates are
+/// registered with their maps cached (a path query on the best map id works at once), the
+/// ranking is readable again by id; a large search is a job with progress; every bad search is
+/// a 422 naming its field.
+#[tokio::test]
+async fn placements_rank_candidates_and_keep_the_best_ready() {
+    let server = start(&["--sync-cells", "20000"]);
+    let id = server.scenario_id("paper-single-user").await;
+    let south = json!({"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 1.0});
+    let request = json!({
+        "scenario_id": id, "candidates": south,
+        "objective": {"kind": "max_threshold", "start": [-10, 0], "goal": [10, 0]},
+    });
+    let (status, body) = server.post("/v1/placements", request.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    assert_eq!(body["map_kind"], "gain");
+    assert_eq!(body["registered"], 3);
+    let ranked = body["candidates"].as_array().unwrap();
+    assert_eq!(ranked.len(), 21);
+    assert_eq!(
+        ranked[0]["center"],
+        json!([0.0, -10.0, 2.0]),
+        "the paper's pose is the best"
+    );
+    let best_map = ranked[2]["map_id"].as_str().unwrap();
+    let (status, path) = server
+        .post(
+            "/v1/paths",
+            json!({"map_id": best_map, "start": [-10, 0], "goal": [10, 0], "threshold": "max"}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{path}");
+    assert!(
+        (path["max_feasible_threshold"].as_f64().unwrap() - ranked[2]["score"].as_f64().unwrap())
+            .abs()
+            < 1e-9
+    );
+    let (status, _) = server
+        .get(&format!(
+            "/v1/maps/{}",
+            ranked[3]["map_id"].as_str().unwrap()
+        ))
+        .await;
+    assert_eq!(
+        status,
+        StatusCode::NOT_FOUND,
+        "only the best three are built"
+    );
+    let (status, again) = server.get(body["href"].as_str().unwrap()).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(again["candidates"], body["candidates"]);
+
+    // 4 walls × 41 samples on 1681 cells is above 4 × 20 000 cell evaluations: a job.
+    let corners = [[-10, -10], [10, -10], [10, 10], [-10, 10]];
+    let walls: Vec<Value> = (0..4)
+        .map(|k| json!({"from": corners[k], "to": corners[(k + 1) % 4]}))
+        .collect();
+    let (status, job) = server
+        .post(
+            "/v1/placements",
+            json!({
+                "scenario_id": id, "candidates": {"walls": walls, "step_m": 0.5},
+                "objective": {"kind": "coverage", "threshold": -62}, "keep": 1,
+            }),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    assert_eq!(job["kind"], "placement");
+    let done = server.wait_job(job["job_id"].as_str().unwrap()).await;
+    assert_eq!(done["state"], "done");
+    assert_eq!(done["cells_done"], done["cells_total"]);
+    let (status, ranking) = server.get(done["result_href"].as_str().unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{ranking}");
+    assert_eq!(ranking["registered"], 1);
+    assert_eq!(
+        ranking["rejected"].as_array().unwrap().len(),
+        41,
+        "the AP's wall"
+    );
+    assert_eq!(ranking["unit"], "fraction");
+
+    let bad = |edit: fn(&mut Value)| {
+        let mut r = request.clone();
+        edit(&mut r);
+        r
+    };
+    type Edit = fn(&mut Value);
+    let cases: [(Edit, &str); 6] = [
+        (|r| r["index"] = 1.into(), "index"),
+        (
+            |r| r["candidates"] = json!({"positions": [[0, 0, 2]]}),
+            "candidates.positions",
+        ),
+        (
+            |r| r["objective"]["start"] = json!([-11, 0]),
+            "objective.start",
+        ),
+        (|r| r["keep"] = 21.into(), "keep"),
+        (
+            |r| r["candidates"]["step_m"] = 0.0001.into(),
+            "candidates.step_m",
+        ),
+        (|r| r["phases"] = "none".into(), "phases"),
+    ];
+    for (edit, field) in cases {
+        let (status, problem_body) = server.post("/v1/placements", bad(edit)).await;
+        assert_eq!(
+            status,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "{field}: {problem_body}"
+        );
+        assert_eq!(problem_body["field"], field, "{problem_body}");
+    }
+    let (status, _) = server.get("/v1/placements/nope").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+}

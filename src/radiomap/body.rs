@@ -83,11 +83,7 @@ impl RadioMap {
 
     /// η(γ) of paper eq. 44: the share of free cells whose value is ≥ γ.
     pub fn coverage(&self, threshold: f64) -> f64 {
-        let free = self.free_cells();
-        if free == 0 {
-            return 0.0;
-        }
-        self.values.iter().filter(|v| **v >= threshold).count() as f64 / free as f64
+        coverage(&self.values, &self.occupied, threshold)
     }
 
     fn as_rows(&self, data: &[f64]) -> Vec<Vec<Option<f64>>> {
@@ -124,4 +120,14 @@ impl RadioMap {
             upper_bound,
         }
     }
+}
+
+/// η(γ) (paper eq. 44): the share of free cells whose value is at least γ (0 on a floor with
+/// no free cell).
+pub fn coverage(values: &[f64], occupied: &[bool], threshold: f64) -> f64 {
+    let free = occupied.iter().filter(|o| !**o).count();
+    if free == 0 {
+        return 0.0;
+    }
+    values.iter().filter(|v| **v >= threshold).count() as f64 / free as f64
 }

@@ -165,6 +165,18 @@ impl RadioMap {
     }
 }
 
+/// Per cell of `grid`: true when something on the floor covers its centre (docs/model.md §1).
+pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
+    let obstructions = scenario.obstructions();
+    (0..grid.cells())
+        .map(|k| {
+            let (i, j) = grid.cell_of(k);
+            let [x, y] = grid.centre(i, j);
+            obstructions.covers(x, y)
+        })
+        .collect()
+}
+
 /// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress
 /// advances and cancellation is checked once per row.
 pub fn build(
@@ -174,14 +186,7 @@ pub fn build(
 ) -> Result<RadioMap, Cancelled> {
     let started = std::time::Instant::now();
     let grid = scenario.grid();
-    let obstructions = scenario.obstructions();
-    let occupied: Vec<bool> = (0..grid.cells())
-        .map(|k| {
-            let (i, j) = grid.cell_of(k);
-            let [x, y] = grid.centre(i, j);
-            obstructions.covers(x, y)
-        })
-        .collect();
+    let occupied = occupancy(scenario, &grid);
     progress.start(grid.cells());
     let (values, cells) = match key.kind {
         MapKind::Gain => {

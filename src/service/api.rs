@@ -4,11 +4,12 @@
 use super::AppState;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
-use super::jobs::{JobView, MapRequestOutcome};
+use super::jobs::{Job, JobView, MapRequestOutcome, PlacementOutcome, Work};
 use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
+use crate::placement::{self, Candidates, Objective, PlacementAnswer, Search, What};
 use crate::planner::{self, SweepAnswer, Threshold};
 use crate::radiomap::{MapKey, MapKind, MapStats, RadioMap};
 use crate::rate::Access;
@@ -70,6 +71,12 @@ pub fn route_table() -> Vec<(
             "/v1/jobs/{job_id}",
             &["get", "delete"],
             get(get_job).merge(delete(cancel_job)),
+        ),
+        ("/v1/placements", &["post"], post(place)),
+        (
+            "/v1/placements/{placement_id}",
+            &["get"],
+            get(get_placement),
         ),
         ("/v1/paths", &["post"], post(plan_path)),
         ("/v1/sweeps", &["post"], post(sweep)),
@@ -240,7 +247,7 @@ async fn delete_scenario(
         .jobs()
         .live()
         .into_iter()
-        .find(|j| j.key.scenario_id == id)
+        .find(|j| j.scenario_id == id)
     {
         return Err(ApiError::scenario_in_use(&id, &job.id));
     }
@@ -297,6 +304,33 @@ fn summary(map: &RadioMap) -> MapSummary {
     }
 }
 
+/// The scenario a request names: a registered one by `scenario_id`, or an inline document
+/// (`inline` true: register it once the whole request is valid). Returns its id too.
+fn scenario_of(
+    state: &AppState,
+    scenario_id: Option<String>,
+    scenario: Option<serde_json::Map<String, serde_json::Value>>,
+    prefix: &str,
+) -> Result<(String, Arc<Scenario>, bool), ApiError> {
+    match (scenario_id, scenario) {
+        (Some(id), None) => {
+            // An unknown id is "not found" (404), as an unknown map_id is, naming the field.
+            let stored = state.registry().get(&id).ok_or_else(|| {
+                ApiError::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
+            })?;
+            Ok((id, stored.scenario.clone(), false))
+        }
+        (None, Some(doc)) => {
+            let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
+            Ok((scenario.content_hash(), Arc::new(scenario), true))
+        }
+        _ => Err(ApiError::invalid(
+            format!("{prefix}scenario_id"),
+            "give exactly one of scenario_id (a registered scenario) and scenario (an inline document)",
+        )),
+    }
+}
+
 /// Resolves a map request to a scenario and a normalised key. An inline scenario is registered
 /// only once the whole request has been validated, so a rejected request leaves no trace.
 fn resolve(
@@ -304,25 +338,7 @@ fn resolve(
     request: MapRequest,
     prefix: &str,
 ) -> Result<(Arc<Scenario>, MapKey), ApiError> {
-    let (id, scenario, inline) = match (request.scenario_id, request.scenario) {
-        (Some(id), None) => {
-            // An unknown id is "not found" (404), as an unknown map_id is, naming the field.
-            let stored = state.registry().get(&id).ok_or_else(|| {
-                ApiError::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
-            })?;
-            (id, stored.scenario.clone(), false)
-        }
-        (None, Some(doc)) => {
-            let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
-            (scenario.content_hash(), Arc::new(scenario), true)
-        }
-        _ => {
-            return Err(ApiError::invalid(
-                format!("{prefix}scenario_id"),
-                "give exactly one of scenario_id (a registered scenario) and scenario (an inline document)",
-            ));
-        }
-    };
+    let (id, scenario, inline) = scenario_of(state, request.scenario_id, request.scenario, prefix)?;
     let key = MapKey::new(
         &id,
         &scenario,
@@ -359,7 +375,7 @@ async fn obtain(
         MapRequestOutcome::Ready(map) => Ok(Ok(map)),
         MapRequestOutcome::Building(job) if cheap => {
             job.finished().await;
-            match state.cache().peek(&job.map_id).await {
+            match state.cache().peek(job.map_id().unwrap_or_default()).await {
                 Some(map) => Ok(Ok(map)),
                 None => {
                     Err(ApiError::build_failed(job.view().error.unwrap_or_else(
@@ -692,6 +708,132 @@ async fn values_npy(
         bytes,
     )
         .into_response())
+}
+
+// ---------------------------------------------------------------- placements
+
+/// A placement search: the scenario (by id or inline) and the search (docs/model.md §7).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlacementRequest {
+    #[serde(default, deserialize_with = "present")]
+    scenario_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    scenario: Option<serde_json::Map<String, serde_json::Value>>,
+    #[serde(default)]
+    what: What,
+    #[serde(default)]
+    index: usize,
+    candidates: Candidates,
+    objective: Objective,
+    #[serde(default, deserialize_with = "present")]
+    phases: Option<PhaseMode>,
+    /// How many of the best candidates to register, with their maps built, so their map ids
+    /// answer path queries at once.
+    #[serde(default, deserialize_with = "present")]
+    keep: Option<usize>,
+}
+
+/// Candidates registered and built by default, and at most.
+const DEFAULT_KEEP: usize = 3;
+const MAX_KEEP: usize = 20;
+
+/// Searches small enough (candidates × cells × APs) are answered while the request waits, as
+/// gain maps of up to `sync_cells` cells are; a candidate's cell costs about what a gain-map
+/// cell does, and four maps' worth is still well under a second.
+const SYNC_PLACEMENT_MAPS: usize = 4;
+
+/// A placement answer as the API returns it: the search's answer (the CLI's body), the job it
+/// ran as and how many of the best candidates are registered with their maps cached.
+#[derive(Serialize)]
+struct PlacementBody<'a> {
+    placement_id: &'a str,
+    #[serde(flatten)]
+    answer: &'a PlacementAnswer,
+    registered: usize,
+    href: String,
+}
+
+fn placement_body<'a>(job: &'a Job, outcome: &'a PlacementOutcome) -> PlacementBody<'a> {
+    PlacementBody {
+        placement_id: &job.id,
+        answer: &outcome.answer,
+        registered: outcome.registered,
+        href: format!("/v1/placements/{}", job.id),
+    }
+}
+
+async fn place(
+    State(state): State<AppState>,
+    Body(request): Body<PlacementRequest>,
+) -> Result<Response, ApiError> {
+    let started = Instant::now();
+    let keep = request.keep.unwrap_or(DEFAULT_KEEP);
+    if keep > MAX_KEEP {
+        return Err(ApiError::limit_exceeded(
+            "keep",
+            MAX_KEEP as u64,
+            format!("at most {MAX_KEEP} candidates are registered"),
+        ));
+    }
+    let (_, scenario, inline) = scenario_of(&state, request.scenario_id, request.scenario, "")?;
+    let search = Search {
+        what: request.what,
+        index: request.index,
+        candidates: request.candidates,
+        objective: request.objective,
+        phases: request.phases,
+    };
+    // Every check (the candidates, the limits, the objective's points) before any work.
+    let (checked_scenario, checked_search) = (scenario.clone(), search.clone());
+    let candidates = tokio::task::spawn_blocking(move || {
+        placement::candidates(&checked_scenario, &checked_search).map(|c| c.len())
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("checking the candidates failed: {e}")))??;
+    if inline {
+        state.register_scenario((*scenario).clone(), "api")?;
+    }
+    let work = candidates * scenario.grid().cells() * scenario.access_points().len();
+    let registrar = state.clone();
+    let job = state.jobs().place(state.cache(), scenario, search, keep, move |s| {
+        registrar
+            .register_scenario(s, "api")
+            .inspect_err(|e| {
+                tracing::warn!(error = %e.problem.detail, "a placement candidate was not registered")
+            })
+            .is_ok()
+    })?;
+    if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells {
+        return Ok(accepted(job.view()));
+    }
+    job.finished().await;
+    let outcome = job.placement().ok_or_else(|| {
+        ApiError::build_failed(
+            job.view()
+                .error
+                .unwrap_or_else(|| format!("job {} did not finish", job.id)),
+        )
+    })?;
+    Ok(Json(Timed::since(started, placement_body(&job, &outcome))).into_response())
+}
+
+async fn get_placement(
+    State(state): State<AppState>,
+    Path(placement_id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = state
+        .jobs()
+        .get(&placement_id)
+        .filter(|j| matches!(j.work, Work::Placement { .. }))
+        .ok_or_else(|| ApiError::not_found("placement", &placement_id))?;
+    match job.placement() {
+        Some(outcome) => Ok(Json(placement_body(&job, &outcome)).into_response()),
+        None if job.state().is_terminal() => {
+            Err(ApiError::job_finished(&job.id, job.view().state.label()))
+        }
+        None => Err(ApiError::placement_not_ready(&job.id)),
+    }
 }
 
 // ---------------------------------------------------------------- jobs

@@ -153,6 +153,16 @@ impl ApiError {
         e.problem.job_id = Some(job_id.to_string());
         e
     }
+    pub fn placement_not_ready(job_id: &str) -> Self {
+        let mut e = Self::new(
+            StatusCode::CONFLICT,
+            "placement_not_ready",
+            "Placement not ready",
+            format!("placement {job_id} is still running; poll /v1/jobs/{job_id}"),
+        );
+        e.problem.job_id = Some(job_id.to_string());
+        e
+    }
     pub fn scenario_protected(id: &str, source: &str) -> Self {
         Self::new(
             StatusCode::CONFLICT,

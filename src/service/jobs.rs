@@ -1,5 +1,6 @@
-//! Map-building jobs: every build runs on tokio's blocking pool (never on the async runtime's
-//! threads), at most `workers` at once behind a semaphore, with at most `queue` more waiting.
+//! Jobs: map builds and placement searches. Every job runs on tokio's blocking pool (never on
+//! the async runtime's threads), at most `workers` at once behind one semaphore, with at most
+//! `queue` more waiting.
 //!
 //! Single flight: while a map id is being built, every request for it gets the same job; the
 //! finished map enters the cache *before* the job leaves the in-flight table, so a request
@@ -8,10 +9,12 @@
 
 use super::cache::MapCache;
 use super::errors::ApiError;
+use crate::placement::{self, PlaceError, Placement, PlacementAnswer, Search};
 use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap};
 use crate::scenario::Scenario;
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
@@ -35,7 +38,7 @@ impl JobState {
             JobState::Done | JobState::Failed | JobState::Cancelled
         )
     }
-    fn label(self) -> &'static str {
+    pub(crate) fn label(self) -> &'static str {
         match self {
             JobState::Queued => "queued",
             JobState::Running => "running",
@@ -46,11 +49,29 @@ impl JobState {
     }
 }
 
-/// One map build.
+/// What a job does.
+pub enum Work {
+    /// Builds one map (single flight by map id).
+    Map { map_id: String, key: MapKey },
+    /// Ranks placement candidates; the answer is kept here once the job is done.
+    Placement {
+        outcome: OnceLock<Arc<PlacementOutcome>>,
+    },
+}
+
+/// A finished placement search: the answer, and how many of its best candidates were
+/// registered with their maps cached (fewer than asked only if the registry refused some).
+pub struct PlacementOutcome {
+    pub answer: PlacementAnswer,
+    pub registered: usize,
+}
+
+/// One job.
 pub struct Job {
     pub id: String,
-    pub map_id: String,
-    pub key: MapKey,
+    /// The scenario the job works on (a live job keeps it registered).
+    pub scenario_id: String,
+    pub work: Work,
     pub progress: Arc<Progress>,
     state: watch::Sender<JobState>,
     cancel: Notify,
@@ -69,8 +90,12 @@ struct JobTimes {
 #[derive(Debug, Clone, Serialize)]
 pub struct JobView {
     pub job_id: String,
-    pub map_id: String,
-    pub key: MapKey,
+    /// `map` or `placement`.
+    pub kind: &'static str,
+    pub scenario_id: String,
+    /// Map jobs: the map being built and its key (null for placements).
+    pub map_id: Option<String>,
+    pub key: Option<MapKey>,
     pub state: JobState,
     pub cells_done: usize,
     pub cells_total: usize,
@@ -81,7 +106,8 @@ pub struct JobView {
     pub finished_at: Option<f64>,
     pub error: Option<String>,
     pub href: String,
-    pub map_href: String,
+    /// Where the result is read once the job is done: the map, or the placement answer.
+    pub result_href: String,
 }
 
 fn unix(t: Option<SystemTime>) -> Option<f64> {
@@ -96,13 +122,45 @@ impl Job {
         *self.state.borrow()
     }
 
+    /// The map a map job builds.
+    pub fn map_id(&self) -> Option<&str> {
+        match &self.work {
+            Work::Map { map_id, .. } => Some(map_id),
+            Work::Placement { .. } => None,
+        }
+    }
+
+    /// A placement job's outcome, once it is done.
+    pub fn placement(&self) -> Option<Arc<PlacementOutcome>> {
+        match &self.work {
+            Work::Placement { outcome } => outcome.get().cloned(),
+            Work::Map { .. } => None,
+        }
+    }
+
     pub fn view(&self) -> JobView {
         let times = *self.times.lock().expect("job lock");
         let (done, total) = (self.progress.cells_done(), self.progress.cells_total());
+        let (kind, map_id, key, result_href) = match &self.work {
+            Work::Map { map_id, key } => (
+                "map",
+                Some(map_id.clone()),
+                Some(key.clone()),
+                format!("/v1/maps/{map_id}"),
+            ),
+            Work::Placement { .. } => (
+                "placement",
+                None,
+                None,
+                format!("/v1/placements/{}", self.id),
+            ),
+        };
         JobView {
             job_id: self.id.clone(),
-            map_id: self.map_id.clone(),
-            key: self.key.clone(),
+            kind,
+            scenario_id: self.scenario_id.clone(),
+            map_id,
+            key,
             state: self.state(),
             cells_done: done,
             cells_total: total,
@@ -116,7 +174,7 @@ impl Job {
             finished_at: unix(times.finished),
             error: self.error.lock().expect("job lock").clone(),
             href: format!("/v1/jobs/{}", self.id),
-            map_href: format!("/v1/maps/{}", self.map_id),
+            result_href,
         }
     }
 
@@ -146,6 +204,11 @@ impl Job {
             _ => {}
         }
     }
+}
+
+/// The map id of a map job (empty for a placement).
+fn map_id_of(job: &Job) -> String {
+    job.map_id().unwrap_or_default().to_string()
 }
 
 /// The outcome of asking for a map.
@@ -228,11 +291,96 @@ impl Jobs {
         {
             return Err(ApiError::queue_full(self.queue_limit));
         }
+        let job = self.admit(
+            key.scenario_id.clone(),
+            Work::Map {
+                map_id: map_id.clone(),
+                key: key.clone(),
+            },
+        );
+        metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
+        in_flight.insert(map_id, job.clone());
+        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id_of(&job), scenario_id = %key.scenario_id);
+        let progress = job.progress.clone();
+        let cache = cache.clone();
+        let work = move || radiomap::build(&scenario, &key, &progress).map_err(PlaceError::from);
+        let finish = move |job: Arc<Job>, map: RadioMap| async move {
+            cache.insert(map_id_of(&job), Arc::new(map)).await;
+        };
+        tokio::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        Ok(MapRequestOutcome::Building(job))
+    }
+
+    /// Starts a placement search as a job (503 when the queue is full). When it is done, the
+    /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
+    /// answer's map ids answer path queries at once; then the answer is kept in the job.
+    pub fn place(
+        self: &Arc<Self>,
+        cache: &MapCache,
+        scenario: Arc<Scenario>,
+        search: Search,
+        keep: usize,
+        register: impl Fn(Scenario) -> bool + Send + 'static,
+    ) -> Result<Arc<Job>, ApiError> {
+        if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
+        {
+            return Err(ApiError::queue_full(self.queue_limit));
+        }
+        let job = self.admit(
+            scenario.content_hash(),
+            Work::Placement {
+                outcome: OnceLock::new(),
+            },
+        );
+        metrics::counter!("irs_placements_total").increment(1);
+        let span = tracing::info_span!("job", job_id = %job.id, kind = "placement", scenario_id = %job.scenario_id);
+        let progress = job.progress.clone();
+        let work = move || -> Result<(Placement, Vec<RadioMap>), PlaceError> {
+            let placement = placement::place(&scenario, &search, &progress)?;
+            let phases = placement.answer.phases;
+            // The best candidates' maps, built now so their ids answer at once (gain maps of
+            // the search's floor: milliseconds each).
+            let maps = placement
+                .scenarios
+                .iter()
+                .take(keep)
+                .map(|s| {
+                    if progress.is_cancelled() {
+                        return Err(Cancelled.into());
+                    }
+                    let key = MapKey::gain(&s.content_hash(), s, phases)?;
+                    Ok(radiomap::build(s, &key, &Progress::default())?)
+                })
+                .collect::<Result<Vec<_>, PlaceError>>()?;
+            Ok((placement, maps))
+        };
+        let cache = cache.clone();
+        let finish = move |job: Arc<Job>, (placement, maps): (Placement, Vec<RadioMap>)| async move {
+            let mut registered = 0;
+            for (scenario, map) in placement.scenarios.into_iter().zip(maps) {
+                if register(scenario) {
+                    cache.insert(map.key.id(), Arc::new(map)).await;
+                    registered += 1;
+                }
+            }
+            if let Work::Placement { outcome } = &job.work {
+                let _ = outcome.set(Arc::new(PlacementOutcome {
+                    answer: placement.answer,
+                    registered,
+                }));
+            }
+        };
+        tokio::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        Ok(job)
+    }
+
+    /// Creates a queued job and records it.
+    fn admit(&self, scenario_id: String, work: Work) -> Arc<Job> {
         let (state, _) = watch::channel(JobState::Queued);
         let job = Arc::new(Job {
             id: uuid::Uuid::new_v4().simple().to_string(),
-            map_id: map_id.clone(),
-            key: key.clone(),
+            scenario_id,
+            work,
             progress: Arc::new(Progress::default()),
             state,
             cancel: Notify::new(),
@@ -243,23 +391,22 @@ impl Jobs {
             error: Mutex::new(None),
         });
         metrics::gauge!("irs_jobs", "state" => "queued").increment(1.0);
-        metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
         self.by_id
             .lock()
             .expect("jobs lock")
             .insert(job.id.clone(), job.clone());
-        in_flight.insert(map_id, job.clone());
         self.queued.fetch_add(1, Ordering::SeqCst);
-        let span = tracing::info_span!("job", job_id = %job.id, map_id = %job.map_id, scenario_id = %key.scenario_id);
-        tokio::spawn(
-            self.clone()
-                .run(job.clone(), scenario, cache.clone())
-                .instrument(span),
-        );
-        Ok(MapRequestOutcome::Building(job))
+        job
     }
 
-    async fn run(self: Arc<Self>, job: Arc<Job>, scenario: Arc<Scenario>, cache: MapCache) {
+    /// Runs `work` on the blocking pool once a worker is free, then `finish` with its result.
+    async fn run<T, W, F, Fut>(self: Arc<Self>, job: Arc<Job>, work: W, finish: F)
+    where
+        T: Send + 'static,
+        W: FnOnce() -> Result<T, PlaceError> + Send + 'static,
+        F: FnOnce(Arc<Job>, T) -> Fut,
+        Fut: std::future::Future<Output = ()>,
+    {
         let queued_at = Instant::now();
         let permit = tokio::select! {
             permit = self.workers.clone().acquire_owned() => permit.ok(),
@@ -274,33 +421,36 @@ impl Jobs {
         };
         job.set_state(JobState::Running);
         let waited = queued_at.elapsed().as_secs_f64();
-        tracing::info!(queued_s = waited, "build started");
-        let progress = job.progress.clone();
-        let key = job.key.clone();
+        tracing::info!(queued_s = waited, "job started");
         let started = Instant::now();
-        let result =
-            tokio::task::spawn_blocking(move || radiomap::build(&scenario, &key, &progress)).await;
+        let result = tokio::task::spawn_blocking(work).await;
         drop(permit);
         let seconds = started.elapsed().as_secs_f64();
         match result {
-            Ok(Ok(map)) => {
-                metrics::histogram!("irs_map_build_seconds").record(seconds);
-                cache.insert(job.map_id.clone(), Arc::new(map)).await;
+            Ok(Ok(output)) => {
+                metrics::histogram!("irs_job_seconds", "kind" => job.view().kind).record(seconds);
+                finish(job.clone(), output).await;
                 job.set_state(JobState::Done);
-                tracing::info!(build_s = seconds, "build done");
+                tracing::info!(run_s = seconds, "job done");
             }
-            Ok(Err(Cancelled)) => {
+            Ok(Err(PlaceError::Cancelled(Cancelled))) => {
                 job.set_state(JobState::Cancelled);
                 tracing::info!(
-                    build_s = seconds,
+                    run_s = seconds,
                     cells_done = job.progress.cells_done(),
-                    "build cancelled"
+                    "job cancelled"
                 );
             }
-            Err(panic) => {
-                *job.error.lock().expect("job lock") = Some(format!("the build panicked: {panic}"));
+            Ok(Err(PlaceError::Invalid(e))) => {
+                // Checked before the job was created; kept for completeness.
+                *job.error.lock().expect("job lock") = Some(e.to_string());
                 job.set_state(JobState::Failed);
-                tracing::error!(error = %panic, "build panicked");
+                tracing::error!(error = %e, "job failed");
+            }
+            Err(panic) => {
+                *job.error.lock().expect("job lock") = Some(format!("the job panicked: {panic}"));
+                job.set_state(JobState::Failed);
+                tracing::error!(error = %panic, "job panicked");
             }
         }
         self.retire(&job).await;
@@ -309,7 +459,9 @@ impl Jobs {
     /// Removes a finished job from the in-flight table and forgets the oldest finished jobs
     /// beyond the history limit.
     async fn retire(&self, job: &Arc<Job>) {
-        self.in_flight.lock().await.remove(&job.map_id);
+        if let Some(map_id) = job.map_id() {
+            self.in_flight.lock().await.remove(map_id);
+        }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());
         while order.len() > self.history_limit {

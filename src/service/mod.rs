@@ -101,7 +101,7 @@ impl AppState {
                 self.jobs()
                     .live()
                     .into_iter()
-                    .map(|job| job.key.scenario_id.clone()),
+                    .map(|job| job.scenario_id.clone()),
             );
             needed
         })

@@ -1,0 +1,165 @@
+//! Placement search (docs/model.md §7): the ranking equals an exhaustive loop that builds every
+//! candidate's map with the ordinary map builder and scores it with the ordinary planner.
+
+use irs_planner::phases::PhaseMode;
+use irs_planner::placement::{self, Candidates, Objective, Search, Segment, What};
+use irs_planner::planner::{self, Threshold};
+use irs_planner::radiomap::{self, MapKey, Progress};
+use irs_planner::scenario::Scenario;
+
+const Q_I: [f64; 2] = [-10.0, 0.0];
+const Q_F: [f64; 2] = [10.0, 0.0];
+
+fn walls(segments: &[([f64; 2], [f64; 2])], step: f64) -> Candidates {
+    Candidates {
+        poses: Vec::new(),
+        positions: Vec::new(),
+        walls: segments
+            .iter()
+            .map(|&(from, to)| Segment { from, to })
+            .collect(),
+        step_m: Some(step),
+        height_m: None,
+    }
+}
+
+/// The score of one candidate scenario, the slow way: a fresh document through the ordinary
+/// parser, the ordinary builder, the ordinary planner.
+fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> Option<f64> {
+    let fresh = Scenario::from_json(&s.canonical_json()).unwrap();
+    let key = MapKey::gain(&fresh.content_hash(), &fresh, phases).unwrap();
+    let map = radiomap::build(&fresh, &key, &Progress::default()).unwrap();
+    match *objective {
+        Objective::Coverage { threshold } => Some(map.coverage(threshold)),
+        Objective::MaxThreshold { start, goal } => {
+            planner::plan(&map, start, goal, Threshold::Max, 1.0)
+                .unwrap()
+                .max_feasible_threshold
+        }
+        Objective::Distance {
+            threshold,
+            start,
+            goal,
+        } => {
+            planner::plan(&map, start, goal, Threshold::Value(threshold), 1.0)
+                .unwrap()
+                .distance_m
+        }
+    }
+}
+
+fn check_against_exhaustive(base: &Scenario, search: &Search) -> placement::PlacementAnswer {
+    let found = placement::place(base, search, &Progress::default()).unwrap();
+    let answer = found.answer;
+    let phases = search.phases.unwrap_or(PhaseMode::Continuous);
+    let lower_is_better = matches!(search.objective, Objective::Distance { .. });
+    let mut previous: Option<Option<f64>> = None;
+    for (ranked, scenario) in answer.candidates.iter().zip(&found.scenarios) {
+        let slow = exhaustive_score(scenario, &search.objective, phases);
+        match (ranked.score, slow) {
+            (Some(a), Some(b)) => assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{a} vs {b}"),
+            (a, b) => assert_eq!(a, b),
+        }
+        assert_eq!(ranked.scenario_id, scenario.content_hash());
+        // Best first: each exhaustive score is no better than the one before (to 1e-9).
+        if let Some(prev) = previous {
+            match (prev, slow) {
+                (Some(p), Some(s)) if lower_is_better => assert!(s >= p - 1e-9),
+                (Some(p), Some(s)) => assert!(s <= p + 1e-9, "{s} ranked after {p}"),
+                (None, Some(_)) => panic!("a feasible candidate ranked after an infeasible one"),
+                _ => {}
+            }
+        }
+        previous = Some(slow);
+    }
+    answer
+}
+
+/// Every 0.5 m of the paper floor's four walls, for the largest threshold q_I → q_F: the north
+/// wall's candidates are rejected (the AP hangs there, on their plane), the rest ranked as the
+/// exhaustive loop ranks them. The paper's centre of the y = −10 wall is among the best.
+#[test]
+fn the_paper_floor_ranking_equals_the_exhaustive_loop() {
+    let base = Scenario::builtin("paper-single-user").unwrap();
+    let (a, b, c, d) = ([-10.0, -10.0], [10.0, -10.0], [10.0, 10.0], [-10.0, 10.0]);
+    let search = Search {
+        what: What::Irs,
+        index: 0,
+        candidates: walls(&[(a, b), (b, c), (c, d), (d, a)], 0.5),
+        objective: Objective::MaxThreshold {
+            start: Q_I,
+            goal: Q_F,
+        },
+        phases: None,
+    };
+    let answer = check_against_exhaustive(&base, &search);
+    assert_eq!(answer.candidates.len() + answer.rejected.len(), 164);
+    assert!(
+        answer.rejected.iter().all(|r| r.center[1] == 10.0),
+        "{:?}",
+        answer.rejected
+    );
+    let best = &answer.candidates[0];
+    println!(
+        "best: {:?} facing {:?}: {:?} dB",
+        best.center, best.normal, best.score
+    );
+    let south: Vec<_> = answer
+        .candidates
+        .iter()
+        .filter(|c| c.center[1] == -10.0)
+        .collect();
+    let paper = south.iter().find(|c| c.center[0] == 0.0).unwrap();
+    println!(
+        "paper's centre: rank {} of {}, {:?} dB",
+        paper.rank,
+        answer.candidates.len(),
+        paper.score
+    );
+    for c in south.iter().take(5) {
+        println!(
+            "  south wall rank {}: x = {}, {:?} dB",
+            c.rank, c.center[0], c.score
+        );
+    }
+}
+
+/// Coverage and distance objectives, 2-bit phases, and the AP moving instead of the IRS.
+#[test]
+fn every_objective_and_the_ap_rank_as_the_exhaustive_loop() {
+    let base = Scenario::builtin("paper-single-user").unwrap();
+    let south = walls(&[([-10.0, -10.0], [10.0, -10.0])], 1.0);
+    for (objective, phases) in [
+        (Objective::Coverage { threshold: -62.0 }, None),
+        (
+            Objective::Distance {
+                threshold: -61.0,
+                start: Q_I,
+                goal: Q_F,
+            },
+            Some(PhaseMode::Bits(2)),
+        ),
+    ] {
+        let search = Search {
+            what: What::Irs,
+            index: 0,
+            candidates: south.clone(),
+            objective,
+            phases,
+        };
+        check_against_exhaustive(&base, &search);
+    }
+    let north = walls(&[([-10.0, 10.0], [10.0, 10.0])], 2.0);
+    let search = Search {
+        what: What::Ap,
+        index: 0,
+        candidates: north,
+        objective: Objective::MaxThreshold {
+            start: Q_I,
+            goal: Q_F,
+        },
+        phases: None,
+    };
+    let answer = check_against_exhaustive(&base, &search);
+    assert_eq!(answer.candidates.len(), 11);
+}
