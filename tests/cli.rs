@@ -526,3 +526,60 @@ fn export_writes_masks_that_read_back_as_floor_plans() {
     assert_eq!(code, 2);
     assert!(err.contains("--best"), "{err}");
 }
+
+/// `place` ranks wall positions and prints the ranking; `--png` draws the best; bad searches
+/// exit 2 naming the flag.
+#[test]
+fn place_prints_the_ranking_and_draws_the_best() {
+    let dir = scratch("place");
+    let png = dir.join("best.png");
+    let (code, body, err) = run(&[
+        "place",
+        "--scenario",
+        "scenarios/paper-single-user.json",
+        "--wall=-10,-10:10,-10",
+        "--step",
+        "2",
+        "--objective",
+        "max_threshold",
+        "--start=-10,0",
+        "--goal",
+        "10,0",
+        "--quiet",
+        "--png",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let answer = json(&body);
+    assert_eq!(answer["candidates"].as_array().unwrap().len(), 11);
+    assert_eq!(
+        answer["candidates"][0]["center"],
+        serde_json::json!([0.0, -10.0, 2.0])
+    );
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+    for (args, needle) in [
+        (vec!["--objective", "coverage"], "--objective coverage"),
+        (
+            vec!["--objective", "widest", "--threshold=-60"],
+            "--objective",
+        ),
+        (
+            vec!["--objective", "coverage", "--threshold=-60", "--index", "3"],
+            "--index",
+        ),
+    ] {
+        let mut all = vec![
+            "place",
+            "--scenario",
+            "scenarios/paper-single-user.json",
+            "--wall=-10,-10:10,-10",
+            "--step",
+            "2",
+            "--quiet",
+        ];
+        all.extend(args);
+        let (code, _, err) = run(&all);
+        assert_eq!(code, 2, "{all:?}: {err}");
+        assert!(err.contains(needle), "{all:?}: {err}");
+    }
+}

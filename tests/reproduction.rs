@@ -1,4 +1,4 @@
-//! The paper's Section IV figures (docs/model.md §8) as regression tests, with stated tolerances.
+//! The paper's Section IV figures (docs/model.md §9) as regression tests, with stated tolerances.
 //! Maps are built once per configuration and shared between tests.
 
 use irs_planner::phases::PhaseMode;
@@ -53,7 +53,7 @@ fn rate_map(access: Access, phases: PhaseMode) -> &'static RadioMap {
     &maps[index]
 }
 
-/// Paper: no IRS infeasible from −62.1 dB; continuous feasible up to −59.5 dB. Ours (docs/model.md §8):
+/// Paper: no IRS infeasible from −62.1 dB; continuous feasible up to −59.5 dB. Ours (docs/model.md §9):
 /// −62.3 ± 0.3 and −59.6 ± 0.3 dB, with 1 ≤ 2 ≤ 3 bits ≤ continuous.
 #[test]
 fn single_user_max_feasible_thresholds() {
@@ -95,7 +95,7 @@ fn without_irs_the_path_at_minus_63_db_is_longer() {
     assert!(irs < 24.0, "IRS path {irs} m");
 }
 
-/// docs/model.md §8: max feasible r̄_m from q_I to q_F within ±0.1 bit/s/Hz.
+/// docs/model.md §9: max feasible r̄_m from q_I to q_F within ±0.1 bit/s/Hz.
 #[test]
 fn multi_user_max_feasible_rates() {
     let cases = [
