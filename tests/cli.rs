@@ -284,6 +284,20 @@ fn json(text: &str) -> serde_json::Value {
     serde_json::from_str(text).unwrap()
 }
 
+/// The warehouse scenario without its floor plan, written into `dir`; with `irs_on_room_wall`
+/// its IRS moves from the floor plan's wall face (x = 29.75) to the room's wall (x = 30), where
+/// it hangs whatever floor plan is given.
+fn bare_warehouse(dir: &std::path::Path, irs_on_room_wall: bool) -> std::path::PathBuf {
+    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
+    bare.as_object_mut().unwrap().remove("floor_plan");
+    if irs_on_room_wall {
+        bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
+    }
+    let path = dir.join("bare.json");
+    std::fs::write(&path, bare.to_string()).unwrap();
+    path
+}
+
 /// The warehouse's floor plan named in its file and given by `--floor-plan` to the same floor
 /// without one are the same scenario (the id hashes the pixels, not a path); `scenario` prints
 /// the inline form the API takes.
@@ -296,10 +310,7 @@ fn floor_plans_come_from_scenario_files_or_the_flag() {
     assert_eq!(from_file["grid"]["ny"], 161);
 
     let dir = scratch("flag");
-    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
-    bare.as_object_mut().unwrap().remove("floor_plan");
-    let bare_path = dir.join("bare.json");
-    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    let bare_path = bare_warehouse(&dir, false);
     let bare_path = bare_path.to_str().unwrap();
     let (code, body, err) = run(&[
         "map",
@@ -405,11 +416,7 @@ fn bad_map_files_exit_2_naming_the_field() {
         ("nokey", "resolution"),
         ("yaw", "floor_plan.origin"),
     ];
-    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
-    bare.as_object_mut().unwrap().remove("floor_plan");
-    bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
-    let bare_path = dir.join("bare.json");
-    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    let bare_path = bare_warehouse(&dir, true);
     for ((name, image, text), (_, needle)) in files.iter().zip(expected) {
         std::fs::write(dir.join(format!("{name}.pgm")), image).unwrap();
         let map_yaml = dir.join(format!("{name}.yaml"));
@@ -477,12 +484,8 @@ fn export_writes_masks_that_read_back_as_floor_plans() {
     }
     let (_, map_body, _) = run(&["map", "--scenario", WAREHOUSE, "--kind", "gain", "--quiet"]);
     let map = json(&map_body);
-    let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
-    bare.as_object_mut().unwrap().remove("floor_plan");
-    // A 1 cm mask is nothing to hang the IRS on: put it on the room's east wall.
-    bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
-    let bare_path = dir.join("bare.json");
-    std::fs::write(&bare_path, bare.to_string()).unwrap();
+    // A 1 cm mask is nothing to hang the IRS on: it goes on the room's east wall.
+    let bare_path = bare_warehouse(&dir, true);
     let (code, again, err) = run(&[
         "map",
         "--scenario",
