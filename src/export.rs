@@ -231,7 +231,7 @@ mod tests {
         let threshold = -70.0;
         let mask = nav2_mask(&map, MaskKind::Cost, threshold, None).unwrap();
         let plan = crate::floorplan::FloorPlan {
-            image: String::new(),
+            image: "".into(),
             resolution: map.grid.resolution_m,
             origin: [0.0; 3],
             negate: crate::floorplan::Negate(false),

@@ -89,8 +89,9 @@ impl<'de> Deserialize<'de> for Negate {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FloorPlan {
-    /// The image file (PGM P2/P5 or PNG, 8-bit grey), base64.
-    pub image: String,
+    /// The image file (PGM P2/P5 or PNG, 8-bit grey), base64. Shared, because scenarios derived
+    /// from this one (placement candidates) clone it.
+    pub image: std::sync::Arc<str>,
     /// Pixel side (m).
     pub resolution: f64,
     /// [x, y, yaw] of the lower-left pixel's lower-left corner (m, m, rad); yaw must be 0.
@@ -426,7 +427,7 @@ mod tests {
 
     fn plan(image: &[u8]) -> FloorPlan {
         FloorPlan {
-            image: b64(image),
+            image: b64(image).into(),
             resolution: 0.5,
             origin: [-1.0, -2.0, 0.0],
             negate: Negate(false),
@@ -468,7 +469,7 @@ mod tests {
     fn image_rows_are_flipped_and_unknown_follows_unknown_as() {
         let mut p = plan(P5);
         p.mode = MapMode::Trinary;
-        p.image = b64(b"P2\n3 2\n255\n0 254 128\n254 254 0\n");
+        p.image = b64(b"P2\n3 2\n255\n0 254 128\n254 254 0\n").into();
         let r = decode(&p, 3.0).unwrap();
         assert_eq!((r.width, r.height, r.obstacle_height), (3, 2, 3.0));
         // Map row 0 is the image's bottom row.
@@ -617,7 +618,7 @@ mod tests {
         let yaml: MapYaml = serde_saphyr::from_str(&scale.yaml).unwrap();
         assert_eq!(yaml.image, "m.pgm");
         let p = FloorPlan {
-            image: b64(&scale.pgm),
+            image: b64(&scale.pgm).into(),
             resolution: yaml.resolution,
             origin: [yaml.origin[0], yaml.origin[1], yaml.origin[2]],
             negate: yaml.negate,
@@ -627,7 +628,7 @@ mod tests {
             ..plan(P5)
         };
         let bytes = base64::engine::general_purpose::STANDARD
-            .decode(&p.image)
+            .decode(p.image.as_bytes())
             .unwrap();
         let grey = decode_grey(&bytes).unwrap();
         let back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
@@ -636,7 +637,7 @@ mod tests {
         let trinary = encode_map(&keepout, 4, 0.5, [0.0, 0.0], MapMode::Trinary, "k.pgm");
         let yaml: MapYaml = serde_saphyr::from_str(&trinary.yaml).unwrap();
         let p = FloorPlan {
-            image: b64(&trinary.pgm),
+            image: b64(&trinary.pgm).into(),
             free_thresh: yaml.free_thresh,
             occupied_thresh: yaml.occupied_thresh,
             ..plan(P5)

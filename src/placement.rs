@@ -523,14 +523,24 @@ fn shared(
     Shared { field, tau }
 }
 
-/// Scores every candidate and ranks them. `progress` counts cell evaluations; cancellation is
-/// checked once per candidate.
+/// Checks a search, scores every candidate and ranks them (see [`candidates`] and
+/// [`rank_candidates`]).
 pub fn place(
     base: &Scenario,
     search: &Search,
     progress: &Progress,
 ) -> Result<Placement, PlaceError> {
-    let candidates = candidates(base, search)?;
+    rank_candidates(base, search, candidates(base, search)?, progress)
+}
+
+/// Scores the candidates [`candidates`] listed for `search` and ranks them. `progress` counts
+/// cell evaluations; cancellation is checked once per candidate.
+pub fn rank_candidates(
+    base: &Scenario,
+    search: &Search,
+    candidates: Vec<Candidate>,
+    progress: &Progress,
+) -> Result<Placement, PlaceError> {
     let mode = search.phases.unwrap_or(PhaseMode::Continuous);
     let grid = base.grid();
     let occupied = radiomap::occupancy(base, &grid);

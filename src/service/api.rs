@@ -787,23 +787,30 @@ async fn place(
     // Every check (the candidates, the limits, the objective's points) before any work.
     let (checked_scenario, checked_search) = (scenario.clone(), search.clone());
     let candidates = tokio::task::spawn_blocking(move || {
-        placement::candidates(&checked_scenario, &checked_search).map(|c| c.len())
+        placement::candidates(&checked_scenario, &checked_search)
     })
     .await
     .map_err(|e| ApiError::internal(format!("checking the candidates failed: {e}")))??;
     if inline {
         state.register_scenario((*scenario).clone(), "api")?;
     }
-    let work = candidates * scenario.grid().cells() * scenario.access_points().len();
+    let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
     let registrar = state.clone();
-    let job = state.jobs().place(state.cache(), scenario, search, keep, move |s| {
-        registrar
-            .register_scenario(s, "api")
-            .inspect_err(|e| {
-                tracing::warn!(error = %e.problem.detail, "a placement candidate was not registered")
-            })
-            .is_ok()
-    })?;
+    let job = state.jobs().place(
+        state.cache(),
+        scenario,
+        search,
+        candidates,
+        keep,
+        move |s| {
+            registrar
+                .register_scenario(s, "api")
+                .inspect_err(|e| {
+                    tracing::warn!(error = %e.problem.detail, "a placement candidate was not registered")
+                })
+                .is_ok()
+        },
+    )?;
     if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells {
         return Ok(accepted(job.view()));
     }

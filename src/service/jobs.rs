@@ -9,7 +9,7 @@
 
 use super::cache::MapCache;
 use super::errors::ApiError;
-use crate::placement::{self, PlaceError, Placement, PlacementAnswer, Search};
+use crate::placement::{self, Candidate, PlaceError, Placement, PlacementAnswer, Search};
 use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap};
 use crate::scenario::Scenario;
 use serde::Serialize;
@@ -311,7 +311,8 @@ impl Jobs {
         Ok(MapRequestOutcome::Building(job))
     }
 
-    /// Starts a placement search as a job (503 when the queue is full). When it is done, the
+    /// Starts a placement search over its checked `candidates` as a job (503 when the queue is
+    /// full). When it is done, the
     /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
     /// answer's map ids answer path queries at once; then the answer is kept in the job.
     pub fn place(
@@ -319,6 +320,7 @@ impl Jobs {
         cache: &MapCache,
         scenario: Arc<Scenario>,
         search: Search,
+        candidates: Vec<Candidate>,
         keep: usize,
         register: impl Fn(Scenario) -> bool + Send + 'static,
     ) -> Result<Arc<Job>, ApiError> {
@@ -336,7 +338,7 @@ impl Jobs {
         let span = tracing::info_span!("job", job_id = %job.id, kind = "placement", scenario_id = %job.scenario_id);
         let progress = job.progress.clone();
         let work = move || -> Result<(Placement, Vec<RadioMap>), PlaceError> {
-            let placement = placement::place(&scenario, &search, &progress)?;
+            let placement = placement::rank_candidates(&scenario, &search, candidates, &progress)?;
             let phases = placement.answer.phases;
             // The best candidates' maps, built now so their ids answer at once (gain maps of
             // the search's floor: milliseconds each).

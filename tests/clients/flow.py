@@ -6,7 +6,7 @@ openapi.yaml, against a running server, with no hand patch:
 
 register a scenario, a gain map, a path at "max", a sweep, coverage, a rate-map job polled to
 done, a path with the power split, a cancelled job, an error decoded as the Problem type, the PNG
-bytes, and deleting what was created. Every request and response is also validated against the
+bytes, a placement search and its best map, and deleting what was created. Every request and response is also validated against the
 contract with openapi-core. Prints "N passed, M failed"; exits 1 on any failure.
 """
 
@@ -27,11 +27,12 @@ sys.path.insert(0, sys.argv[2])
 
 from irs_planner_client import Client  # noqa: E402
 from irs_planner_client.api.default import (  # noqa: E402
-    cancel_job, delete_scenario, get_coverage, get_job, get_map, get_map_image, list_scenarios,
-    plan_path, register_scenario, request_map, sweep)
+    cancel_job, delete_scenario, get_coverage, get_job, get_map, get_map_image, get_placement,
+    list_scenarios, place, plan_path, register_scenario, request_map, sweep)
 from irs_planner_client.models import (  # noqa: E402
     Coverage, Job, JobState, MapBody, MapRequestById, MapSummary, PathAnswer, PathRequestByMapId,
-    Problem, Scenario, ScenarioDocument, SweepAnswer, SweepRequestByMapId)
+    Placement, PlacementRequest, Problem, Scenario, ScenarioDocument, SweepAnswer,
+    SweepRequestByMapId)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 # The contract, with the server under test as its server (openapi.yaml names the default one).
@@ -155,6 +156,21 @@ check("an error decodes as a Problem", isinstance(problem, Problem) and problem.
 # The picture.
 r = get_map_image.sync_detailed(client=client, map_id=gain_id, start="0.5,0.5", goal="5.5,3.5")
 check("the PNG bytes", r.status_code == 200 and r.content.startswith(b"\x89PNG\r\n\x1a\n"), len(r.content))
+
+# Where to mount the IRS: every metre of the south wall, ranked by coverage at −70 dB; the best
+# candidate's map answers at once, and the ranking reads back by id.
+placement = place.sync(client=client, body=PlacementRequest.from_dict({
+    "scenario_id": scenario_id,
+    "candidates": {"walls": [{"from": [0, 0], "to": [6, 0]}], "step_m": 1.0},
+    "objective": {"kind": "coverage", "threshold": -70}}))
+check("a placement ranks the wall's candidates", isinstance(placement, Placement)
+      and len(placement.candidates) + len(placement.rejected) == 7 and placement.map_kind.value == "gain",
+      placement)
+best = get_map.sync(client=client, map_id=placement.candidates[0].map_id)
+check("the best candidate's map is built", isinstance(best, MapBody), best)
+again = get_placement.sync(client=client, placement_id=placement.placement_id)
+check("the ranking reads back by id", isinstance(again, Placement)
+      and [c.map_id for c in again.candidates] == [c.map_id for c in placement.candidates], again)
 
 # Clean up.
 r = delete_scenario.sync_detailed(client=client, scenario_id=scenario_id)
