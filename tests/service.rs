@@ -1163,3 +1163,38 @@ async fn placements_rank_candidates_and_keep_the_best_ready() {
     let (status, _) = server.get("/v1/placements/nope").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
 }
+
+/// A long placement search is a job like a map build: it reports progress and a cancel stops it.
+#[tokio::test]
+async fn a_placement_job_can_be_cancelled() {
+    let server = start(&["--sync-cells", "1000"]);
+    // The paper floor at 0.1 m (201² cells) and every 0.5 m of three walls: 9.9 M evaluations.
+    let doc = scenario("paper-single-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.1.into();
+        v["name"] = "paper-fine".into();
+    });
+    let corners = [[-10, 10], [-10, -10], [10, -10], [10, 10]];
+    let walls: Vec<Value> = (0..3)
+        .map(|k| json!({"from": corners[k], "to": corners[k + 1]}))
+        .collect();
+    let (status, job) = server
+        .post(
+            "/v1/placements",
+            json!({
+                "scenario": doc, "candidates": {"walls": walls, "step_m": 0.5},
+                "objective": {"kind": "coverage", "threshold": -62},
+            }),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    let id = job["job_id"].as_str().unwrap();
+    let (status, body) = server.get(&format!("/v1/placements/{id}")).await;
+    problem(status, &body, StatusCode::CONFLICT, "placement_not_ready");
+    let (status, _) = server.send("DELETE", &format!("/v1/jobs/{id}"), None).await;
+    assert_eq!(status, StatusCode::ACCEPTED);
+    let done = server.wait_job(id).await;
+    assert_eq!(done["state"], "cancelled", "{done}");
+    assert!(done["cells_done"].as_u64().unwrap() < done["cells_total"].as_u64().unwrap());
+    let (status, body) = server.get(&format!("/v1/placements/{id}")).await;
+    problem(status, &body, StatusCode::CONFLICT, "job_finished");
+}

@@ -202,3 +202,40 @@ fn ap_lists_canonicalise_and_rate_maps_take_one_ap() {
     models[0].evaluate(q, true, &mut w0);
     assert!(w0.iter().all(|x| x.norm() > 0.0));
 }
+
+/// Rate maps take the concatenated vector too: with a second surface on the small floor, every
+/// cell's rate stays within its certificate and waypoints carry one phase vector per surface.
+#[test]
+fn rate_maps_solve_and_certify_the_concatenated_vector() {
+    let small = Scenario::builtin("small-test").unwrap();
+    let first = small.surfaces()[0].clone();
+    let mut second = first.clone();
+    (second.center, second.normal, second.nx_sub, second.nz_sub) =
+        ([6.0, 2.0, 1.8], [-1.0, 0.0, 0.0], 3, 1);
+    let two = small.with_surfaces(vec![first, second]).unwrap();
+    let key = MapKey::rate(
+        &two.content_hash(),
+        &two,
+        PhaseMode::Continuous,
+        irs_planner::rate::Access::Noma,
+    )
+    .unwrap();
+    let map = radiomap::build(&two, &key, &Progress::default()).unwrap();
+    let radiomap::CellSolutions::Rate(cells) = &map.cells else {
+        panic!("a rate map")
+    };
+    let mut solved = 0;
+    for (k, v) in map.values.iter().enumerate() {
+        if v.is_finite() {
+            assert!(
+                *v <= cells.upper_bound[k] + 1e-9,
+                "cell {k}: {v} above {}",
+                cells.upper_bound[k]
+            );
+            let phases = map.cell_config(k).irs_phases_rad;
+            assert_eq!(phases.iter().map(Vec::len).collect::<Vec<_>>(), [4, 3]);
+            solved += 1;
+        }
+    }
+    assert!(solved > 50, "{solved} cells solved");
+}
