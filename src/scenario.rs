@@ -352,16 +352,21 @@ impl Scenario {
     /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
     pub fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
         floorplan::reject_map_reference(&value)?;
-        let mut scenario = deserialize_tracking_path(value)?;
-        scenario.resolve_defaults();
-        scenario.validate()?;
-        if scenario.irss.len() == 1 {
-            scenario.irs = scenario.irss.pop();
+        deserialize_tracking_path(value)?.checked()
+    }
+
+    /// Resolves defaults, validates, and keeps a one-element `irss` or `aps` as `irs` or `ap`
+    /// (the canonical form). Every way to make a scenario ends here.
+    fn checked(mut self) -> Result<Scenario, FieldError> {
+        self.resolve_defaults();
+        self.validate()?;
+        if self.irss.len() == 1 {
+            self.irs = self.irss.pop();
         }
-        if scenario.aps.len() == 1 {
-            scenario.ap = scenario.aps.pop();
+        if self.aps.len() == 1 {
+            self.ap = self.aps.pop();
         }
-        Ok(scenario)
+        Ok(self)
     }
 
     /// Reads a scenario file: a `floor_plan.map` in it names a map YAML relative to the file's
@@ -405,63 +410,48 @@ impl Scenario {
         &self.access_points()[0]
     }
 
-    /// The same scenario with other access points, validated again.
-    pub fn with_access_points(&self, aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
-        let mut document = serde_json::to_value(self).expect("a scenario always serialises");
-        let object = document.as_object_mut().expect("a scenario is an object");
-        object.remove("ap");
-        object.insert(
-            "aps".into(),
-            serde_json::to_value(aps).expect("APs serialise"),
-        );
-        Scenario::from_value(document)
+    /// The same scenario with other access points, validated again (a derived scenario keeps
+    /// its decoded floor plan).
+    pub fn with_access_points(&self, mut aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
+        // One AP as `ap`, so errors name `ap.…` as they would in a document.
+        let ap = (aps.len() == 1).then(|| aps.remove(0));
+        Scenario {
+            ap,
+            aps,
+            ..self.clone()
+        }
+        .checked()
+    }
+
+    /// The same scenario with other surfaces, validated again.
+    pub fn with_surfaces(&self, mut surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
+        let irs = (surfaces.len() == 1).then(|| surfaces.remove(0));
+        Scenario {
+            irs,
+            irss: surfaces,
+            ..self.clone()
+        }
+        .checked()
     }
 
     /// The same scenario with surface `index` replaced by `irs`, validated again (a placement
-    /// candidate). Cheaper than a new document: the floor plan is not decoded again.
+    /// candidate).
     pub fn with_surface(&self, index: usize, irs: Irs) -> Result<Scenario, FieldError> {
-        let mut next = self.clone();
-        match (&mut next.irs, index) {
-            (Some(one), 0) => *one = irs,
-            _ => {
-                *next.irss.get_mut(index).ok_or_else(|| {
-                    FieldError::new("index", "the scenario has no IRS of that index")
-                })? = irs
-            }
-        }
-        next.resolve_defaults();
-        next.validate()?;
-        Ok(next)
+        let mut surfaces = self.surfaces().to_vec();
+        *surfaces
+            .get_mut(index)
+            .ok_or_else(|| FieldError::new("index", "the scenario has no IRS of that index"))? =
+            irs;
+        self.with_surfaces(surfaces)
     }
 
     /// The same scenario with access point `index` moved to `position`, validated again.
     pub fn with_ap_at(&self, index: usize, position: [f64; 3]) -> Result<Scenario, FieldError> {
-        let mut next = self.clone();
-        let ap = match (&mut next.ap, index) {
-            (Some(one), 0) => one,
-            _ => next
-                .aps
-                .get_mut(index)
-                .ok_or_else(|| FieldError::new("index", "the scenario has no AP of that index"))?,
-        };
-        ap.position = position;
-        next.validate()?;
-        Ok(next)
-    }
-
-    /// The same scenario with other surfaces, validated again.
-    pub fn with_surfaces(&self, surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
-        let mut document = serde_json::to_value(self).expect("a scenario always serialises");
-        let object = document.as_object_mut().expect("a scenario is an object");
-        object.remove("irs");
-        object.remove("irss");
-        if !surfaces.is_empty() {
-            object.insert(
-                "irss".into(),
-                serde_json::to_value(surfaces).expect("surfaces serialise"),
-            );
-        }
-        Scenario::from_value(document)
+        let mut aps = self.access_points().to_vec();
+        aps.get_mut(index)
+            .ok_or_else(|| FieldError::new("index", "the scenario has no AP of that index"))?
+            .position = position;
+        self.with_access_points(aps)
     }
 
     /// λ = c / f_c (m) of the first AP's carrier.
