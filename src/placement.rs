@@ -97,7 +97,7 @@ pub enum Objective {
 }
 
 impl Objective {
-    /// The unit of the score.
+    /// The unit of the score (gain maps are in dB).
     pub fn unit(&self) -> &'static str {
         match self {
             Objective::Coverage { .. } => "fraction",
@@ -651,10 +651,6 @@ pub fn rank_candidates(
             })
         })
         .collect();
-    let unit = match search.objective {
-        Objective::MaxThreshold { .. } => "dB",
-        other => other.unit(),
-    };
     Ok(Placement {
         answer: PlacementAnswer {
             scenario_id: base.content_hash(),
@@ -663,7 +659,7 @@ pub fn rank_candidates(
             map_kind: "gain",
             phases: mode,
             objective: search.objective,
-            unit,
+            unit: search.objective.unit(),
             candidates: ranked,
             rejected,
         },
