@@ -203,7 +203,7 @@ impl ChannelModel {
     }
 
     fn link_budget(&self, a: &P3, b: &P3) -> LinkBudget {
-        let los = !self.obstructions.blocks((*a).into(), (*b).into());
+        let los = !self.obstructions.blocks_segment(a, b);
         let pl = path_loss_db((a - b).norm(), self.carrier_ghz, los);
         LinkBudget {
             los,
@@ -254,11 +254,6 @@ impl ChannelModel {
             h: self.los_phase((q - self.ap).norm()) * direct.los_amplitude(),
             tau: direct.scattered_power(),
         }
-    }
-
-    /// The number of IRSs.
-    pub fn surface_count(&self) -> usize {
-        self.surfaces.len()
     }
 
     /// Surface `s`'s part of the channel at `user`: fills `w` (length N_s) with its w̃_s and

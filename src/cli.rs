@@ -252,8 +252,7 @@ pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
     let fail =
         |e: &dyn std::fmt::Display| Failure::input(format!("--scenario {}: {e}", path.display()));
     let text = std::fs::read_to_string(path).map_err(|e| fail(&e))?;
-    let mut document: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| fail(&format!("$: not a JSON document: {e}")))?;
+    let mut document = crate::scenario::document(&text).map_err(|e| fail(&e))?;
     if let Some(map_yaml) = &source.floor_plan {
         let absolute = std::path::absolute(map_yaml)
             .map_err(|e| Failure::input(format!("--floor-plan {}: {e}", map_yaml.display())))?;

@@ -310,10 +310,14 @@ impl Obstructions {
     /// True when the segment between two points passes through the interior of a box, a wall or
     /// the raster's occupied region.
     pub fn blocks(&self, a: [f64; 3], b: [f64; 3]) -> bool {
-        let (a, b) = (P3::from(a), P3::from(b));
-        self.boxes.iter().any(|bx| bx.blocks(&a, &b))
-            || self.walls.iter().any(|w| w.blocks(&a, &b))
-            || self.raster.as_ref().is_some_and(|r| r.blocks(&a, &b))
+        self.blocks_segment(&P3::from(a), &P3::from(b))
+    }
+
+    /// [`Obstructions::blocks`] for points the channel model already holds as vectors.
+    pub fn blocks_segment(&self, a: &P3, b: &P3) -> bool {
+        self.boxes.iter().any(|bx| bx.blocks(a, b))
+            || self.walls.iter().any(|w| w.blocks(a, b))
+            || self.raster.as_ref().is_some_and(|r| r.blocks(a, b))
     }
 
     /// True when (x, y) lies in or on a footprint: such a grid cell is occupied.

@@ -15,6 +15,7 @@
 //! changes every link, so each AP candidate's map is built in full by the ordinary builder.
 
 use crate::channel::{C64, ChannelModel};
+use crate::geometry::Obstructions;
 use crate::input::FieldError;
 use crate::numerics::l1_norm;
 use crate::phases::{PhaseMode, quantise_phase};
@@ -257,6 +258,7 @@ pub fn candidates(base: &Scenario, search: &Search) -> Result<Vec<Candidate>, Fi
         out.push((*p, None));
     }
     if let Some(step) = c.step_m {
+        let obstructions = base.obstructions();
         if !(step.is_finite() && step > 0.0) {
             return Err(FieldError::new("candidates.step_m", "must be positive"));
         }
@@ -283,6 +285,7 @@ pub fn candidates(base: &Scenario, search: &Search) -> Result<Vec<Candidate>, Fi
                 let normal = match search.what {
                     What::Irs => Some(inward_normal(
                         base,
+                        &obstructions,
                         [x, y, height],
                         [dx / length, dy / length],
                     )),
@@ -343,9 +346,15 @@ pub fn candidates(base: &Scenario, search: &Search) -> Result<Vec<Candidate>, Fi
 /// to the wall, the one with free floor 5 cm in front and a wall, an obstacle or the room's end
 /// 5 cm behind; the first perpendicular when neither or both qualify (the candidate's own
 /// validation then says why it fails).
-fn inward_normal(base: &Scenario, at: [f64; 3], along: [f64; 2]) -> [f64; 3] {
+fn inward_normal(
+    base: &Scenario,
+    obstructions: &Obstructions,
+    at: [f64; 3],
+    along: [f64; 2],
+) -> [f64; 3] {
+    // Far enough to step off the face, no thicker than the thinnest wall a floor plan draws
+    // (one 0.05 m pixel).
     const PROBE_M: f64 = 0.05;
-    let obstructions = base.obstructions();
     let r = &base.room;
     let solid = |x: f64, y: f64| {
         x < r.x_min

@@ -344,9 +344,7 @@ impl Scenario {
 
     /// Parses and validates a scenario document.
     pub fn from_json(text: &str) -> Result<Scenario, FieldError> {
-        let value: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))?;
-        Scenario::from_value(value)
+        Scenario::from_value(document(text)?)
     }
 
     /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
@@ -373,9 +371,7 @@ impl Scenario {
     /// folder (see [`floorplan::resolve_map_reference`]).
     pub fn from_file(path: &Path) -> Result<Scenario, FieldError> {
         let text = std::fs::read_to_string(path).map_err(|e| FieldError::new("$", e))?;
-        let value: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))?;
-        Scenario::from_value_with_files(value, path.parent().unwrap_or(Path::new(".")))
+        Scenario::from_value_with_files(document(&text)?, path.parent().unwrap_or(Path::new(".")))
     }
 
     /// Validates a document whose file references (`floor_plan.map`) are relative to `base`.
@@ -1057,6 +1053,13 @@ impl Scenario {
             .expect("built in")
             .expect("a valid grouping variant")
     }
+}
+
+/// A scenario's text as a JSON value (before any field is looked at), for callers that edit the
+/// document first (the CLI's `--floor-plan`).
+pub fn document(text: &str) -> Result<serde_json::Value, FieldError> {
+    serde_json::from_str(text)
+        .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))
 }
 
 /// First 128 bits of SHA-256 of `bytes`, as 32 lowercase hex digits.

@@ -502,6 +502,17 @@ async fn off_runtime_if_big<T: Send + 'static>(
         .map_err(|e| ApiError::internal(format!("the query's worker failed: {e}")))
 }
 
+/// Rejects query parameters outside `allowed`, naming the first unknown one.
+fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), ApiError> {
+    match query.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(unknown) => Err(ApiError::invalid(
+            unknown.clone(),
+            "unknown query parameter",
+        )),
+        None => Ok(()),
+    }
+}
+
 #[derive(Serialize)]
 struct Coverage {
     map_id: String,
@@ -518,12 +529,7 @@ async fn coverage(
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
-    if let Some(unknown) = query.keys().find(|k| k.as_str() != "threshold") {
-        return Err(ApiError::invalid(
-            unknown.clone(),
-            "unknown query parameter",
-        ));
-    }
+    only_query(&query, &["threshold"])?;
     let threshold = query.get("threshold").ok_or_else(|| {
         ApiError::invalid("threshold", "the threshold query parameter is required")
     })?;
@@ -558,15 +564,7 @@ async fn image(
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    if let Some(unknown) = query
-        .keys()
-        .find(|k| !["threshold", "start", "goal", "cell_px"].contains(&k.as_str()))
-    {
-        return Err(ApiError::invalid(
-            unknown.clone(),
-            "unknown query parameter",
-        ));
-    }
+    only_query(&query, &["threshold", "start", "goal", "cell_px"])?;
     let threshold = match query.get("threshold") {
         None => Threshold::Max,
         Some(text) => text
@@ -632,17 +630,6 @@ async fn image(
         )
     })?;
     Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
-}
-
-/// Rejects query parameters outside `allowed`, naming the first unknown one.
-fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), ApiError> {
-    match query.keys().find(|k| !allowed.contains(&k.as_str())) {
-        Some(unknown) => Err(ApiError::invalid(
-            unknown.clone(),
-            "unknown query parameter",
-        )),
-        None => Ok(()),
-    }
 }
 
 /// A Nav2 mask of the map at `threshold` (keep-out by default, or `mask=cost` with an optional
