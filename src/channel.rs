@@ -119,6 +119,22 @@ pub struct DirectAndScattered {
 }
 
 impl ChannelModel {
+    /// Bytes the model holds on the heap, for cache weighing: the scattering points and their
+    /// AP distances (6.4 MB at M = 200 000 elements), the boxes and the walls. A floor plan's
+    /// raster is shared with the scenario (an `Arc`) and weighed with it.
+    pub fn heap_bytes(&self) -> usize {
+        let surfaces: usize = self
+            .surfaces
+            .iter()
+            .map(|irs| {
+                std::mem::size_of::<IrsModel>()
+                    + irs.points.capacity() * std::mem::size_of::<P3>()
+                    + irs.ap_distance.capacity() * std::mem::size_of::<f64>()
+            })
+            .sum();
+        std::mem::size_of::<ChannelModel>() + surfaces + self.obstructions.heap_bytes()
+    }
+
     /// Builds the model of a validated scenario, for its first AP.
     pub fn new(scenario: &Scenario) -> ChannelModel {
         ChannelModel::for_ap(scenario, 0)

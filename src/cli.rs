@@ -9,9 +9,9 @@ use crate::export::{self, MaskKind};
 use crate::input::{parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::phases::PhaseMode;
-use crate::placement::{self, Candidates, Objective, PlaceError, Pose, Search, Segment, What};
+use crate::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
 use crate::planner::{self, Threshold};
-use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
 use crate::rate::Access;
 use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
@@ -393,9 +393,18 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         RenderOptions::for_path(&map, &path),
     )?;
     let monte_carlo = match args.monte_carlo {
-        Some(draws) if path.feasible => Some(montecarlo::check_path(
-            &scenario, &map, &path, draws, args.seed,
-        )),
+        Some(draws) if path.feasible => {
+            let progress = Progress::default();
+            let checked = with_progress_bar(
+                &progress,
+                args.map.quiet,
+                "monte carlo",
+                "waypoints",
+                || montecarlo::check_path(&scenario, &map, &path, draws, args.seed, &progress),
+            );
+            // Nothing cancels a CLI check: the progress is ours alone.
+            Some(checked.map_err(|e| Failure::runtime(e.to_string()))?)
+        }
         _ => None,
     };
     print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))
@@ -486,8 +495,8 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
         placement::place(&scenario, &search, &progress)
     })
     .map_err(|e| match e {
-        PlaceError::Invalid(e) => Failure::input(format!("--{e}")),
-        PlaceError::Cancelled(e) => Failure::runtime(e.to_string()),
+        WorkError::Invalid(e) => Failure::input(format!("--{e}")),
+        WorkError::Cancelled(e) => Failure::runtime(e.to_string()),
     })?;
     if let (Some(file), Some(best)) = (&args.png, placement.scenarios.first()) {
         let key = MapKey::gain(&best.content_hash(), best, placement.answer.phases)

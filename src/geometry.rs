@@ -307,6 +307,12 @@ pub struct Obstructions {
 }
 
 impl Obstructions {
+    /// Bytes of the boxes and walls (the raster is shared, see [`Raster`]'s owner).
+    pub fn heap_bytes(&self) -> usize {
+        self.boxes.capacity() * std::mem::size_of::<Aabb>()
+            + self.walls.capacity() * std::mem::size_of::<Wall>()
+    }
+
     /// True when the segment between two points passes through the interior of a box, a wall or
     /// the raster's occupied region.
     pub fn blocks(&self, a: [f64; 3], b: [f64; 3]) -> bool {

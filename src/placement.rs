@@ -20,7 +20,7 @@ use crate::input::FieldError;
 use crate::numerics::l1_norm;
 use crate::phases::{PhaseMode, quantise_phase};
 use crate::planner::CellGraph;
-use crate::radiomap::{self, Cancelled, MapKey, Progress, body::coverage};
+use crate::radiomap::{self, Cancelled, MapKey, Progress, WorkError, body::coverage};
 use crate::scenario::{Grid, Irs, Scenario};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -184,15 +184,6 @@ pub struct Placement {
     pub answer: PlacementAnswer,
     /// The ranked candidates' scenarios, best first (as `answer.candidates`).
     pub scenarios: Vec<Scenario>,
-}
-
-/// Why a search stopped.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum PlaceError {
-    #[error(transparent)]
-    Invalid(#[from] FieldError),
-    #[error(transparent)]
-    Cancelled(#[from] Cancelled),
 }
 
 /// Checks a search and lists its candidates, each with its scenario (or the reason it has
@@ -538,7 +529,7 @@ pub fn place(
     base: &Scenario,
     search: &Search,
     progress: &Progress,
-) -> Result<Placement, PlaceError> {
+) -> Result<Placement, WorkError> {
     rank_candidates(base, search, candidates(base, search)?, progress)
 }
 
@@ -549,7 +540,7 @@ pub fn rank_candidates(
     search: &Search,
     candidates: Vec<Candidate>,
     progress: &Progress,
-) -> Result<Placement, PlaceError> {
+) -> Result<Placement, WorkError> {
     let mode = search.phases.unwrap_or(PhaseMode::Continuous);
     let grid = base.grid();
     let occupied = radiomap::occupancy(base, &grid);
@@ -613,7 +604,7 @@ pub fn rank_candidates(
         What::Ap => valid
             .par_iter()
             .map(
-                |&(k, scenario)| -> Result<(usize, Option<f64>), PlaceError> {
+                |&(k, scenario)| -> Result<(usize, Option<f64>), WorkError> {
                     if progress.is_cancelled() {
                         return Err(Cancelled.into());
                     }
@@ -626,7 +617,7 @@ pub fn rank_candidates(
                     ))
                 },
             )
-            .collect::<Result<_, PlaceError>>()?,
+            .collect::<Result<_, WorkError>>()?,
     };
     let mut scores = scores;
     rank(&mut scores, &search.objective);

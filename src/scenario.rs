@@ -34,6 +34,15 @@ pub const MAX_SRUS: usize = 4;
 pub const MAX_OBSTACLES: usize = 1000;
 /// Largest number of walls; each is tested against every link, like a box.
 pub const MAX_WALLS: usize = 1000;
+/// Longest scenario name, in characters: a label for listings, not a document store.
+pub const MAX_NAME_CHARS: usize = 200;
+/// Most cells along one axis of the grid: a 1 km corridor at 0.1 m. Together with
+/// [`MAX_GRID_CELLS`] it keeps absurd aspect ratios (a 10⁶ × 1 grid) out, which would otherwise
+/// give pictures and masks a side no image format holds.
+pub const MAX_GRID_SIDE: usize = 10_001;
+/// Largest |coordinate| (m) of the room, and so of everything inside it: a floor is far smaller,
+/// and beyond ~10⁵ m squared distances lose the millimetre precision blockage tests rely on.
+pub const MAX_COORDINATE_M: f64 = 100_000.0;
 /// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit":
 /// loose enough for spans and normals typed with six significant digits.
 const TOL: f64 = 1e-6;
@@ -531,6 +540,25 @@ impl Scenario {
         ] {
             finite(field, v)?;
         }
+        if let Some(name) = &self.name
+            && name.chars().count() > MAX_NAME_CHARS
+        {
+            return err(
+                "name",
+                &format!("longer than the limit of {MAX_NAME_CHARS} characters"),
+            );
+        }
+        for (field, v) in [
+            ("room.x_min", r.x_min),
+            ("room.x_max", r.x_max),
+            ("room.y_min", r.y_min),
+            ("room.y_max", r.y_max),
+            ("room.ceiling_m", r.ceiling_m),
+        ] {
+            if v.abs() > MAX_COORDINATE_M {
+                return err(field, &format!("must lie within ±{MAX_COORDINATE_M} m"));
+            }
+        }
         if r.x_max <= r.x_min {
             return err("room.x_max", "must be greater than room.x_min");
         }
@@ -549,10 +577,20 @@ impl Scenario {
             ("room.y_max", r.y_max - r.y_min),
         ] {
             let cells = span / d;
-            if cells > MAX_GRID_CELLS as f64 {
+            if cells + 1.0 > MAX_GRID_SIDE as f64 {
                 return Err(FieldError::new(
                     "grid.resolution_m",
-                    format!("grid larger than the limit of {MAX_GRID_CELLS} cells"),
+                    format!(
+                        "{field} − min spans {span} m: {} cells at this resolution, above the \
+                         limit of {MAX_GRID_SIDE} cells a side",
+                        (cells + 1.0).floor()
+                    ),
+                ));
+            }
+            if cells < 1.0 - TOL {
+                return Err(FieldError::new(
+                    "grid.resolution_m",
+                    format!("{d} m is larger than the room's span of {span} m"),
                 ));
             }
             if (cells - cells.round()).abs() > TOL * cells.max(1.0) {
@@ -1026,6 +1064,13 @@ impl Scenario {
     pub fn content_hash(&self) -> String {
         hash_hex(self.canonical_json().as_bytes())
     }
+
+    /// Approximate bytes the scenario holds, for a registry's budget: about its canonical
+    /// document (numbers and the floor plan's base64 take as much parsed as written), plus the
+    /// floor plan decoded to one byte per pixel.
+    pub fn approx_bytes(&self) -> usize {
+        self.canonical_json().len() + self.raster.as_ref().map_or(0, |r| r.occupied.capacity())
+    }
 }
 
 #[cfg(test)]
@@ -1242,6 +1287,27 @@ mod tests {
             (
                 Box::new(|v| v["mru"]["v_max_mps"] = 0.into()),
                 "mru.v_max_mps",
+            ),
+            // Sizes the engine would otherwise take on trust.
+            (
+                Box::new(|v| v["name"] = "n".repeat(MAX_NAME_CHARS + 1).into()),
+                "name",
+            ),
+            (
+                Box::new(|v| v["grid"]["resolution_m"] = 100.0.into()),
+                "grid.resolution_m",
+            ),
+            (
+                Box::new(|v| {
+                    v["room"]["x_max"] = 20_000.0.into();
+                    v["room"]["y_max"] = 0.5.into();
+                    v["grid"]["resolution_m"] = 0.5.into();
+                }),
+                "grid.resolution_m",
+            ),
+            (
+                Box::new(|v| v["room"]["x_min"] = (-1e300).into()),
+                "room.x_min",
             ),
             (
                 Box::new(|v| v["ap"]["carrier_ghz"] = (-2.0).into()),

@@ -65,6 +65,16 @@ fn start(extra: &[&str]) -> Server {
 
 impl Server {
     async fn send(&self, method: &str, path: &str, body: Option<Value>) -> (StatusCode, Value) {
+        self.send_as(None, method, path, body).await
+    }
+    /// A request with `Authorization: Bearer <token>` when a token is given.
+    async fn send_as(
+        &self,
+        token: Option<&str>,
+        method: &str,
+        path: &str,
+        body: Option<Value>,
+    ) -> (StatusCode, Value) {
         let url = format!("{}{path}", self.base);
         let req = match method {
             "GET" => self.client.get(url),
@@ -76,6 +86,10 @@ impl Server {
             Some(b) => req
                 .header("content-type", "application/json")
                 .body(b.to_string()),
+            None => req,
+        };
+        let req = match token {
+            Some(t) => req.bearer_auth(t),
             None => req,
         };
         let resp = req.send().await.unwrap();
@@ -200,6 +214,8 @@ fn openapi_query_patterns_are_the_servers_number_grammar() {
         .lines()
         .filter_map(|line| line.split("pattern: ").nth(1))
         .map(|rest| rest.split(" }").next().unwrap())
+        // A listing's cursor is an opaque key, not a number.
+        .filter(|pattern| *pattern != "'^[A-Za-z0-9]{1,128}$'")
         .collect();
     assert_eq!(patterns.len(), 6, "threshold ×3, start, goal, best");
     for pattern in patterns {
@@ -424,7 +440,7 @@ async fn concurrent_requests_for_one_map_start_one_build() {
     let id = server.scenario_id("paper-multi-user").await;
     let before = server.metric("irs_map_builds_total{kind=\"rate\"}").await;
     let request = json!({"scenario_id": id, "kind": "rate", "access": "oma"});
-    let answers = futures_join(&server, &request, 8).await;
+    let answers = futures_join_all(&server, &vec![request.clone(); 8]).await;
     let job_ids: std::collections::HashSet<String> = answers
         .iter()
         .map(|(_, b)| b["job_id"].as_str().unwrap().to_string())
@@ -446,9 +462,10 @@ async fn concurrent_requests_for_one_map_start_one_build() {
     );
 }
 
-async fn futures_join(server: &Server, request: &Value, n: usize) -> Vec<(StatusCode, Value)> {
+/// POSTs every request to /v1/maps at once; the answers in request order.
+async fn futures_join_all(server: &Server, requests: &[Value]) -> Vec<(StatusCode, Value)> {
     let mut handles = Vec::new();
-    for _ in 0..n {
+    for request in requests {
         let (client, url, body) = (
             server.client.clone(),
             format!("{}/v1/maps", server.base),
@@ -533,6 +550,23 @@ async fn every_error_is_a_problem_naming_its_field() {
         StatusCode::UNSUPPORTED_MEDIA_TYPE,
         "unsupported_media_type",
     );
+    // A body without a content type is not guessed at.
+    let resp = server
+        .client
+        .post(format!("{}/v1/paths", server.base))
+        .body("{}")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    // An array of the wrong length is a field error (422), not a syntax error.
+    let (s, b) = raw(
+        r#"{"map_id": "x", "start": [1, 2, 3], "goal": [1, 2], "threshold": 0}"#,
+        "application/json",
+    )
+    .await;
+    problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "invalid_field");
+    assert_eq!(b["field"], "start");
     let big = format!("{{\"start\": [{}0]}}", "0,".repeat(10_000));
     let resp = server
         .client
@@ -860,8 +894,18 @@ async fn operations_endpoints() {
 
 #[tokio::test]
 async fn sigterm_shuts_down_gracefully() {
-    let mut server = start(&[]);
+    let mut server = start(&["--shutdown-grace-s", "1"]);
     assert_eq!(server.get("/healthz").await.0, StatusCode::OK);
+    // A build that outlasts the grace period is cancelled, and the process exits within the
+    // grace period plus two seconds.
+    let (s, job) = server
+        .post(
+            "/v1/maps",
+            long_rate_request(fine_multi_user("shutdown"), "noma"),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    let signalled = Instant::now();
     let pid = server.child.id().to_string();
     assert!(
         Command::new("kill")
@@ -874,6 +918,11 @@ async fn sigterm_shuts_down_gracefully() {
     loop {
         if let Some(status) = server.child.try_wait().unwrap() {
             assert!(status.success(), "exit status {status}");
+            assert!(
+                signalled.elapsed() < Duration::from_secs(4),
+                "exit took {:?}",
+                signalled.elapsed()
+            );
             break;
         }
         assert!(
@@ -1197,4 +1246,205 @@ async fn a_placement_job_can_be_cancelled() {
     assert!(done["cells_done"].as_u64().unwrap() < done["cells_total"].as_u64().unwrap());
     let (status, body) = server.get(&format!("/v1/placements/{id}")).await;
     problem(status, &body, StatusCode::CONFLICT, "job_finished");
+}
+
+/// Tokens on: writes need one, and jobs and scenarios belong to the token that made them.
+#[tokio::test]
+async fn tokens_guard_writes_and_records_belong_to_their_token() {
+    let (alice, bob) = ("alice-token-0123456789", "bob-token-0123456789ab");
+    let server = start(&["--api-tokens", &format!("{alice},{bob}")]);
+    let doc = scenario("small-test.json", |v| v["name"] = "alice's".into());
+    let (s, b) = server.post("/v1/scenarios", doc.clone()).await;
+    problem(s, &b, StatusCode::UNAUTHORIZED, "unauthorized");
+    let (s, b) = server
+        .send_as(Some("not-a-token-at-all"), "GET", "/v1/scenarios", None)
+        .await;
+    problem(s, &b, StatusCode::UNAUTHORIZED, "unauthorized");
+    let resp = server
+        .client
+        .delete(format!("{}/v1/jobs/x", server.base))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::UNAUTHORIZED);
+    assert!(resp.headers().contains_key("www-authenticate"));
+
+    let (s, created) = server
+        .send_as(Some(alice), "POST", "/v1/scenarios", Some(doc))
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{created}");
+    let id = created["id"].as_str().unwrap().to_string();
+    let names = |list: &Value| -> Vec<String> {
+        list["scenarios"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["name"].as_str().unwrap_or("").to_string())
+            .collect()
+    };
+    let (_, mine) = server
+        .send_as(Some(alice), "GET", "/v1/scenarios", None)
+        .await;
+    assert!(names(&mine).contains(&"alice's".to_string()), "{mine}");
+    let (_, theirs) = server
+        .send_as(Some(bob), "GET", "/v1/scenarios", None)
+        .await;
+    assert!(!names(&theirs).contains(&"alice's".to_string()), "{theirs}");
+    let (_, anonymous) = server.get("/v1/scenarios").await;
+    assert_eq!(
+        names(&anonymous).len(),
+        3,
+        "only the built-in scenarios: {anonymous}"
+    );
+    // Reads by id stay open: ids are content hashes.
+    assert_eq!(
+        server.get(&format!("/v1/scenarios/{id}")).await.0,
+        StatusCode::OK
+    );
+    let path = format!("/v1/scenarios/{id}");
+    let (s, b) = server.send_as(Some(bob), "DELETE", &path, None).await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+
+    let (s, job) = server
+        .send_as(
+            Some(alice),
+            "POST",
+            "/v1/maps",
+            Some(long_rate_request(fine_multi_user("alice-job"), "noma")),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    let job_path = format!("/v1/jobs/{}", job["job_id"].as_str().unwrap());
+    let (s, b) = server.send_as(Some(bob), "DELETE", &job_path, None).await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+    let (_, bobs) = server.send_as(Some(bob), "GET", "/v1/jobs", None).await;
+    assert_eq!(bobs["jobs"].as_array().unwrap().len(), 0, "{bobs}");
+    let (_, alices) = server.send_as(Some(alice), "GET", "/v1/jobs", None).await;
+    assert_eq!(alices["jobs"].as_array().unwrap().len(), 1, "{alices}");
+    // Anyone holding the job's id may follow it (identical requests share one job).
+    assert_eq!(server.get(&job_path).await.0, StatusCode::OK);
+    let (s, _) = server.send_as(Some(alice), "DELETE", &job_path, None).await;
+    assert_eq!(s, StatusCode::ACCEPTED);
+    server.wait_job(job["job_id"].as_str().unwrap()).await;
+    let (s, _) = server.send_as(Some(alice), "DELETE", &path, None).await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    assert_eq!(server.get(&path).await.0, StatusCode::NOT_FOUND);
+}
+
+/// Listings come a page at a time; following next_cursor visits every item once.
+#[tokio::test]
+async fn listings_are_paginated() {
+    let server = start(&[]);
+    for k in 0..5 {
+        let doc = scenario("small-test.json", |v| {
+            v["name"] = format!("page-{k}").into()
+        });
+        assert_eq!(
+            server.post("/v1/scenarios", doc).await.0,
+            StatusCode::CREATED
+        );
+    }
+    let mut seen = Vec::new();
+    let mut cursor: Option<String> = None;
+    loop {
+        let query = match &cursor {
+            Some(c) => format!("/v1/scenarios?limit=2&cursor={c}"),
+            None => "/v1/scenarios?limit=2".to_string(),
+        };
+        let (s, page) = server.get(&query).await;
+        assert_eq!(s, StatusCode::OK, "{page}");
+        let items = page["scenarios"].as_array().unwrap();
+        assert!(items.len() <= 2);
+        seen.extend(items.iter().map(|s| s["id"].as_str().unwrap().to_string()));
+        match page["next_cursor"].as_str() {
+            Some(next) => cursor = Some(next.to_string()),
+            None => break,
+        }
+    }
+    let mut unique = seen.clone();
+    unique.sort();
+    unique.dedup();
+    assert_eq!(seen.len(), 8, "3 built-in + 5 registered: {seen:?}");
+    assert_eq!(unique.len(), seen.len());
+    for (query, field) in [
+        ("/v1/scenarios?limit=0", "limit"),
+        ("/v1/jobs?limit=1001", "limit"),
+        ("/v1/maps?cursor=%2F..", "cursor"),
+        ("/v1/jobs?page=2", "page"),
+    ] {
+        let (s, b) = server.get(query).await;
+        assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{query}: {b}");
+        assert_eq!(b["field"], field, "{b}");
+    }
+}
+
+/// Work above the CPU budget is refused before it starts, naming the field and the limit;
+/// a client's request id is kept only if it is short and clean.
+#[tokio::test]
+async fn budgets_and_request_ids() {
+    let server = start(&["--max-build-cpu-s", "0.001"]);
+    let heavy = scenario("paper-single-user.json", |v| {
+        v["irs"]["grouping"] = "elements".into();
+        v["name"] = "heavy".into();
+    });
+    let (s, b) = server
+        .post("/v1/maps", json!({"scenario": heavy, "kind": "gain"}))
+        .await;
+    problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
+    assert_eq!(b["field"], "kind");
+    assert_eq!(b["limit"], 1);
+    let (_, listed) = server.get("/v1/scenarios").await;
+    assert_eq!(
+        listed["scenarios"].as_array().unwrap().len(),
+        3,
+        "the refused scenario left no trace"
+    );
+
+    let echo = |id: String| {
+        let (client, url) = (server.client.clone(), format!("{}/healthz", server.base));
+        async move {
+            let resp = client
+                .get(url)
+                .header("x-request-id", id)
+                .send()
+                .await
+                .unwrap();
+            resp.headers()["x-request-id"].to_str().unwrap().to_string()
+        }
+    };
+    assert_eq!(echo("trace-42.a:b".into()).await, "trace-42.a:b");
+    let long = "x".repeat(65);
+    assert_ne!(echo(long.clone()).await, long);
+    assert_ne!(echo("a b;c=\"d\"".into()).await, "a b;c=\"d\"");
+}
+
+/// A map is handed to the requests that waited for it even when the cache cannot keep it (no
+/// 500 when it is evicted at once), and a map bigger than the whole cache budget is refused
+/// before its build.
+#[tokio::test]
+async fn maps_are_delivered_and_never_built_beyond_the_cache() {
+    let server = start(&["--cache-mb", "2"]);
+    let fine = |resolution: f64, name: &str| {
+        scenario("paper-single-user.json", |v| {
+            v["grid"]["resolution_m"] = resolution.into();
+            v["name"] = name.into();
+        })
+    };
+    // 1.5 MB each: every build evicts the map before it.
+    let requests: Vec<Value> = (0..4)
+        .map(|k| json!({"scenario": fine(0.05, &format!("fine-{k}")), "kind": "gain"}))
+        .collect();
+    let answers = futures_join_all(&server, &requests).await;
+    for (status, body) in &answers {
+        assert_eq!(*status, StatusCode::OK, "{body}");
+    }
+    assert!(server.metric("irs_map_cache_bytes").await <= 2.0 * 1024.0 * 1024.0);
+    let (s, b) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario": fine(0.025, "too-fine"), "kind": "gain"}),
+        )
+        .await;
+    problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
+    assert_eq!(b["limit"], 2 * 1024 * 1024);
 }

@@ -147,7 +147,8 @@ fn monte_carlo_means_respect_the_jensen_bound() {
         let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
         let path = planner::plan(&map, [0.5, 0.5], [5.5, 3.0], Threshold::Max, 1.0).unwrap();
         assert!(path.feasible);
-        let report = montecarlo::check_path(&s, &map, &path, 20_000, 7);
+        let report =
+            montecarlo::check_path(&s, &map, &path, 20_000, 7, &Progress::default()).unwrap();
         assert_eq!(report.waypoints.len(), path.waypoints.len());
         for wp in &report.waypoints {
             for u in &wp.users {

@@ -6,7 +6,7 @@ pub mod graph;
 pub use graph::{CellGraph, Infeasible, Path};
 
 use crate::input::{FieldError, parse_finite};
-use crate::radiomap::{CellConfig, RadioMap};
+use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, WorkError};
 use crate::scenario::Grid;
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
@@ -235,30 +235,37 @@ pub fn plan(
     Ok(answer)
 }
 
-/// Distance versus threshold for a list of thresholds, in one request.
+/// Distance versus threshold for a list of thresholds, in one request. `progress` counts the
+/// thresholds done; cancelling it stops the sweep before the next threshold.
 pub fn sweep(
     map: &RadioMap,
     start: [f64; 2],
     goal: [f64; 2],
     thresholds: &[f64],
     v_max_mps: f64,
-) -> Result<SweepAnswer, FieldError> {
+    progress: &Progress,
+) -> Result<SweepAnswer, WorkError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
     let graph = graph(map);
+    progress.start(thresholds.len());
     let points = thresholds
         .iter()
         .map(|&t| {
+            if progress.is_cancelled() {
+                return Err(Cancelled);
+            }
             let r = graph.shortest_path(s, g, t);
-            SweepPoint {
+            progress.advance(1);
+            Ok(SweepPoint {
                 threshold: t,
                 feasible: r.is_ok(),
                 reason: r.as_ref().err().copied(),
                 distance_m: r.as_ref().ok().map(|p| p.distance_m),
                 travel_time_s: r.as_ref().ok().map(|p| p.distance_m / v_max_mps),
-            }
+            })
         })
-        .collect();
+        .collect::<Result<_, Cancelled>>()?;
     Ok(SweepAnswer {
         map_id: map.key.id(),
         unit: map.key.unit(),

@@ -10,6 +10,7 @@
 //! Occupied cells hold NaN (JSON null, the paper's −∞).
 
 pub mod body;
+pub mod cost;
 pub mod gain;
 pub mod key;
 pub mod rate_cells;
@@ -24,7 +25,7 @@ use serde::Serialize;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-/// Shared progress and cancellation of one map build.
+/// Shared progress and cancellation of one piece of long work (a map build, a search, a query).
 #[derive(Debug, Default)]
 pub struct Progress {
     done: AtomicUsize,
@@ -56,8 +57,18 @@ impl Progress {
 
 /// A build stopped by [`Progress::cancel`]; the only way a build of a validated key can fail.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[error("the map build was cancelled")]
+#[error("the work was cancelled")]
 pub struct Cancelled;
+
+/// Why long work (a placement search, a sweep) gave no answer: what it was asked is invalid,
+/// or it was cancelled.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WorkError {
+    #[error(transparent)]
+    Invalid(#[from] crate::input::FieldError),
+    #[error(transparent)]
+    Cancelled(#[from] Cancelled),
+}
 
 /// What a map keeps per cell to answer "how do I configure the IRS (and the AP) here?".
 #[derive(Debug, Clone)]
@@ -155,11 +166,16 @@ impl RadioMap {
         }
     }
 
-    /// Approximate heap size, for cache weighing.
+    /// Bytes the map holds, for cache weighing: its values and occupancy, and what answers
+    /// waypoints (the channel models of a gain map, the per-cell solutions of a rate map).
     pub fn size_bytes(&self) -> usize {
-        let base = self.values.len() * 9 + 256;
+        let base = std::mem::size_of::<RadioMap>()
+            + self.values.capacity() * std::mem::size_of::<f64>()
+            + self.occupied.capacity();
         match &self.cells {
-            CellSolutions::Gain { serving, .. } => base + serving.len(),
+            CellSolutions::Gain {
+                models, serving, ..
+            } => base + serving.capacity() + models.iter().map(|m| m.heap_bytes()).sum::<usize>(),
             CellSolutions::Rate(r) => base + r.size_bytes(),
         }
     }

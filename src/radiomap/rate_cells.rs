@@ -40,8 +40,11 @@ impl RateCells {
         }
     }
 
+    /// Bytes held: the per-cell bounds, phases, powers and decoding orders.
     pub fn size_bytes(&self) -> usize {
-        8 * (self.upper_bound.len() + self.phases.len() + self.power_w.len()) + self.order.len()
+        8 * (self.upper_bound.capacity() + self.phases.capacity() + self.power_w.capacity())
+            + self.order.capacity()
+            + self.surface_lengths.capacity() * 8
     }
 
     /// Index of the decoding order used at a cell (into [`RateModel::orders`]).

@@ -2,6 +2,7 @@
 //! between JSON and the engine; all physics lives in the library modules.
 
 use super::AppState;
+use super::auth::Caller;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
 use super::jobs::{Job, JobView, MapRequestOutcome, PlacementOutcome, Work};
@@ -11,7 +12,8 @@ use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
 use crate::placement::{self, Candidates, Objective, PlacementAnswer, Search, What};
 use crate::planner::{self, SweepAnswer, Threshold};
-use crate::radiomap::{MapKey, MapKind, MapStats, RadioMap};
+use crate::radiomap::cost;
+use crate::radiomap::{MapKey, MapKind, MapStats, Progress, RadioMap, WorkError};
 use crate::rate::Access;
 use crate::render::{self, RenderOptions};
 use crate::scenario::Scenario;
@@ -99,23 +101,29 @@ impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
-        if let Some(ct) = req.headers().get(header::CONTENT_TYPE) {
-            let ct = ct.to_str().unwrap_or("");
-            let essence = ct
-                .split(';')
-                .next()
-                .unwrap_or("")
-                .trim()
-                .to_ascii_lowercase();
-            if essence != "application/json" && !essence.ends_with("+json") {
-                return Err(ApiError::unsupported_media_type(format!(
-                    "expected application/json, got {ct:?}"
-                )));
-            }
+        let Some(ct) = req.headers().get(header::CONTENT_TYPE) else {
+            return Err(ApiError::unsupported_media_type(
+                "the body must be JSON: send Content-Type: application/json",
+            ));
+        };
+        let ct = ct.to_str().unwrap_or("");
+        let essence = ct
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        if essence != "application/json" && !essence.ends_with("+json") {
+            return Err(ApiError::unsupported_media_type(format!(
+                "expected application/json, got {ct:?}"
+            )));
         }
         let limit = state.limits().max_body_bytes;
-        let bytes = axum::body::Bytes::from_request(req, state)
+        let timeout = state.limits().body_timeout;
+        let read = axum::body::Bytes::from_request(req, state);
+        let bytes = tokio::time::timeout(timeout, read)
             .await
+            .map_err(|_| ApiError::body_timeout(timeout.as_secs()))?
             .map_err(|rejection| {
                 if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::body_too_large(limit as u64)
@@ -124,6 +132,66 @@ impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
                 }
             })?;
         parse_json(&bytes).map(Body)
+    }
+}
+
+/// Items per page of a listing when the client does not say, and at most.
+const DEFAULT_PAGE: usize = 100;
+const MAX_PAGE: usize = 1000;
+
+/// A listing's `limit` and `cursor` query parameters (the cursor is the `next_cursor` of the
+/// page before: the key of its last item).
+struct Page {
+    limit: usize,
+    cursor: Option<String>,
+}
+
+impl Page {
+    fn of(query: &HashMap<String, String>) -> Result<Page, ApiError> {
+        only_query(query, &["limit", "cursor"])?;
+        let limit = match query.get("limit") {
+            None => DEFAULT_PAGE,
+            Some(text) => text
+                .parse::<usize>()
+                .ok()
+                .filter(|n| (1..=MAX_PAGE).contains(n))
+                .ok_or_else(|| {
+                    ApiError::limit_exceeded(
+                        "limit",
+                        MAX_PAGE as u64,
+                        format!("must be a whole number from 1 to {MAX_PAGE}"),
+                    )
+                })?,
+        };
+        let cursor = query.get("cursor").cloned();
+        if let Some(c) = &cursor
+            && (c.is_empty() || c.len() > 128 || !c.bytes().all(|b| b.is_ascii_alphanumeric()))
+        {
+            return Err(ApiError::invalid(
+                "cursor",
+                "not a cursor this server gave: use a listing's next_cursor",
+            ));
+        }
+        Ok(Page { limit, cursor })
+    }
+
+    /// The page of `items` (in listing order, each with its key) after the cursor, and the
+    /// cursor of the next page if there is one. `after(key, cursor)` tells whether an item
+    /// comes after the cursor in listing order.
+    fn cut<T>(
+        &self,
+        items: Vec<(String, T)>,
+        after: impl Fn(&str, &str) -> bool,
+    ) -> (Vec<T>, Option<String>) {
+        let mut rest = items
+            .into_iter()
+            .filter(|(key, _)| self.cursor.as_deref().is_none_or(|c| after(key, c)));
+        let page: Vec<(String, T)> = rest.by_ref().take(self.limit).collect();
+        let next = match rest.next() {
+            Some(_) => page.last().map(|(key, _)| key.clone()),
+            None => None,
+        };
+        (page.into_iter().map(|(_, item)| item).collect(), next)
     }
 }
 
@@ -150,7 +218,7 @@ async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiErr
     }
     Ok(Json(Readiness {
         status: "ready",
-        scenarios: state.registry().list().len(),
+        scenarios: state.registry().len(),
     }))
 }
 
@@ -183,12 +251,25 @@ async fn metrics_text(State(state): State<AppState>) -> Response {
 #[derive(Serialize)]
 struct ScenarioList {
     scenarios: Vec<ScenarioSummary>,
+    /// The cursor of the next page, or null on the last.
+    next_cursor: Option<String>,
 }
 
-async fn list_scenarios(State(state): State<AppState>) -> Json<ScenarioList> {
-    Json(ScenarioList {
-        scenarios: state.registry().list(),
-    })
+/// The scenarios the caller may see (the server's own and, with authentication on, the
+/// caller's), by id, a page at a time.
+async fn list_scenarios(
+    State(state): State<AppState>,
+    caller: Caller,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<ScenarioList>, ApiError> {
+    let page = Page::of(&query)?;
+    let listed = state.registry().list(&caller);
+    let keyed = listed.into_iter().map(|s| (s.id.clone(), s)).collect();
+    let (scenarios, next_cursor) = page.cut(keyed, |key, cursor| key > cursor);
+    Ok(Json(ScenarioList {
+        scenarios,
+        next_cursor,
+    }))
 }
 
 #[derive(Serialize)]
@@ -205,10 +286,11 @@ fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, Ap
 
 async fn register_scenario(
     State(state): State<AppState>,
+    caller: Caller,
     Body(value): Body<serde_json::Value>,
 ) -> Result<Response, ApiError> {
     let scenario = parse_scenario(value, "")?;
-    let (stored, created) = state.register_scenario(scenario, "api")?;
+    let (stored, created) = state.register_scenario(scenario, "api", &caller)?;
     let status = if created {
         StatusCode::CREATED
     } else {
@@ -237,10 +319,12 @@ async fn get_scenario(
     }))
 }
 
-/// Deletes an API-registered scenario and the cached maps built from it. A scenario that a
-/// queued or running job needs is kept (409 with the job).
+/// Deletes the caller's registration of an API scenario; with the last registration the
+/// scenario goes, and the cached maps built from it. A scenario that a queued or running job
+/// needs is kept (409 with the job).
 async fn delete_scenario(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
     if let Some(job) = state
@@ -251,13 +335,14 @@ async fn delete_scenario(
     {
         return Err(ApiError::scenario_in_use(&id, &job.id));
     }
-    state.registry().delete(&id)?;
-    for (map_id, map) in state.cache().entries() {
-        if map.key.scenario_id == id {
-            state.cache().remove(&map_id).await;
+    if state.registry().delete(&id, &caller)? {
+        for (map_id, map) in state.cache().entries() {
+            if map.key.scenario_id == id {
+                state.cache().remove(&map_id).await;
+            }
         }
+        tracing::info!(scenario_id = %id, "scenario deleted");
     }
-    tracing::info!(scenario_id = %id, "scenario deleted");
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -331,10 +416,12 @@ fn scenario_of(
     }
 }
 
-/// Resolves a map request to a scenario and a normalised key. An inline scenario is registered
-/// only once the whole request has been validated, so a rejected request leaves no trace.
+/// Resolves a map request to a scenario and a normalised key, and checks the build's estimated
+/// cost against the budget. An inline scenario is registered (for `caller`) only once the whole
+/// request has been validated, so a rejected request leaves no trace.
 fn resolve(
     state: &AppState,
+    caller: &Caller,
     request: MapRequest,
     prefix: &str,
 ) -> Result<(Arc<Scenario>, MapKey), ApiError> {
@@ -357,31 +444,71 @@ fn resolve(
             format!("rate maps are limited to {limit} cells; this grid has {cells}"),
         ));
     }
+    check_budget(
+        &format!("{prefix}kind"),
+        "map build",
+        cost::build_seconds(&scenario, &key),
+        state.limits().max_build_cpu_s,
+    )?;
+    // A map the cache could never hold would be built, handed out once and dropped: refuse it.
+    let (bytes, budget) = (cost::map_bytes(&scenario, &key), state.limits().cache_bytes);
+    if bytes > budget as f64 {
+        return Err(ApiError::limit_exceeded(
+            format!("{prefix}kind"),
+            budget,
+            format!(
+                "this map would take about {:.0} MiB, more than the map cache's whole budget of \
+                 {} MiB (--cache-mb): use a coarser grid or fewer elements",
+                bytes / 1048576.0,
+                budget / 1048576
+            ),
+        ));
+    }
     if inline {
-        let (stored, _) = state.register_scenario((*scenario).clone(), "api")?;
+        let (stored, _) = state.register_scenario((*scenario).clone(), "api", caller)?;
         return Ok((stored.scenario.clone(), key));
     }
     Ok((scenario, key))
 }
 
+/// Refuses work whose estimated CPU time exceeds the budget (422 naming `field` and the limit
+/// in seconds), before any of it is done.
+fn check_budget(field: &str, what: &str, seconds: f64, budget: f64) -> Result<(), ApiError> {
+    if seconds <= budget {
+        return Ok(());
+    }
+    Err(ApiError::limit_exceeded(
+        field,
+        budget.ceil() as u64,
+        format!(
+            "this {what} would take about {seconds:.0} s of CPU, above the server's budget of \
+             {budget:.0} s: use a coarser grid, fewer elements (coherent grouping) or fewer \
+             candidates or draws"
+        ),
+    ))
+}
+
 /// The map, waiting for cheap builds; `Err(Response)` is the 202 job answer for long ones.
 async fn obtain(
     state: &AppState,
+    caller: &Caller,
     scenario: Arc<Scenario>,
     key: MapKey,
 ) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
     let cheap = key.kind == MapKind::Gain && scenario.grid().cells() <= state.limits().sync_cells;
-    match state.jobs().request(state.cache(), scenario, key).await? {
+    let outcome = state
+        .jobs()
+        .request(state.cache(), scenario, key, caller.owner())
+        .await?;
+    match outcome {
         MapRequestOutcome::Ready(map) => Ok(Ok(map)),
         MapRequestOutcome::Building(job) if cheap => {
-            job.finished().await;
-            match state.cache().peek(job.map_id().unwrap_or_default()).await {
+            // The job hands its map over itself, whatever the cache has done with it since.
+            match job.wait_for_map().await {
                 Some(map) => Ok(Ok(map)),
-                None => {
-                    Err(ApiError::build_failed(job.view().error.unwrap_or_else(
-                        || format!("job {} did not finish", job.id),
-                    )))
-                }
+                None => Err(ApiError::build_failed(job.view().error.unwrap_or_else(
+                    || format!("job {} ended {} without a map", job.id, job.state().label()),
+                ))),
             }
         }
         MapRequestOutcome::Building(job) => Ok(Err(accepted(job.view()))),
@@ -400,11 +527,12 @@ fn accepted(view: JobView) -> Response {
 
 async fn request_map(
     State(state): State<AppState>,
+    caller: Caller,
     Body(request): Body<MapRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
-    let (scenario, key) = resolve(&state, request, "")?;
-    Ok(match obtain(&state, scenario, key).await? {
+    let (scenario, key) = resolve(&state, &caller, request, "")?;
+    Ok(match obtain(&state, &caller, scenario, key).await? {
         Ok(map) => Json(Timed::since(started, summary(&map))).into_response(),
         Err(job) => job,
     })
@@ -413,17 +541,23 @@ async fn request_map(
 #[derive(Serialize)]
 struct MapList {
     maps: Vec<MapSummary>,
+    /// The cursor of the next page, or null on the last.
+    next_cursor: Option<String>,
 }
 
-async fn list_maps(State(state): State<AppState>) -> Json<MapList> {
-    let mut maps: Vec<MapSummary> = state
-        .cache()
-        .entries()
-        .iter()
-        .map(|(_, m)| summary(m))
-        .collect();
-    maps.sort_by(|a, b| a.map_id.cmp(&b.map_id));
-    Json(MapList { maps })
+/// The cached maps, by id, a page at a time.
+async fn list_maps(
+    State(state): State<AppState>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<MapList>, ApiError> {
+    let page = Page::of(&query)?;
+    let mut entries = state.cache().entries();
+    entries.sort_by(|a, b| a.0.cmp(&b.0));
+    let (maps, next_cursor) = page.cut(entries, |key, cursor| key > cursor);
+    Ok(Json(MapList {
+        maps: maps.iter().map(|m| summary(m)).collect(),
+        next_cursor,
+    }))
 }
 
 async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, ApiError> {
@@ -472,7 +606,7 @@ async fn get_map(
     let started = Instant::now();
     let map = cached_map(&state, &map_id).await?;
     let cells = map.grid.cells();
-    let bytes = off_runtime_if_big(cells, move || {
+    let bytes = heavy(&state, "map body", cells, move |_| {
         serde_json::to_vec(&Timed::since(started, map.body()))
     })
     .await?;
@@ -480,26 +614,27 @@ async fn get_map(
     Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
 }
 
-/// Work on a map with more cells than this (path and sweep searches, map bodies, pictures)
-/// runs on tokio's blocking pool. A search or a serialisation touches every cell at a few tens
-/// of nanoseconds each, so past ~10 000 cells it would hold an async worker thread for longer
-/// than the ~0.1–1 ms tokio budgets between awaits, and every other request on that thread
-/// (health checks included) would wait. Below it (the paper's map has 1 681 cells) the work is
-/// cheaper than the hand-off to another thread.
+/// Work on a map with more cells than this (path and sweep searches, map bodies, exports) is a
+/// heavy query, run on the query pool under its admission control (`super::queries`). A
+/// search or a serialisation touches every cell at a few tens of nanoseconds each, so past
+/// ~10 000 cells it would hold an async worker thread for longer than the ~0.1–1 ms tokio
+/// budgets between awaits, and every other request on that thread (health checks included)
+/// would wait. Below it (the paper's map has 1 681 cells) the work is cheaper than the
+/// hand-off to another thread.
 const INLINE_WORK_CELLS: usize = 10_000;
 
-/// Runs `work` inline for small maps and on the blocking pool for big ones (see
-/// [`INLINE_WORK_CELLS`]).
-async fn off_runtime_if_big<T: Send + 'static>(
+/// Runs `work` inline for small maps and as a heavy query for big ones (see
+/// [`INLINE_WORK_CELLS`]); the work's [`Progress`] is cancelled if the client goes.
+async fn heavy<T: Send + 'static>(
+    state: &AppState,
+    what: &'static str,
     cells: usize,
-    work: impl FnOnce() -> T + Send + 'static,
+    work: impl FnOnce(&Progress) -> T + Send + 'static,
 ) -> Result<T, ApiError> {
     if cells <= INLINE_WORK_CELLS {
-        return Ok(work());
+        return Ok(work(&Progress::default()));
     }
-    tokio::task::spawn_blocking(work)
-        .await
-        .map_err(|e| ApiError::internal(format!("the query's worker failed: {e}")))
+    state.queries().run(what, work).await
 }
 
 /// Rejects query parameters outside `allowed`, naming the first unknown one.
@@ -600,8 +735,8 @@ async fn image(
         })
         .transpose()?;
     let (map, scenario) = map_and_scenario(&state, &map_id).await?;
-    // Rendering touches every pixel, so it always leaves the async threads.
-    let bytes = tokio::task::spawn_blocking(move || -> Result<Option<Vec<u8>>, FieldError> {
+    // Rendering touches every pixel (up to 4096² of them), so it is always a heavy query.
+    let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
         let options = match path_ends {
             Some((s, g)) => {
                 RenderOptions::for_path(&map, &planner::plan(&map, s, g, threshold, 1.0)?)
@@ -616,19 +751,21 @@ async fn image(
         };
         let options = RenderOptions { cell_px, ..options };
         Ok(render::png(&map, &scenario, &options))
-    })
-    .await
-    .map_err(|e| ApiError::internal(format!("rendering failed: {e}")))??
-    .ok_or_else(|| {
-        ApiError::limit_exceeded(
-            "cell_px",
-            render::MAX_SIDE_PX as u64,
-            format!(
-                "the picture would exceed {} pixels a side",
-                render::MAX_SIDE_PX
-            ),
-        )
-    })?;
+    };
+    let bytes = state
+        .queries()
+        .run("picture", render)
+        .await??
+        .ok_or_else(|| {
+            ApiError::limit_exceeded(
+                "cell_px",
+                render::MAX_SIDE_PX as u64,
+                format!(
+                    "the picture would exceed {} pixels a side",
+                    render::MAX_SIDE_PX
+                ),
+            )
+        })?;
     Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
 }
 
@@ -660,7 +797,7 @@ async fn nav2_mask(
         .unwrap_or_default();
     let map = cached_map(&state, &map_id).await?;
     let cells = map.grid.cells();
-    let archive = off_runtime_if_big(cells, move || {
+    let archive = heavy(&state, "mask export", cells, move |_| {
         export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
     })
     .await?
@@ -685,7 +822,7 @@ async fn values_npy(
     only_query(&query, &[])?;
     let map = cached_map(&state, &map_id).await?;
     let cells = map.grid.cells();
-    let bytes = off_runtime_if_big(cells, move || export::npy(&map)).await?;
+    let bytes = heavy(&state, "values export", cells, move |_| export::npy(&map)).await?;
     let disposition = format!("attachment; filename=\"{map_id}.npy\"");
     Ok((
         [
@@ -752,6 +889,7 @@ fn placement_body<'a>(job: &'a Job, outcome: &'a PlacementOutcome) -> PlacementB
 
 async fn place(
     State(state): State<AppState>,
+    caller: Caller,
     Body(request): Body<PlacementRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
@@ -773,25 +911,35 @@ async fn place(
     };
     // Every check (the candidates, the limits, the objective's points) before any work.
     let (checked_scenario, checked_search) = (scenario.clone(), search.clone());
-    let candidates = tokio::task::spawn_blocking(move || {
-        placement::candidates(&checked_scenario, &checked_search)
-    })
-    .await
-    .map_err(|e| ApiError::internal(format!("checking the candidates failed: {e}")))??;
+    let candidates = state
+        .queries()
+        .run("placement check", move |_| {
+            placement::candidates(&checked_scenario, &checked_search)
+        })
+        .await??;
+    let cell_evaluations = candidates.len() as f64 * scenario.grid().cells() as f64;
+    let mode = search.phases.unwrap_or(PhaseMode::Continuous);
+    check_budget(
+        "candidates",
+        "placement search",
+        cost::gain_seconds(&scenario, cell_evaluations, mode),
+        state.limits().max_build_cpu_s,
+    )?;
     if inline {
-        state.register_scenario((*scenario).clone(), "api")?;
+        state.register_scenario((*scenario).clone(), "api", &caller)?;
     }
     let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
-    let registrar = state.clone();
+    let (registrar, owner) = (state.clone(), caller.clone());
     let job = state.jobs().place(
         state.cache(),
         scenario,
         search,
         candidates,
         keep,
+        caller.owner(),
         move |s| {
             registrar
-                .register_scenario(s, "api")
+                .register_scenario(s, "api", &owner)
                 .inspect_err(|e| {
                     tracing::warn!(error = %e.problem.detail, "a placement candidate was not registered")
                 })
@@ -835,12 +983,30 @@ async fn get_placement(
 #[derive(Serialize)]
 struct JobList {
     jobs: Vec<JobView>,
+    /// The cursor of the next page, or null on the last.
+    next_cursor: Option<String>,
 }
 
-async fn list_jobs(State(state): State<AppState>) -> Json<JobList> {
-    Json(JobList {
-        jobs: state.jobs().list(),
-    })
+/// The caller's jobs (all jobs with authentication off), newest first, a page at a time.
+async fn list_jobs(
+    State(state): State<AppState>,
+    caller: Caller,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<JobList>, ApiError> {
+    let page = Page::of(&query)?;
+    let keyed = state
+        .jobs()
+        .list(&caller)
+        .into_iter()
+        .map(|(seq, view)| (seq.to_string(), view))
+        .collect();
+    // Newest first: a job comes after the cursor when it is older (a smaller sequence).
+    let older = |key: &str, cursor: &str| match (key.parse::<u64>(), cursor.parse::<u64>()) {
+        (Ok(k), Ok(c)) => k < c,
+        _ => false,
+    };
+    let (jobs, next_cursor) = page.cut(keyed, older);
+    Ok(Json(JobList { jobs, next_cursor }))
 }
 
 async fn get_job(
@@ -856,9 +1022,10 @@ async fn get_job(
 
 async fn cancel_job(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
-    let job = state.jobs().cancel(&id)?;
+    let job = state.jobs().cancel(&id, &caller)?;
     Ok((StatusCode::ACCEPTED, Json(job.view())))
 }
 
@@ -888,14 +1055,15 @@ struct PathRequest {
 /// The map a path or sweep query names, or the 202 answer while it is built.
 async fn map_for_query(
     state: &AppState,
+    caller: &Caller,
     map_id: Option<String>,
     map: Option<MapRequest>,
 ) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, ApiError> {
     match (map_id, map) {
         (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
         (None, Some(request)) => {
-            let (scenario, key) = resolve(state, request, "map.")?;
-            Ok(obtain(state, scenario.clone(), key)
+            let (scenario, key) = resolve(state, caller, request, "map.")?;
+            Ok(obtain(state, caller, scenario.clone(), key)
                 .await?
                 .map(|m| (m, scenario)))
         }
@@ -916,6 +1084,7 @@ fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], ApiError> {
 
 async fn plan_path(
     State(state): State<AppState>,
+    caller: Caller,
     Body(request): Body<PathRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
@@ -941,27 +1110,37 @@ async fn plan_path(
             "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
         ));
     }
-    let (map, scenario) = match map_for_query(&state, request.map_id, request.map).await? {
+    let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
+    let (map, scenario) = match found {
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let planned = map.clone();
-    let path = off_runtime_if_big(cells, move || {
+    let path = heavy(&state, "path", cells, move |_| {
         planner::plan(&planned, start, goal, threshold, v_max)
     })
     .await??;
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
+            let rate = map.key.kind == MapKind::Rate;
+            check_budget(
+                "monte_carlo_draws",
+                "Monte Carlo check",
+                montecarlo::check_seconds(&scenario, path.waypoints.len(), draws, rate),
+                state.limits().max_check_cpu_s,
+            )?;
             let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
             let seed = request.seed.unwrap_or(1);
-            // Thousands of draws per waypoint: always off the async threads.
-            let report = tokio::task::spawn_blocking(move || {
-                montecarlo::check_path(&scenario, &map, &path, draws, seed)
-            })
-            .await
-            .map_err(|e| ApiError::internal(format!("the Monte Carlo check failed: {e}")))?;
+            // Thousands of draws per waypoint: always a heavy query, cancelled with its client.
+            let report = state
+                .queries()
+                .run("Monte Carlo check", move |progress| {
+                    montecarlo::check_path(&scenario, &map, &path, draws, seed, progress)
+                })
+                .await?
+                .map_err(|e| ApiError::internal(e.to_string()))?;
             Some(report)
         }
         _ => None,
@@ -984,6 +1163,7 @@ struct SweepRequest {
 
 async fn sweep(
     State(state): State<AppState>,
+    caller: Caller,
     Body(request): Body<SweepRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
@@ -1003,14 +1183,21 @@ async fn sweep(
             "must be a finite number",
         ));
     }
-    let (map, scenario) = match map_for_query(&state, request.map_id, request.map).await? {
+    let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
+    let (map, scenario) = match found {
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
     let (cells, v_max, thresholds) = (map.grid.cells(), scenario.mru.v_max_mps, request.thresholds);
-    let answer: SweepAnswer = off_runtime_if_big(cells, move || {
-        planner::sweep(&map, start, goal, &thresholds, v_max)
+    // A sweep is one search per threshold: heavy once thresholds × cells is, not cells alone.
+    let work = cells.saturating_mul(thresholds.len());
+    let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
+        planner::sweep(&map, start, goal, &thresholds, v_max, progress)
     })
-    .await??;
+    .await?
+    .map_err(|e| match e {
+        WorkError::Invalid(e) => ApiError::from(e),
+        WorkError::Cancelled(c) => ApiError::internal(c.to_string()),
+    })?;
     Ok(Json(Timed::since(started, answer)).into_response())
 }

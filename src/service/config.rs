@@ -54,12 +54,76 @@ pub struct ServeArgs {
     /// Finished jobs kept for inspection (oldest forgotten first).
     #[arg(long, env = "IRS_JOB_HISTORY", default_value_t = 1000)]
     pub job_history: usize,
+    /// Memory budget of the scenario registry in MiB (scenarios weighed by their canonical
+    /// document and decoded floor plan; least recently used API scenarios evicted, 507 when
+    /// nothing can go).
+    #[arg(long, env = "IRS_REGISTRY_MB", default_value_t = 256)]
+    pub registry_mb: u64,
+    /// Largest estimated CPU time (seconds of one core) of one map build or placement search;
+    /// a request above it is refused with 422 before any work starts.
+    #[arg(long, env = "IRS_MAX_BUILD_CPU_S", default_value_t = 600.0)]
+    pub max_build_cpu_s: f64,
+    /// Largest estimated CPU time (seconds of one core) of one Monte Carlo check of a path.
+    #[arg(long, env = "IRS_MAX_CHECK_CPU_S", default_value_t = 60.0)]
+    pub max_check_cpu_s: f64,
+    /// Heavy queries (sweeps, paths and pictures of big maps, map bodies and exports, Monte
+    /// Carlo checks) that may run at once, on a thread pool of their own so they never hold
+    /// the async threads or the map builders' pool (default: half the cores, at least 1).
+    #[arg(long, env = "IRS_QUERY_WORKERS")]
+    pub query_workers: Option<usize>,
+    /// Heavy queries that may wait for a query worker; one more is refused with 503 and
+    /// Retry-After.
+    #[arg(long, env = "IRS_QUERY_QUEUE", default_value_t = 32)]
+    pub query_queue: usize,
+    /// Seconds a client has to send a request's headers (on a new or a kept-alive connection).
+    #[arg(long, env = "IRS_HEADER_TIMEOUT_S", default_value_t = 10)]
+    pub header_timeout_s: u64,
+    /// Seconds a client has to send a request's body once its headers arrived (408 after).
+    #[arg(long, env = "IRS_BODY_TIMEOUT_S", default_value_t = 30)]
+    pub body_timeout_s: u64,
+    /// Seconds an idle kept-alive connection stays open.
+    #[arg(long, env = "IRS_IDLE_TIMEOUT_S", default_value_t = 60)]
+    pub idle_timeout_s: u64,
+    /// Seconds one request may take from its headers to its answer (503 after; long builds
+    /// run as jobs, so only a stuck request reaches it).
+    #[arg(long, env = "IRS_REQUEST_TIMEOUT_S", default_value_t = 120)]
+    pub request_timeout_s: u64,
+    /// Connections served at once; further ones wait in the kernel's accept queue.
+    #[arg(long, env = "IRS_MAX_CONNECTIONS", default_value_t = 1024)]
+    pub max_connections: usize,
+    /// Bearer tokens, comma-separated: when any is set (here or in --api-tokens-file), every
+    /// mutating request needs one, and jobs and API scenarios belong to the token that made
+    /// them. Off by default (the embedded development set-up).
+    #[arg(
+        long,
+        env = "IRS_API_TOKENS",
+        value_delimiter = ',',
+        hide_env_values = true
+    )]
+    pub api_tokens: Vec<String>,
+    /// A file of bearer tokens, one per line (blank lines and `#` comments ignored).
+    #[arg(long, env = "IRS_API_TOKENS_FILE")]
+    pub api_tokens_file: Option<PathBuf>,
+    /// Origins allowed to call the API from a browser (CORS), comma-separated; none by default
+    /// (the built-in viewer is same-origin).
+    #[arg(long, env = "IRS_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origin: Vec<String>,
+    /// Seconds SIGTERM waits for running jobs before cancelling them; the process exits at most
+    /// two seconds later.
+    #[arg(long, env = "IRS_SHUTDOWN_GRACE_S", default_value_t = 5)]
+    pub shutdown_grace_s: u64,
 }
 
 impl ServeArgs {
     pub fn workers(&self) -> usize {
         self.workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()))
+            .max(1)
+    }
+
+    pub fn query_workers(&self) -> usize {
+        self.query_workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()) / 2)
             .max(1)
     }
 }

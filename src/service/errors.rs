@@ -218,14 +218,61 @@ impl ApiError {
         e.retry_after_s = Some(5);
         e
     }
-    pub fn registry_full(limit: usize) -> Self {
+    pub fn registry_full(detail: impl Into<String>) -> Self {
         Self::new(
             StatusCode::INSUFFICIENT_STORAGE,
             "registry_full",
             "Scenario registry full",
-            format!("the registry already holds its limit of {limit} scenarios"),
+            detail,
         )
-        .with_limit(limit as u64)
+    }
+    /// Heavy queries are all taken and `limit` more wait: come back in `retry_after_s`.
+    pub fn busy(what: &str, limit: usize, retry_after_s: u64) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "busy",
+            "Server busy",
+            format!(
+                "every query worker is busy and {limit} heavy queries already wait; this {what} \
+                 was not started: retry later"
+            ),
+        )
+        .with_limit(limit as u64);
+        e.retry_after_s = Some(retry_after_s);
+        e
+    }
+    pub fn unauthorized(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "Unauthorized",
+            detail,
+        )
+    }
+    /// The request as a whole took longer than the server's request timeout.
+    pub fn request_timeout(seconds: u64) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "request_timeout",
+            "Request timed out",
+            format!(
+                "the request was not answered within the server's limit of {seconds} s; long \
+                 builds run as jobs, so retry, or ask for the map and poll its job"
+            ),
+        )
+        .with_limit(seconds);
+        e.retry_after_s = Some(1);
+        e
+    }
+    /// The client did not send its body within the body timeout.
+    pub fn body_timeout(seconds: u64) -> Self {
+        Self::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "body_timeout",
+            "Request body timed out",
+            format!("the request body did not arrive within {seconds} s"),
+        )
+        .with_limit(seconds)
     }
     pub fn not_ready() -> Self {
         Self::new(
@@ -260,26 +307,28 @@ impl IntoResponse for ApiError {
         if let Some(s) = self.retry_after_s {
             headers.insert(header::RETRY_AFTER, HeaderValue::from(s));
         }
+        if status == StatusCode::UNAUTHORIZED {
+            headers.insert(
+                header::WWW_AUTHENTICATE,
+                HeaderValue::from_static("Bearer realm=\"irs-planner\""),
+            );
+        }
         response
     }
 }
 
-/// Parses a JSON body strictly, mapping serde errors to problems that name the field.
+/// Parses a JSON body strictly, mapping serde errors to problems that name the field. The text
+/// is parsed as JSON first (a syntax error is 400), then the value is matched to `T` (every
+/// mismatch is 422 naming the field, including arrays of the wrong length, which serde_json's
+/// streaming parser would report as trailing characters, a syntax error).
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
-    let mut de = serde_json::Deserializer::from_slice(bytes);
-    let value: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+    let value: serde_json::Value =
+        serde_json::from_slice(bytes).map_err(|e| ApiError::malformed_json(e.to_string()))?;
+    serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
-        let inner = e.into_inner();
-        if inner.is_syntax() || inner.is_eof() {
-            ApiError::malformed_json(inner.to_string())
-        } else {
-            ApiError::invalid(
-                if path == "." { "$".to_string() } else { path },
-                inner.to_string(),
-            )
-        }
-    })?;
-    de.end()
-        .map_err(|e| ApiError::malformed_json(e.to_string()))?;
-    Ok(value)
+        ApiError::invalid(
+            if path == "." { "$".to_string() } else { path },
+            e.into_inner().to_string(),
+        )
+    })
 }

@@ -4,18 +4,22 @@
 //!
 //! Single flight: while a map id is being built, every request for it gets the same job; the
 //! finished map enters the cache *before* the job leaves the in-flight table, so a request
-//! that arrives in between finds the map, never a second build. Cancellation sets the build's
-//! flag, which [`crate::radiomap::build`] checks once per grid row.
+//! that arrives in between finds the map, never a second build. The requests that wait for a
+//! job take the map from the job itself ([`Job::wait_for_map`]), not from the cache, so a
+//! cache that evicts it at once (full of other maps) cannot fail them; the job lets go of the
+//! map as soon as the last of them has it. Cancellation sets the build's flag, which
+//! [`crate::radiomap::build`] checks once per grid row.
 
+use super::auth::{Caller, Owner};
 use super::cache::MapCache;
 use super::errors::ApiError;
-use crate::placement::{self, Candidate, PlaceError, Placement, PlacementAnswer, Search};
-use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap};
+use crate::placement::{self, Candidate, Placement, PlacementAnswer, Search};
+use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
 use crate::scenario::Scenario;
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::{Notify, Semaphore, watch};
@@ -51,12 +55,27 @@ impl JobState {
 
 /// What a job does.
 pub enum Work {
-    /// Builds one map (single flight by map id).
-    Map { map_id: String, key: MapKey },
+    /// Builds one map (single flight by map id); `handover` passes it to the waiters.
+    Map {
+        map_id: String,
+        key: MapKey,
+        handover: Mutex<Handover>,
+    },
     /// Ranks placement candidates; the answer is kept here once the job is done.
     Placement {
         outcome: OnceLock<Arc<PlacementOutcome>>,
     },
+}
+
+/// How a map job hands its map to the requests waiting for it.
+#[derive(Default)]
+pub struct Handover {
+    /// Requests waiting for the map.
+    waiters: usize,
+    /// The map, held while waiters remain.
+    map: Option<Arc<RadioMap>>,
+    /// Set when the build finished: the map for whoever comes late, while anything holds it.
+    built: Option<std::sync::Weak<RadioMap>>,
 }
 
 /// A finished placement search: the answer, and how many of its best candidates were
@@ -69,6 +88,10 @@ pub struct PlacementOutcome {
 /// One job.
 pub struct Job {
     pub id: String,
+    /// Order of creation, for listings (newest first) and their cursors.
+    pub seq: u64,
+    /// The token that started it (`None` with authentication off); only it may cancel.
+    pub owner: Option<Owner>,
     /// The scenario the job works on (a live job keeps it registered).
     pub scenario_id: String,
     pub work: Work,
@@ -130,6 +153,39 @@ impl Job {
         }
     }
 
+    /// Waits for a map job and takes its map: `None` if the build failed or was cancelled.
+    pub async fn wait_for_map(&self) -> Option<Arc<RadioMap>> {
+        let Work::Map { handover, .. } = &self.work else {
+            return None;
+        };
+        {
+            let mut h = handover.lock().expect("job lock");
+            if let Some(built) = &h.built {
+                return built.upgrade();
+            }
+            h.waiters += 1;
+        }
+        self.finished().await;
+        let mut h = handover.lock().expect("job lock");
+        h.waiters -= 1;
+        let map = h.map.clone().or_else(|| h.built.as_ref()?.upgrade());
+        if h.waiters == 0 {
+            h.map = None;
+        }
+        map
+    }
+
+    /// Hands the built map to the waiters (held only if there are some).
+    fn hand_over(&self, map: &Arc<RadioMap>) {
+        if let Work::Map { handover, .. } = &self.work {
+            let mut h = handover.lock().expect("job lock");
+            h.built = Some(Arc::downgrade(map));
+            if h.waiters > 0 {
+                h.map = Some(map.clone());
+            }
+        }
+    }
+
     /// A placement job's outcome, once it is done.
     pub fn placement(&self) -> Option<Arc<PlacementOutcome>> {
         match &self.work {
@@ -142,7 +198,7 @@ impl Job {
         let times = *self.times.lock().expect("job lock");
         let (done, total) = (self.progress.cells_done(), self.progress.cells_total());
         let (kind, map_id, key, result_href) = match &self.work {
-            Work::Map { map_id, key } => (
+            Work::Map { map_id, key, .. } => (
                 "map",
                 Some(map_id.clone()),
                 Some(key.clone()),
@@ -218,6 +274,7 @@ pub enum MapRequestOutcome {
 }
 
 pub struct Jobs {
+    next_seq: AtomicU64,
     workers: Arc<Semaphore>,
     queue_limit: usize,
     queued: Arc<AtomicUsize>,
@@ -230,6 +287,7 @@ pub struct Jobs {
 impl Jobs {
     pub fn new(workers: usize, queue_limit: usize, history_limit: usize) -> Self {
         Jobs {
+            next_seq: AtomicU64::new(0),
             workers: Arc::new(Semaphore::new(workers)),
             queue_limit,
             queued: Arc::new(AtomicUsize::new(0)),
@@ -249,6 +307,18 @@ impl Jobs {
         self.in_flight.lock().await.get(map_id).cloned()
     }
 
+    /// Cancels every queued and running job (shutdown); returns their ids.
+    pub fn cancel_all(&self) -> Vec<String> {
+        self.live()
+            .into_iter()
+            .map(|job| {
+                job.progress.cancel();
+                job.cancel.notify_one();
+                job.id.clone()
+            })
+            .collect()
+    }
+
     /// The jobs that are queued or running.
     pub fn live(&self) -> Vec<Arc<Job>> {
         self.by_id
@@ -260,15 +330,17 @@ impl Jobs {
             .collect()
     }
 
-    pub fn list(&self) -> Vec<JobView> {
-        let mut all: Vec<JobView> = self
+    /// The jobs `caller` may see, newest first, with their sequence numbers (for cursors).
+    pub fn list(&self, caller: &Caller) -> Vec<(u64, JobView)> {
+        let mut all: Vec<(u64, JobView)> = self
             .by_id
             .lock()
             .expect("jobs lock")
             .values()
-            .map(|j| j.view())
+            .filter(|j| caller.may_touch(j.owner.as_ref()))
+            .map(|j| (j.seq, j.view()))
             .collect();
-        all.sort_by(|a, b| b.created_at.total_cmp(&a.created_at));
+        all.sort_by(|a, b| b.0.cmp(&a.0));
         all
     }
 
@@ -278,6 +350,7 @@ impl Jobs {
         cache: &MapCache,
         scenario: Arc<Scenario>,
         key: MapKey,
+        owner: Option<Owner>,
     ) -> Result<MapRequestOutcome, ApiError> {
         let map_id = key.id();
         let mut in_flight = self.in_flight.lock().await;
@@ -293,9 +366,11 @@ impl Jobs {
         }
         let job = self.admit(
             key.scenario_id.clone(),
+            owner,
             Work::Map {
                 map_id: map_id.clone(),
                 key: key.clone(),
+                handover: Mutex::new(Handover::default()),
             },
         );
         metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
@@ -303,9 +378,11 @@ impl Jobs {
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id_of(&job), scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
         let cache = cache.clone();
-        let work = move || radiomap::build(&scenario, &key, &progress).map_err(PlaceError::from);
+        let work = move || radiomap::build(&scenario, &key, &progress).map_err(WorkError::from);
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
-            cache.insert(map_id_of(&job), Arc::new(map)).await;
+            let map = Arc::new(map);
+            job.hand_over(&map);
+            cache.insert(map_id_of(&job), map).await;
         };
         tokio::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(MapRequestOutcome::Building(job))
@@ -322,6 +399,7 @@ impl Jobs {
         search: Search,
         candidates: Vec<Candidate>,
         keep: usize,
+        owner: Option<Owner>,
         register: impl Fn(Scenario) -> bool + Send + 'static,
     ) -> Result<Arc<Job>, ApiError> {
         if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
@@ -330,6 +408,7 @@ impl Jobs {
         }
         let job = self.admit(
             scenario.content_hash(),
+            owner,
             Work::Placement {
                 outcome: OnceLock::new(),
             },
@@ -337,7 +416,7 @@ impl Jobs {
         metrics::counter!("irs_placements_total").increment(1);
         let span = tracing::info_span!("job", job_id = %job.id, kind = "placement", scenario_id = %job.scenario_id);
         let progress = job.progress.clone();
-        let work = move || -> Result<(Placement, Vec<RadioMap>), PlaceError> {
+        let work = move || -> Result<(Placement, Vec<RadioMap>), WorkError> {
             let placement = placement::rank_candidates(&scenario, &search, candidates, &progress)?;
             let phases = placement.answer.phases;
             // The best candidates' maps, built now so their ids answer at once (gain maps of
@@ -353,7 +432,7 @@ impl Jobs {
                     let key = MapKey::gain(&s.content_hash(), s, phases)?;
                     Ok(radiomap::build(s, &key, &Progress::default())?)
                 })
-                .collect::<Result<Vec<_>, PlaceError>>()?;
+                .collect::<Result<Vec<_>, WorkError>>()?;
             Ok((placement, maps))
         };
         let cache = cache.clone();
@@ -377,10 +456,12 @@ impl Jobs {
     }
 
     /// Creates a queued job and records it.
-    fn admit(&self, scenario_id: String, work: Work) -> Arc<Job> {
+    fn admit(&self, scenario_id: String, owner: Option<Owner>, work: Work) -> Arc<Job> {
         let (state, _) = watch::channel(JobState::Queued);
         let job = Arc::new(Job {
             id: uuid::Uuid::new_v4().simple().to_string(),
+            seq: self.next_seq.fetch_add(1, Ordering::Relaxed),
+            owner,
             scenario_id,
             work,
             progress: Arc::new(Progress::default()),
@@ -405,7 +486,7 @@ impl Jobs {
     async fn run<T, W, F, Fut>(self: Arc<Self>, job: Arc<Job>, work: W, finish: F)
     where
         T: Send + 'static,
-        W: FnOnce() -> Result<T, PlaceError> + Send + 'static,
+        W: FnOnce() -> Result<T, WorkError> + Send + 'static,
         F: FnOnce(Arc<Job>, T) -> Fut,
         Fut: std::future::Future<Output = ()>,
     {
@@ -435,7 +516,7 @@ impl Jobs {
                 job.set_state(JobState::Done);
                 tracing::info!(run_s = seconds, "job done");
             }
-            Ok(Err(PlaceError::Cancelled(Cancelled))) => {
+            Ok(Err(WorkError::Cancelled(Cancelled))) => {
                 job.set_state(JobState::Cancelled);
                 tracing::info!(
                     run_s = seconds,
@@ -443,7 +524,7 @@ impl Jobs {
                     "job cancelled"
                 );
             }
-            Ok(Err(PlaceError::Invalid(e))) => {
+            Ok(Err(WorkError::Invalid(e))) => {
                 // Checked before the job was created; kept for completeness.
                 *job.error.lock().expect("job lock") = Some(e.to_string());
                 job.set_state(JobState::Failed);
@@ -473,9 +554,12 @@ impl Jobs {
         }
     }
 
-    /// Cancels a queued or running job.
-    pub fn cancel(&self, id: &str) -> Result<Arc<Job>, ApiError> {
-        let job = self.get(id).ok_or_else(|| ApiError::not_found("job", id))?;
+    /// Cancels a queued or running job; a job of another token is not found (404).
+    pub fn cancel(&self, id: &str, caller: &Caller) -> Result<Arc<Job>, ApiError> {
+        let job = self
+            .get(id)
+            .filter(|job| caller.may_touch(job.owner.as_ref()))
+            .ok_or_else(|| ApiError::not_found("job", id))?;
         let state = job.state();
         if state.is_terminal() {
             return Err(ApiError::job_finished(id, state.label()));

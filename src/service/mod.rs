@@ -3,20 +3,27 @@
 //! `openapi.yaml`.
 //!
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
-//! registry and map cache), `jobs` (map builds), `errors` (problem+json; [`Problem`] is the
-//! body of every error answer), `viewer` (the built-in map viewer at `/`).
+//! registry and map cache), `jobs` (map builds and placement searches), `queries` (admission
+//! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
+//! timeouts), `errors` (problem+json; [`Problem`] is the body of every error answer), `viewer`
+//! (the built-in map viewer at `/`).
 
 pub mod api;
+pub(crate) mod auth;
 pub(crate) mod cache;
 pub mod config;
 pub(crate) mod errors;
 pub(crate) mod jobs;
+pub(crate) mod queries;
+pub(crate) mod server;
 pub(crate) mod viewer;
 
 pub use errors::Problem;
 
 use crate::scenario::{BUILTIN, Scenario};
+use auth::{Caller, Tokens};
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
+use axum::http::{HeaderValue, Method, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use cache::{MapCache, ScenarioRegistry};
@@ -24,11 +31,13 @@ use config::{LogFormat, ServeArgs};
 use errors::ApiError;
 use jobs::Jobs;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
+use queries::QueryPool;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use tower::ServiceBuilder;
 use tower_http::compression::CompressionLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 
@@ -40,7 +49,17 @@ pub(crate) struct Limits {
     pub max_rate_cells: usize,
     pub max_sweep: usize,
     pub max_draws: usize,
+    pub max_build_cpu_s: f64,
+    pub max_check_cpu_s: f64,
+    /// The map cache's budget: a map estimated bigger is refused before its build.
+    pub cache_bytes: u64,
+    pub body_timeout: Duration,
+    pub request_timeout: Duration,
 }
+
+/// Longest `x-request-id` taken from a client (a UUID is 36 characters); a longer one, or one
+/// with characters outside `[A-Za-z0-9._:-]`, is replaced by a fresh UUID so logs stay clean.
+const MAX_REQUEST_ID_CHARS: usize = 64;
 
 /// Shared state of the handlers.
 #[derive(Clone)]
@@ -53,28 +72,60 @@ struct Inner {
     registry: ScenarioRegistry,
     cache: MapCache,
     jobs: Arc<Jobs>,
+    queries: QueryPool,
+    tokens: Tokens,
+    cors_origins: Vec<HeaderValue>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
 }
 
 impl AppState {
-    pub fn new(args: &ServeArgs, metrics: PrometheusHandle) -> Self {
-        AppState {
+    /// The state for `args`; an error names the setting that is wrong.
+    pub fn new(args: &ServeArgs, metrics: PrometheusHandle) -> Result<Self, String> {
+        let positive = |flag: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                Err(format!(
+                    "{flag} must be a positive number of seconds, got {v}"
+                ))
+            }
+        };
+        let cors_origins = args
+            .cors_origin
+            .iter()
+            .map(|o| {
+                HeaderValue::from_str(o.trim())
+                    .ok()
+                    .filter(|_| o.starts_with("http://") || o.starts_with("https://"))
+                    .ok_or_else(|| format!("--cors-origin {o:?}: not an http(s) origin"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mb = |v: u64| usize::try_from(v.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX);
+        Ok(AppState {
             inner: Arc::new(Inner {
                 limits: Limits {
-                    max_body_bytes: args.max_body_kb * 1024,
+                    max_body_bytes: args.max_body_kb.saturating_mul(1024),
                     sync_cells: args.sync_cells,
                     max_rate_cells: args.max_rate_cells,
                     max_sweep: args.max_sweep,
                     max_draws: args.max_draws.min(crate::montecarlo::MAX_DRAWS),
+                    max_build_cpu_s: positive("--max-build-cpu-s", args.max_build_cpu_s)?,
+                    max_check_cpu_s: positive("--max-check-cpu-s", args.max_check_cpu_s)?,
+                    cache_bytes: args.cache_mb.saturating_mul(1024 * 1024),
+                    body_timeout: Duration::from_secs(args.body_timeout_s.max(1)),
+                    request_timeout: Duration::from_secs(args.request_timeout_s.max(1)),
                 },
-                registry: ScenarioRegistry::new(args.max_scenarios),
-                cache: MapCache::new(args.cache_mb * 1024 * 1024),
+                registry: ScenarioRegistry::new(args.max_scenarios, mb(args.registry_mb)),
+                cache: MapCache::new(args.cache_mb.saturating_mul(1024 * 1024)),
                 jobs: Arc::new(Jobs::new(args.workers(), args.queue, args.job_history)),
+                queries: QueryPool::new(args.query_workers(), args.query_queue)?,
+                tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
+                cors_origins,
                 ready: AtomicBool::new(false),
                 metrics,
             }),
-        }
+        })
     }
     pub(crate) fn limits(&self) -> &Limits {
         &self.inner.limits
@@ -88,23 +139,31 @@ impl AppState {
     pub(crate) fn jobs(&self) -> &Arc<Jobs> {
         &self.inner.jobs
     }
-    /// Registers a scenario, evicting the least recently used unneeded one if the registry is
-    /// full (see [`ScenarioRegistry`]).
+    pub(crate) fn queries(&self) -> &QueryPool {
+        &self.inner.queries
+    }
+    pub(crate) fn tokens(&self) -> &Tokens {
+        &self.inner.tokens
+    }
+    /// Registers a scenario for `caller`, evicting the least recently used unneeded ones if the
+    /// registry is full (see [`ScenarioRegistry`]).
     pub(crate) fn register_scenario(
         &self,
         scenario: Scenario,
         source: &'static str,
+        caller: &Caller,
     ) -> Result<(Arc<cache::StoredScenario>, bool), ApiError> {
-        self.registry().register(scenario, source, || {
-            let mut needed = self.cache().scenario_ids();
-            needed.extend(
-                self.jobs()
-                    .live()
-                    .into_iter()
-                    .map(|job| job.scenario_id.clone()),
-            );
-            needed
-        })
+        self.registry()
+            .register(scenario, source, caller.owner(), || {
+                let mut needed = self.cache().scenario_ids();
+                needed.extend(
+                    self.jobs()
+                        .live()
+                        .into_iter()
+                        .map(|job| job.scenario_id.clone()),
+                );
+                needed
+            })
     }
 
     pub fn is_ready(&self) -> bool {
@@ -125,7 +184,7 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
         state
-            .register_scenario(scenario, "builtin")
+            .register_scenario(scenario, "builtin", &Caller::Open)
             .map_err(|e| e.problem.detail)?;
     }
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -142,34 +201,84 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let (stored, created) = state
-            .register_scenario(scenario, "file")
+            .register_scenario(scenario, "file", &Caller::Open)
             .map_err(|e| e.problem.detail)?;
         tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
     }
     Ok(())
 }
 
-/// The full application: routes, fallbacks, metrics, request ids, tracing and the body limit.
+/// The full application: routes, fallbacks, metrics, authentication, the request timeout,
+/// request ids, tracing, CORS (only when origins are configured) and the body limit.
 pub fn app(state: AppState) -> axum::Router {
     let max_body = state.limits().max_body_bytes;
-    api::router()
+    let cors = (!state.inner.cors_origins.is_empty()).then(|| {
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(state.inner.cors_origins.clone()))
+            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION, header::ACCEPT])
+            .expose_headers([header::LOCATION, header::RETRY_AFTER])
+            .max_age(Duration::from_secs(600))
+    });
+    let router = api::router()
         .route_layer(middleware::from_fn(track_metrics))
         .fallback(route_not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(max_body))
+        .layer(middleware::from_fn_with_state(state.clone(), auth::authenticate))
+        .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
         // gzip or brotli when the client accepts it (a 577k-cell map body is 10.9 MB of JSON);
         // tower-http's default predicate leaves PNGs and tiny bodies alone.
         .layer(CompressionLayer::new())
         .layer(
             ServiceBuilder::new()
+                .layer(middleware::from_fn(clean_request_id))
                 .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
                 .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
                     let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
                     tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %request_id)
                 }))
                 .layer(PropagateRequestIdLayer::x_request_id()),
-        )
-        .with_state(state)
+        );
+    let router = match cors {
+        Some(cors) => router.layer(cors),
+        None => router,
+    };
+    router.with_state(state)
+}
+
+/// Drops a client's `x-request-id` that is too long or has characters that do not belong in a
+/// log line; [`SetRequestIdLayer`] then gives the request a fresh UUID.
+async fn clean_request_id(mut req: Request, next: Next) -> Response {
+    let acceptable = |v: &HeaderValue| {
+        let bytes = v.as_bytes();
+        !bytes.is_empty()
+            && bytes.len() <= MAX_REQUEST_ID_CHARS
+            && bytes
+                .iter()
+                .all(|b| b.is_ascii_alphanumeric() || b"._:-".contains(b))
+    };
+    if req
+        .headers()
+        .get("x-request-id")
+        .is_some_and(|v| !acceptable(v))
+    {
+        req.headers_mut().remove("x-request-id");
+    }
+    next.run(req).await
+}
+
+/// Answers 503 when a request takes longer than the request timeout (the handler's future is
+/// dropped, which cancels its heavy query, see `queries`).
+async fn request_timeout(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let limit = state.limits().request_timeout;
+    match tokio::time::timeout(limit, next.run(req)).await {
+        Ok(response) => response,
+        Err(_) => {
+            metrics::counter!("irs_request_timeouts_total").increment(1);
+            ApiError::request_timeout(limit.as_secs()).into_response()
+        }
+    }
 }
 
 async fn route_not_found(State(_): State<AppState>, req: Request) -> Response {
@@ -230,7 +339,51 @@ async fn shutdown_signal() {
         _ = ctrl_c => {},
         _ = terminate => {},
     }
-    tracing::info!("shutdown signal received; draining connections");
+}
+
+/// After the accept loop stopped: waits up to `grace` for running jobs and open requests, then
+/// cancels the jobs still running and gives connections two more seconds.
+async fn drain(state: &AppState, connections: &server::OpenConnections, grace: Duration) {
+    let started = Instant::now();
+    let deadline = started + grace;
+    let live = state.jobs().live().len();
+    tracing::info!(
+        live_jobs = live,
+        connections = connections.count(),
+        grace_s = grace.as_secs_f64(),
+        "shutdown: no longer accepting; waiting for running work"
+    );
+    while !state.jobs().live().is_empty() && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let cancelled = state.jobs().cancel_all();
+    if cancelled.is_empty() {
+        tracing::info!(
+            waited_s = started.elapsed().as_secs_f64(),
+            "shutdown: no job left running"
+        );
+    } else {
+        tracing::warn!(
+            cancelled = cancelled.len(),
+            job_ids = %cancelled.join(","),
+            "shutdown: grace period over; cancelled the jobs still queued or running"
+        );
+    }
+    // Jobs check their flag once per grid row, so they end within a fraction of a second;
+    // requests waiting on them are then answered and their connections close.
+    let open = connections
+        .drain(Instant::now().max(deadline) + Duration::from_secs(2))
+        .await;
+    if open > 0 {
+        tracing::warn!(
+            connections = open,
+            "shutdown: closing connections still open"
+        );
+    }
+    tracing::info!(
+        total_s = started.elapsed().as_secs_f64(),
+        "shutdown complete"
+    );
 }
 
 /// Why `serve` stopped with an error.
@@ -262,23 +415,42 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
         .enable_all()
         .build()
         .map_err(|e| runtime_error(&e))?;
-    runtime.block_on(async move {
-        let state = AppState::new(&args, metrics);
+    let grace = Duration::from_secs(args.shutdown_grace_s);
+    let outcome = runtime.block_on(async move {
+        let state = AppState::new(&args, metrics).map_err(ServeError::Config)?;
         preload(&state, &args.scenarios).map_err(ServeError::Config)?;
         let listener = tokio::net::TcpListener::bind(args.bind)
             .await
             .map_err(|e| runtime_error(&format!("--bind {}: {e}", args.bind)))?;
         let addr = listener.local_addr().map_err(|e| runtime_error(&e))?;
         state.set_ready(true);
-        tracing::info!(%addr, workers = args.workers(), queue = args.queue, cache_mb = args.cache_mb, "irs-planner listening");
+        tracing::info!(
+            %addr,
+            workers = args.workers(),
+            queue = args.queue,
+            query_workers = args.query_workers(),
+            cache_mb = args.cache_mb,
+            authentication = state.tokens().enabled(),
+            tokens = state.tokens().count(),
+            "irs-planner listening"
+        );
         println!("listening on http://{addr}");
-        let ready = state.clone();
-        axum::serve(listener, app(state))
-            .with_graceful_shutdown(async move {
-                shutdown_signal().await;
-                ready.set_ready(false);
-            })
-            .await
-            .map_err(|e| runtime_error(&e))
-    })
+        let limits = server::ConnectionLimits {
+            max_connections: args.max_connections,
+            header_timeout: Duration::from_secs(args.header_timeout_s.max(1)),
+            idle_timeout: Duration::from_secs(args.idle_timeout_s.max(1)),
+        };
+        let stopping = state.clone();
+        let connections = server::serve(listener, app(state.clone()), limits, async move {
+            shutdown_signal().await;
+            stopping.set_ready(false);
+        })
+        .await;
+        drain(&state, &connections, grace).await;
+        Ok(())
+    });
+    // Blocking tasks still running (a build between two cancellation checks) are not waited
+    // for beyond this: the process must exit within the grace period plus two seconds.
+    runtime.shutdown_timeout(Duration::from_millis(500));
+    outcome
 }

@@ -36,6 +36,8 @@ const state = {
 
 async function api(method, path, body) {
   const init = { method, headers: {} };
+  const token = $("token").value.trim();
+  if (token) init.headers.authorization = `Bearer ${token}`;
   if (body !== undefined) {
     init.headers["content-type"] = "application/json";
     init.body = JSON.stringify(body);
@@ -60,12 +62,21 @@ function say(message, isError = false) {
 // ------------------------------------------------------------------ scenarios
 
 async function loadScenarios(select) {
-  const { data } = await api("GET", "/v1/scenarios");
+  // Every page of the listing, in name order.
+  const scenarios = [];
+  let cursor = null;
+  do {
+    const query = cursor ? `?limit=1000&cursor=${encodeURIComponent(cursor)}` : "?limit=1000";
+    const { data } = await api("GET", `/v1/scenarios${query}`);
+    scenarios.push(...data.scenarios);
+    cursor = data.next_cursor;
+  } while (cursor);
+  scenarios.sort((a, b) => (a.name || "").localeCompare(b.name || "") || a.id.localeCompare(b.id));
   const list = $("scenario");
   list.replaceChildren(
-    ...data.scenarios.map((s) => new Option(`${s.name || "(unnamed)"} — ${s.id.slice(0, 8)}`, s.id)),
+    ...scenarios.map((s) => new Option(`${s.name || "(unnamed)"} — ${s.id.slice(0, 8)}`, s.id)),
   );
-  const preferred = select || data.scenarios.find((s) => s.name === "paper-single-user")?.id;
+  const preferred = select || scenarios.find((s) => s.name === "paper-single-user")?.id;
   if (preferred) list.value = preferred;
   await chooseScenario(list.value);
 }
@@ -629,6 +640,8 @@ function refresh() {
 function wire() {
   const guard = (f) => (...args) => Promise.resolve(f(...args)).catch(report);
   $("scenario").addEventListener("change", guard((e) => chooseScenario(e.target.value)));
+  $("token").value = sessionStorage.getItem("irs-planner-token") || "";
+  $("token").addEventListener("change", () => sessionStorage.setItem("irs-planner-token", $("token").value.trim()));
   $("register").addEventListener("click", guard(registerScenario));
   for (const id of ["kind", "phases", "access"]) $(id).addEventListener("change", guard(buildMap));
   $("build").addEventListener("click", guard(buildMap));

@@ -1,0 +1,189 @@
+//! Bearer-token authentication and ownership (off unless tokens are configured).
+//!
+//! With tokens set (`--api-tokens`, `--api-tokens-file`), every `POST` and `DELETE` needs
+//! `Authorization: Bearer <token>` (401 otherwise): they start builds and searches, register
+//! scenarios and cancel work, and even a path query may build its map. Reads stay open, as the
+//! ids they take are content hashes or random. Jobs and API-registered scenarios belong to the
+//! token that made them: another token gets 404 when it cancels or deletes them, and listings
+//! show a caller only its own (and the server's built-in and file scenarios).
+//!
+//! A token is never stored in a record or a log: an owner is named by the first 16 hex digits
+//! of the token's SHA-256.
+
+use super::AppState;
+use super::errors::ApiError;
+use axum::extract::{FromRequestParts, Request, State};
+use axum::http::{Method, header, request::Parts};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Who made a record: the digest of a token.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub(crate) struct Owner(Arc<str>);
+
+impl Owner {
+    fn of(token: &str) -> Owner {
+        let digest = Sha256::digest(token.as_bytes());
+        let hex: String = digest[..8].iter().map(|b| format!("{b:02x}")).collect();
+        Owner(hex.into())
+    }
+}
+
+impl std::fmt::Display for Owner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// The tokens the server accepts (empty: authentication off).
+#[derive(Debug, Default)]
+pub(crate) struct Tokens {
+    owners: HashMap<String, Owner>,
+}
+
+/// Shortest token accepted: 16 characters, so a configured token is not guessable by trying.
+const MIN_TOKEN_CHARS: usize = 16;
+
+impl Tokens {
+    /// The tokens given on the command line and in `file` (one per line, `#` comments).
+    pub fn load(listed: &[String], file: Option<&Path>) -> Result<Tokens, String> {
+        let mut all: Vec<String> = listed.iter().map(|t| t.trim().to_string()).collect();
+        if let Some(path) = file {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| format!("--api-tokens-file {}: {e}", path.display()))?;
+            all.extend(
+                text.lines()
+                    .map(str::trim)
+                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                    .map(str::to_string),
+            );
+        }
+        all.retain(|t| !t.is_empty());
+        if let Some(short) = all.iter().position(|t| t.chars().count() < MIN_TOKEN_CHARS) {
+            return Err(format!(
+                "API token #{} is shorter than {MIN_TOKEN_CHARS} characters",
+                short + 1
+            ));
+        }
+        if let Some(bad) = all
+            .iter()
+            .position(|t| !t.bytes().all(|b| b.is_ascii_graphic()))
+        {
+            return Err(format!(
+                "API token #{} has characters outside printable ASCII",
+                bad + 1
+            ));
+        }
+        Ok(Tokens {
+            owners: all
+                .into_iter()
+                .map(|token| {
+                    let owner = Owner::of(&token);
+                    (token, owner)
+                })
+                .collect(),
+        })
+    }
+
+    pub fn enabled(&self) -> bool {
+        !self.owners.is_empty()
+    }
+
+    pub fn count(&self) -> usize {
+        self.owners.len()
+    }
+}
+
+/// Who is calling, as the handlers see it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Caller {
+    /// Authentication is off: no ownership, everything visible (the development set-up).
+    Open,
+    /// Authentication is on and the request carried no token (reads only).
+    Anonymous,
+    /// A valid token.
+    Owner(Owner),
+}
+
+impl Caller {
+    /// The owner to record on what this caller creates.
+    pub fn owner(&self) -> Option<Owner> {
+        match self {
+            Caller::Owner(o) => Some(o.clone()),
+            Caller::Open | Caller::Anonymous => None,
+        }
+    }
+
+    /// May this caller see or change a record owned by `owner`? Open servers have no owners;
+    /// with authentication on, only the owner may.
+    pub fn may_touch(&self, owner: Option<&Owner>) -> bool {
+        match self {
+            Caller::Open => true,
+            Caller::Anonymous => false,
+            Caller::Owner(me) => owner == Some(me),
+        }
+    }
+}
+
+impl<S: Send + Sync> FromRequestParts<S> for Caller {
+    type Rejection = std::convert::Infallible;
+
+    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, Self::Rejection> {
+        Ok(parts
+            .extensions
+            .get::<Caller>()
+            .cloned()
+            .unwrap_or(Caller::Open))
+    }
+}
+
+/// Middleware: resolves the caller from `Authorization` and refuses unauthenticated writes.
+pub(crate) async fn authenticate(
+    State(state): State<AppState>,
+    mut request: Request,
+    next: Next,
+) -> Response {
+    let tokens = state.tokens();
+    if !tokens.enabled() {
+        request.extensions_mut().insert(Caller::Open);
+        return next.run(request).await;
+    }
+    let presented = request
+        .headers()
+        .get(header::AUTHORIZATION)
+        .map(|v| v.to_str().unwrap_or(""));
+    let caller = match presented {
+        None => Caller::Anonymous,
+        Some(value) => {
+            let token = value
+                .strip_prefix("Bearer ")
+                .or_else(|| value.strip_prefix("bearer "));
+            match token.and_then(|t| tokens.owners.get(t.trim())) {
+                Some(owner) => Caller::Owner(owner.clone()),
+                None => {
+                    metrics::counter!("irs_auth_failures_total").increment(1);
+                    return ApiError::unauthorized(
+                        "the bearer token is not one this server accepts",
+                    )
+                    .into_response();
+                }
+            }
+        }
+    };
+    let writes = matches!(
+        *request.method(),
+        Method::POST | Method::DELETE | Method::PUT | Method::PATCH
+    );
+    if writes && caller == Caller::Anonymous {
+        return ApiError::unauthorized(
+            "this server requires a bearer token for POST and DELETE: send Authorization: Bearer <token>",
+        )
+        .into_response();
+    }
+    request.extensions_mut().insert(caller);
+    next.run(request).await
+}

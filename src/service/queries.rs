@@ -1,0 +1,108 @@
+//! Admission control for heavy queries: sweeps, paths and pictures of big maps, map bodies and
+//! exports, Monte Carlo checks. They run on a rayon pool of their own, never on the async
+//! runtime's threads (which must stay free for health checks and cheap queries) nor on the
+//! global pool the map builds use (a check sharing it slowed a 1001² build 40-fold), at most
+//! `workers` at once, with at most `queue` more waiting; one more is refused with 503 and
+//! `Retry-After`.
+//!
+//! A query is cancelled when its client goes: hyper drops the handler's future when the
+//! connection closes, and dropping [`QueryPool::run`]'s future sets the work's cancellation
+//! flag, which sweeps check per threshold and Monte Carlo checks per waypoint. The worker's
+//! permit is held by the work itself, so a cancelled query still counts until it has stopped.
+
+use super::errors::ApiError;
+use crate::radiomap::Progress;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use tokio::sync::{Semaphore, oneshot};
+
+/// Seconds a client refused for a full query queue is asked to wait: queries last from
+/// milliseconds to a few seconds, so one second spreads retries without idling the pool.
+const RETRY_AFTER_S: u64 = 1;
+
+pub(crate) struct QueryPool {
+    threads: rayon::ThreadPool,
+    permits: Arc<Semaphore>,
+    waiting: AtomicUsize,
+    queue_limit: usize,
+}
+
+/// Cancels the work when the query's future is dropped before the work ended (disarmed by
+/// taking the progress out once it has).
+struct CancelOnDrop(Option<Arc<Progress>>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        if let Some(progress) = &self.0 {
+            progress.cancel();
+        }
+    }
+}
+
+/// Counts a query waiting for a permit for as long as it waits.
+struct Waiting<'a>(&'a AtomicUsize);
+
+impl Drop for Waiting<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+        metrics::gauge!("irs_queries_waiting").decrement(1.0);
+    }
+}
+
+impl QueryPool {
+    pub fn new(workers: usize, queue_limit: usize) -> Result<Self, String> {
+        let threads = rayon::ThreadPoolBuilder::new()
+            .num_threads(workers)
+            .thread_name(|k| format!("irs-query-{k}"))
+            .build()
+            .map_err(|e| format!("query pool: {e}"))?;
+        Ok(QueryPool {
+            threads,
+            permits: Arc::new(Semaphore::new(workers)),
+            waiting: AtomicUsize::new(0),
+            queue_limit,
+        })
+    }
+
+    /// Runs `work` on the query pool once a worker is free (503 when the queue is full). The
+    /// work gets a [`Progress`] that is cancelled if this future is dropped first.
+    pub async fn run<T: Send + 'static>(
+        &self,
+        what: &'static str,
+        work: impl FnOnce(&Progress) -> T + Send + 'static,
+    ) -> Result<T, ApiError> {
+        let permit = match self.permits.clone().try_acquire_owned() {
+            Ok(permit) => permit,
+            Err(_) => {
+                if self.waiting.fetch_add(1, Ordering::SeqCst) >= self.queue_limit {
+                    self.waiting.fetch_sub(1, Ordering::SeqCst);
+                    metrics::counter!("irs_queries_refused_total", "what" => what).increment(1);
+                    return Err(ApiError::busy(what, self.queue_limit, RETRY_AFTER_S));
+                }
+                metrics::gauge!("irs_queries_waiting").increment(1.0);
+                let _waiting = Waiting(&self.waiting);
+                self.permits
+                    .clone()
+                    .acquire_owned()
+                    .await
+                    .map_err(|e| ApiError::internal(format!("query pool closed: {e}")))?
+            }
+        };
+        let progress = Arc::new(Progress::default());
+        let mut guard = CancelOnDrop(Some(progress.clone()));
+        let (tx, rx) = oneshot::channel();
+        self.threads.spawn(move || {
+            // A panic must not reach rayon, whose default handler aborts the process.
+            let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&progress)));
+            drop(permit);
+            let _ = tx.send(answer);
+        });
+        let answer = rx.await;
+        guard.0 = None;
+        match answer {
+            Ok(Ok(answer)) => Ok(answer),
+            Ok(Err(_)) => Err(ApiError::internal(format!("the {what} failed"))),
+            Err(_) => Err(ApiError::internal(format!("the {what} worker stopped"))),
+        }
+    }
+}
