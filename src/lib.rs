@@ -30,7 +30,8 @@
 //!   [`phases`]: continuous, b-bit and no-IRS phase modes.
 //! * [`rate`]: NOMA/OMA expected rates and the closed-form power split.
 //! * [`solver`]: per-cell rate maximisation (`fast`, `sdr-sca`) and the SDR certificate.
-//! * [`radiomap`]: map keys, gain maps, rate maps and the map body.
+//! * [`radiomap`]: map keys, gain maps, rate maps, the map body, and the cost estimates a service
+//!   checks against its budgets before a build.
 //! * [`planner`]: the feasible-map graph, shortest and widest paths, path and sweep answers.
 //! * [`montecarlo`] and [`render`]: a Monte Carlo check of a path; PNG pictures.
 //! * [`service`] (HTTP, axum) and [`cli`] (`serve`, `map`, `plan`): the two front doors, which

@@ -1448,3 +1448,32 @@ async fn maps_are_delivered_and_never_built_beyond_the_cache() {
     problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
     assert_eq!(b["limit"], 2 * 1024 * 1024);
 }
+
+/// CORS is deliberate: no CORS headers unless origins are configured, and then only for them.
+#[tokio::test]
+async fn cors_only_for_configured_origins() {
+    let preflight = |server: &Server, origin: &'static str| {
+        let (client, url) = (server.client.clone(), format!("{}/v1/paths", server.base));
+        async move {
+            let resp = client
+                .request(reqwest::Method::OPTIONS, url)
+                .header("origin", origin)
+                .header("access-control-request-method", "POST")
+                .header("access-control-request-headers", "content-type")
+                .send()
+                .await
+                .unwrap();
+            resp.headers()
+                .get("access-control-allow-origin")
+                .map(|v| v.to_str().unwrap().to_string())
+        }
+    };
+    let closed = start(&[]);
+    assert_eq!(preflight(&closed, "https://fleet.example").await, None);
+    let open = start(&["--cors-origin", "https://fleet.example"]);
+    assert_eq!(
+        preflight(&open, "https://fleet.example").await.as_deref(),
+        Some("https://fleet.example")
+    );
+    assert_eq!(preflight(&open, "https://elsewhere.example").await, None);
+}

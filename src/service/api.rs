@@ -5,7 +5,7 @@ use super::AppState;
 use super::auth::Caller;
 use super::cache::ScenarioSummary;
 use super::errors::{ApiError, parse_json};
-use super::jobs::{Job, JobView, MapRequestOutcome, PlacementOutcome, Work};
+use super::jobs::{Job, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work};
 use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
@@ -930,12 +930,15 @@ async fn place(
     }
     let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
     let (registrar, owner) = (state.clone(), caller.clone());
-    let job = state.jobs().place(
-        state.cache(),
+    let checked = PlacementSearch {
         scenario,
         search,
         candidates,
         keep,
+    };
+    let job = state.jobs().place(
+        state.cache(),
+        checked,
         caller.owner(),
         move |s| {
             registrar

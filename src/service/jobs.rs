@@ -78,6 +78,16 @@ pub struct Handover {
     built: Option<std::sync::Weak<RadioMap>>,
 }
 
+/// A checked placement search, ready to run.
+pub struct PlacementSearch {
+    pub scenario: Arc<Scenario>,
+    pub search: Search,
+    /// Its candidates, checked by [`placement::candidates`].
+    pub candidates: Vec<Candidate>,
+    /// How many of the best to register with their maps.
+    pub keep: usize,
+}
+
 /// A finished placement search: the answer, and how many of its best candidates were
 /// registered with their maps cached (fewer than asked only if the registry refused some).
 pub struct PlacementOutcome {
@@ -340,7 +350,7 @@ impl Jobs {
             .filter(|j| caller.may_touch(j.owner.as_ref()))
             .map(|j| (j.seq, j.view()))
             .collect();
-        all.sort_by(|a, b| b.0.cmp(&a.0));
+        all.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
         all
     }
 
@@ -388,20 +398,22 @@ impl Jobs {
         Ok(MapRequestOutcome::Building(job))
     }
 
-    /// Starts a placement search over its checked `candidates` as a job (503 when the queue is
-    /// full). When it is done, the
+    /// Starts a placement search as a job (503 when the queue is full). When it is done, the
     /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
     /// answer's map ids answer path queries at once; then the answer is kept in the job.
     pub fn place(
         self: &Arc<Self>,
         cache: &MapCache,
-        scenario: Arc<Scenario>,
-        search: Search,
-        candidates: Vec<Candidate>,
-        keep: usize,
+        search: PlacementSearch,
         owner: Option<Owner>,
         register: impl Fn(Scenario) -> bool + Send + 'static,
     ) -> Result<Arc<Job>, ApiError> {
+        let PlacementSearch {
+            scenario,
+            search,
+            candidates,
+            keep,
+        } = search;
         if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
         {
             return Err(ApiError::queue_full(self.queue_limit));

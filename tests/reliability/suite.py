@@ -1,0 +1,449 @@
+#!/usr/bin/env python3
+"""Reliability suite: what an anonymous client or a heavy user does to a release server, each
+case against its own server on a loopback port, with the figure it measured in the log.
+
+Usage: suite.py BINARY [CASE ...]   (cases: overflow cache lost-work starvation slow-loris
+ownership shutdown; default all). Exits 1 on the first failed expectation. Bounded: every
+case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1 only.
+"""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.error
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BINARY = None
+
+
+def scenario(name, edit=None):
+    with open(os.path.join(ROOT, "scenarios", f"{name}.json")) as f:
+        doc = json.load(f)
+    if edit:
+        edit(doc)
+    return doc
+
+
+class Server:
+    """`irs-planner serve` on a free loopback port with extra flags."""
+
+    def __init__(self, *flags):
+        self.empty = tempfile.mkdtemp(prefix="irs-reliability-")
+        self.log = tempfile.NamedTemporaryFile(prefix="irs-reliability-", suffix=".log", delete=False)
+        self.proc = subprocess.Popen(
+            [BINARY, "serve", "--bind", "127.0.0.1:0", "--scenarios", self.empty, *flags],
+            stdout=subprocess.PIPE,
+            stderr=self.log,
+            text=True,
+        )
+        line = self.proc.stdout.readline()
+        assert line.startswith("listening on "), f"server did not start: {line!r}"
+        self.base = line.split()[-1]
+        self.port = int(self.base.rsplit(":", 1)[1])
+
+    def request(self, method, path, body=None, token=None, timeout=120):
+        headers = {}
+        data = None
+        if body is not None:
+            data = json.dumps(body).encode()
+            headers["content-type"] = "application/json"
+        if token:
+            headers["authorization"] = f"Bearer {token}"
+        req = urllib.request.Request(self.base + path, data, headers, method=method)
+        try:
+            with urllib.request.urlopen(req, timeout=timeout) as resp:
+                return resp.status, json.loads(resp.read() or b"null")
+        except urllib.error.HTTPError as e:
+            text = e.read()
+            try:
+                return e.code, json.loads(text)
+            except ValueError:
+                return e.code, text.decode(errors="replace")
+
+    def get(self, path, **kw):
+        return self.request("GET", path, **kw)
+
+    def post(self, path, body, **kw):
+        return self.request("POST", path, body, **kw)
+
+    def timed_get(self, path):
+        started = time.perf_counter()
+        status, _ = self.get(path, timeout=10)
+        return status, (time.perf_counter() - started) * 1000
+
+    def metric(self, name):
+        with urllib.request.urlopen(self.base + "/metrics", timeout=10) as resp:
+            text = resp.read().decode()
+        total = 0.0
+        for line in text.splitlines():
+            if line.startswith(name) and (len(line) == len(name) or line[len(name)] in " {"):
+                total += float(line.rsplit(" ", 1)[1])
+        return total
+
+    def rss_mb(self, peak=False):
+        key = "VmHWM" if peak else "VmRSS"
+        with open(f"/proc/{self.proc.pid}/status") as f:
+            for line in f:
+                if line.startswith(key):
+                    return int(line.split()[1]) / 1024
+        return 0.0
+
+    def wait_job(self, job_id, limit_s=120):
+        deadline = time.time() + limit_s
+        while time.time() < deadline:
+            _, job = self.get(f"/v1/jobs/{job_id}")
+            if job["state"] in ("done", "failed", "cancelled"):
+                return job
+            time.sleep(0.05)
+        raise AssertionError(f"job {job_id} did not finish")
+
+    def scenario_id(self, name):
+        _, listed = self.get("/v1/scenarios?limit=1000")
+        return next(s["id"] for s in listed["scenarios"] if s["name"] == name)
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def expect(condition, message):
+    if not condition:
+        raise AssertionError(message)
+
+
+def figure(case, text):
+    print(f"[{case}] {text}", flush=True)
+
+
+# ------------------------------------------------------------------------------------ cases
+
+
+def overflow():
+    """Sizes that wrapped or were taken on trust: each refused with 422, nothing allocated."""
+    server = Server()
+    try:
+        def irs(**fields):
+            return scenario("small-test", lambda d: d["irs"].update(fields))
+
+        def room(**fields):
+            return scenario("small-test", lambda d: d["room"].update(fields))
+
+        cases = {
+            "nx_sub = nz_sub = 2^32": irs(nx_sub=2**32, nz_sub=2**32),
+            "nz_sub = 2^63": irs(nz_sub=2**63),
+            "elements_per_sub = 2^63 + 1": irs(elements_per_sub=2**63 + 1),
+            "resolution larger than the room": scenario(
+                "small-test", lambda d: d["grid"].update(resolution_m=100.0)),
+            "20 km × 0.5 m corridor": scenario("small-test", lambda d: (
+                d["room"].update(x_max=20000.0, y_max=0.5), d["grid"].update(resolution_m=0.5))),
+            "room at 1e300 m": room(x_min=-1e300),
+            "a 3-coordinate point": scenario("small-test", lambda d: d["ap"].update(position=[1, 2, 3, 4])),
+            "a 1 MB name": scenario("small-test", lambda d: d.update(name="n" * 1_000_000)),
+        }
+        statuses = {}
+        for what, doc in cases.items():
+            status, body = server.post("/v1/scenarios", doc)
+            statuses[what] = status
+            expect(status == 422, f"{what}: {status} {body}")
+            expect(body.get("field"), f"{what}: the problem names no field: {body}")
+        status, body = server.post(
+            "/v1/paths", {"map_id": "x", "start": [1, 2, 3], "goal": [1, 2], "threshold": 0})
+        expect(status == 422 and body["field"] == "start", f"3-coordinate start: {status} {body}")
+        # Work above the budget is refused before it starts.
+        heavy = scenario("paper-single-user", lambda d: (
+            d["irs"].update(grouping="elements", elements_per_sub=3000),
+            d["grid"].update(resolution_m=0.02)))
+        status, body = server.post("/v1/maps", {"scenario": heavy, "kind": "gain"})
+        expect(status == 422 and body["code"] == "limit_exceeded", f"budget: {status} {body}")
+        expect(server.get("/healthz")[0] == 200, "the server died")
+        figure("overflow", f"{len(cases) + 2} hostile inputs → 422 naming the field; "
+               f"server alive, RSS {server.rss_mb(peak=True):.0f} MB peak "
+               f"(budget refusal: {body['detail'][:70]}…)")
+    finally:
+        server.stop()
+
+
+def cache():
+    """Maps of M = 200 000 elements each hold 6.4 MB of channel model: the cache weighs it."""
+    budget_mb = 64
+    server = Server("--cache-mb", str(budget_mb))
+    try:
+        baseline = server.rss_mb()
+        maps = 30
+        for k in range(maps):
+            doc = scenario("small-test", lambda d: (
+                d.update(name=f"m200k-{k}"),
+                d["irs"].update(nx_sub=20, nz_sub=10, elements_per_sub=1000, grouping="elements")))
+            status, body = server.post("/v1/maps", {"scenario": doc, "kind": "gain"})
+            expect(status == 200, f"map {k}: {status} {body}")
+        gauge = server.metric("irs_map_cache_bytes") / 2**20
+        rss = server.rss_mb()
+        slack = 64
+        expect(gauge <= budget_mb, f"cache gauge {gauge:.1f} MB above the budget")
+        expect(rss <= baseline + budget_mb + slack,
+               f"RSS {rss:.0f} MB above baseline {baseline:.0f} + budget {budget_mb} + slack {slack}")
+        figure("cache", f"{maps} maps of M = 200 000 (≈ {maps * 6.4:.0f} MB unweighed) with "
+               f"--cache-mb {budget_mb}: cache gauge {gauge:.1f} MB, RSS {rss:.0f} MB "
+               f"(baseline {baseline:.0f} MB, limit baseline + {budget_mb} + {slack} MB slack)")
+    finally:
+        server.stop()
+
+
+def lost_work():
+    """A full cache never costs a request its map, and a done job's map is there."""
+    server = Server("--cache-mb", "2")
+    try:
+        # 1.5 MB maps in a 2 MB cache: each build evicts the one before.
+        def fine(k):
+            return scenario("paper-single-user", lambda d: (
+                d.update(name=f"fine-{k}"), d["grid"].update(resolution_m=0.05)))
+
+        results = [None] * 6
+
+        def ask(k):
+            results[k] = server.post("/v1/maps", {"scenario": fine(k), "kind": "gain"})
+
+        threads = [threading.Thread(target=ask, args=(k,)) for k in range(len(results))]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        statuses = [status for status, _ in results]
+        expect(all(s == 200 for s in statuses), f"statuses {statuses}: {results}")
+        # Jobs: each done job's map answers at once, and nothing is built twice.
+        server.stop()
+        server = Server("--cache-mb", "64", "--sync-cells", "100")
+        jobs = 0
+        for k in range(5):
+            status, job = server.post("/v1/maps", {"scenario": fine(10 + k), "kind": "gain"})
+            expect(status == 202, f"job {k}: {status} {job}")
+            done = server.wait_job(job["job_id"])
+            expect(done["state"] == "done", f"job {k}: {done}")
+            status, _ = server.get(f"/v1/maps/{done['map_id']}/coverage?threshold=-60")
+            expect(status == 200, f"job {k} says done but its map answers {status}")
+            jobs += 1
+        builds = server.metric("irs_map_builds_total")
+        expect(builds == jobs, f"{builds} builds for {jobs} maps")
+        figure("lost-work", f"6 concurrent 1.5 MB maps in a 2 MB cache: statuses {statuses}; "
+               f"{jobs} jobs done → map 200 at once, {builds:.0f} builds")
+    finally:
+        server.stop()
+
+
+def starvation():
+    """Worst-case sweeps and Monte Carlo checks do not hold the async threads."""
+    server = Server()
+    try:
+        big = scenario("paper-single-user", lambda d: (
+            d.update(name="big"), d["grid"].update(resolution_m=0.02)))
+        status, job = server.post("/v1/maps", {"scenario": big, "kind": "gain"})
+        expect(status == 202, f"1001² map: {status} {job}")
+        done = server.wait_job(job["job_id"])
+        big_map = done["map_id"]
+        paper = server.scenario_id("paper-single-user")
+        status, small = server.post("/v1/maps", {"scenario_id": paper, "kind": "gain"})
+        expect(status == 200, f"paper map: {status}")
+        cheap_path = {"map_id": small["map_id"], "start": [-8, -8], "goal": [8, 8], "threshold": -60}
+        # 100 thresholds across the feasible band: each is a full search of the 1001² grid
+        # (1000 such take minutes on one query worker, past the request timeout).
+        thresholds = [-75 + 0.15 * k for k in range(100)]
+        sweep = {"map_id": big_map, "start": [-9.5, 0], "goal": [9.5, 0], "thresholds": thresholds}
+        check = {"map_id": big_map, "start": [-9.5, 0], "goal": [9.5, 0], "threshold": "max",
+                 "monte_carlo_draws": 300}
+        answers = []
+
+        def heavy(body, path):
+            answers.append(server.post(path, body, timeout=300)[0])
+
+        threads = [threading.Thread(target=heavy, args=(sweep, "/v1/sweeps")) for _ in range(2)]
+        threads += [threading.Thread(target=heavy, args=(check, "/v1/paths")) for _ in range(2)]
+        for t in threads:
+            t.start()
+        time.sleep(0.3)
+        health, paths = [], []
+        while any(t.is_alive() for t in threads) and len(health) < 1000:
+            status, ms = server.timed_get("/healthz")
+            expect(status == 200, f"healthz {status}")
+            health.append(ms)
+            started = time.perf_counter()
+            status, _ = server.post("/v1/paths", cheap_path, timeout=10)
+            expect(status == 200, f"cached path {status}")
+            paths.append((time.perf_counter() - started) * 1000)
+            time.sleep(0.05)
+        for t in threads:
+            t.join()
+        expect(all(a == 200 for a in answers), f"heavy answers {answers}")
+        expect(max(health) < 50, f"healthz max {max(health):.1f} ms")
+        expect(max(paths) < 100, f"cached path max {max(paths):.1f} ms")
+        # A client that leaves cancels its query: the worker is free for the next one at once.
+        sock = socket.create_connection(("127.0.0.1", server.port))
+        body = json.dumps(sweep).encode()
+        sock.sendall(b"POST /v1/sweeps HTTP/1.1\r\nHost: x\r\ncontent-type: application/json\r\n"
+                     + f"content-length: {len(body)}\r\n\r\n".encode() + body)
+        time.sleep(0.5)
+        sock.close()
+        started = time.perf_counter()
+        one = dict(sweep, thresholds=[-70])
+        status, _ = server.post("/v1/sweeps", one, timeout=60)
+        after_leave = time.perf_counter() - started
+        expect(status == 200, f"sweep after a client left: {status}")
+        expect(after_leave < 3, f"the abandoned sweep held the worker for {after_leave:.1f} s")
+        figure("starvation", f"2 sweeps × 100 thresholds + 2 checks × 300 draws on 1001² "
+               f"(answers {sorted(answers)}): healthz max {max(health):.1f} ms over {len(health)}, "
+               f"cached path max {max(paths):.1f} ms; after a client left mid-sweep the next "
+               f"sweep answered in {after_leave:.2f} s")
+    finally:
+        server.stop()
+
+
+def slow_loris():
+    """200 slow clients are cut off by the timeouts while another client is served."""
+    server = Server("--header-timeout-s", "2", "--body-timeout-s", "2", "--idle-timeout-s", "2")
+    try:
+        sockets = []
+        for _ in range(200):
+            s = socket.create_connection(("127.0.0.1", server.port))
+            s.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\nX-Slow: ")
+            sockets.append(s)
+        started = time.time()
+        served = []
+        closed = set()
+        while time.time() - started < 6 and len(closed) < len(sockets):
+            status, ms = server.timed_get("/healthz")
+            served.append((status, ms))
+            for k, s in enumerate(sockets):
+                if k in closed:
+                    continue
+                try:
+                    s.sendall(b"a")
+                    s.setblocking(False)
+                    if s.recv(1) == b"":
+                        closed.add(k)
+                except BlockingIOError:
+                    pass
+                except OSError:
+                    closed.add(k)
+                finally:
+                    s.setblocking(True)
+            time.sleep(0.25)
+        elapsed = time.time() - started
+        for s in sockets:
+            s.close()
+        expect(len(closed) == len(sockets), f"{len(sockets) - len(closed)} slow clients still open")
+        expect(all(st == 200 and ms < 100 for st, ms in served), f"other client: {served[:5]}")
+        # A body that stalls is answered 408; an idle kept-alive connection is closed.
+        s = socket.create_connection(("127.0.0.1", server.port))
+        s.sendall(b"POST /v1/scenarios HTTP/1.1\r\nHost: x\r\ncontent-type: application/json\r\n"
+                  b"content-length: 100\r\n\r\n{\"name\"")
+        s.settimeout(10)
+        t0 = time.time()
+        reply = s.recv(200)
+        body_s = time.time() - t0
+        expect(b" 408 " in reply.split(b"\r\n")[0], f"stalled body: {reply[:60]!r}")
+        s.close()
+        s = socket.create_connection(("127.0.0.1", server.port))
+        s.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        s.settimeout(10)
+        s.recv(500)
+        t0 = time.time()
+        rest = s.recv(10)
+        idle_s = time.time() - t0
+        expect(rest == b"" and idle_s < 4, f"idle connection: {rest!r} after {idle_s:.1f} s")
+        s.close()
+        worst = max(ms for _, ms in served)
+        figure("slow-loris", f"200 slow-header clients closed within {elapsed:.1f} s "
+               f"(header timeout 2 s); other client served {len(served)}× (max {worst:.1f} ms); "
+               f"stalled body → 408 after {body_s:.1f} s; idle keep-alive closed after {idle_s:.1f} s")
+    finally:
+        server.stop()
+
+
+def ownership():
+    """With tokens, writes need one and jobs belong to their token."""
+    alice, bob = "alice-reliability-0001", "bob-reliability-000002"
+    server = Server("--api-tokens", f"{alice},{bob}")
+    try:
+        multi = scenario("paper-multi-user", lambda d: (
+            d.update(name="owned"), d["grid"].update(resolution_m=0.2)))
+        status, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
+        expect(status == 401, f"anonymous POST: {status}")
+        status, job = server.post("/v1/maps", {"scenario": multi, "kind": "rate"}, token=alice)
+        expect(status == 202, f"alice's job: {status} {job}")
+        path = f"/v1/jobs/{job['job_id']}"
+        status, _ = server.request("DELETE", path, token=bob)
+        expect(status == 404, f"bob cancels alice's job: {status}")
+        _, bobs = server.get("/v1/jobs", token=bob)
+        _, alices = server.get("/v1/jobs", token=alice)
+        expect(len(bobs["jobs"]) == 0 and len(alices["jobs"]) == 1, f"{bobs} {alices}")
+        status, _ = server.request("DELETE", path, token=alice)
+        expect(status == 202, f"alice cancels her job: {status}")
+        figure("ownership", "anonymous POST 401; bob's cancel of alice's job 404, his listing "
+               "0 jobs, hers 1; her cancel 202")
+    finally:
+        server.stop()
+
+
+def shutdown():
+    """SIGTERM cancels what outlives the grace period and exits within grace + 2 s."""
+    server = Server("--shutdown-grace-s", "2")
+    try:
+        multi = scenario("paper-multi-user", lambda d: (
+            d.update(name="long"), d["grid"].update(resolution_m=0.125)))
+        status, job = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
+        expect(status == 202, f"long job: {status}")
+        time.sleep(0.5)
+        started = time.time()
+        server.proc.send_signal(signal.SIGTERM)
+        code = server.proc.wait(timeout=10)
+        took = time.time() - started
+        expect(code == 0, f"exit code {code}")
+        expect(took < 4.0, f"exit took {took:.1f} s")
+        with open(server.log.name) as f:
+            log = f.read()
+        expect(job["job_id"] in log and "cancelled" in log, "no log line names the cancelled job")
+        figure("shutdown", f"SIGTERM with a running rate-map build: exit 0 after {took:.2f} s "
+               f"(grace 2 s), the log names the cancelled job")
+    finally:
+        server.stop()
+
+
+CASES = {
+    "overflow": overflow,
+    "cache": cache,
+    "lost-work": lost_work,
+    "starvation": starvation,
+    "slow-loris": slow_loris,
+    "ownership": ownership,
+    "shutdown": shutdown,
+}
+
+
+def main():
+    global BINARY
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    BINARY = os.path.abspath(sys.argv[1])
+    chosen = sys.argv[2:] or list(CASES)
+    failed = 0
+    for name in chosen:
+        started = time.time()
+        try:
+            CASES[name]()
+            print(f"ok {name} ({time.time() - started:.1f} s)", flush=True)
+        except AssertionError as e:
+            failed += 1
+            print(f"FAILED {name}: {e}", flush=True)
+    print(f"{len(chosen) - failed} passed, {failed} failed")
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
