@@ -1199,6 +1199,25 @@ mod tests {
         assert_eq!(g.centre(g.nx - 1, g.ny - 1), [s.room.x_max, s.room.y_max]);
     }
 
+    /// Found by the fuzzer: a coordinate written with more digits than an f64 holds must parse
+    /// to the correctly rounded f64, or its canonical form re-parses to another number and the
+    /// scenario's id changes when its own document is registered again.
+    #[test]
+    fn the_canonical_form_parses_back_to_the_same_scenario() {
+        let doc: serde_json::Value =
+            serde_json::from_str(include_str!("../scenarios/paper-multi-user.json")).unwrap();
+        let written = doc.to_string();
+        let text = written.replacen(
+            "\"v_max_mps\":1.0",
+            "\"v_max_mps\":0.00018446744073709551615001",
+            1,
+        );
+        assert_ne!(text, written);
+        let first = Scenario::from_json(&text).unwrap();
+        let again = Scenario::from_json(&first.canonical_json()).unwrap();
+        assert_eq!(again.content_hash(), first.content_hash());
+    }
+
     #[test]
     fn hash_ignores_key_order_formatting_and_written_defaults() {
         let a = Scenario::from_json(SMALL).unwrap();

@@ -185,6 +185,8 @@ impl ScenarioRegistry {
         if gone {
             by_id.remove(id);
             metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
+            let held: usize = by_id.values().map(|s| s.bytes).sum();
+            metrics::gauge!("irs_scenario_bytes").set(held as f64);
         }
         Ok(gone)
     }

@@ -78,6 +78,19 @@ pub struct Handover {
     built: Option<std::sync::Weak<RadioMap>>,
 }
 
+/// One request waiting for a map job; the last to go lets the job drop the map.
+struct Waiter<'a>(&'a Mutex<Handover>);
+
+impl Drop for Waiter<'_> {
+    fn drop(&mut self) {
+        let mut h = self.0.lock().expect("job lock");
+        h.waiters -= 1;
+        if h.waiters == 0 {
+            h.map = None;
+        }
+    }
+}
+
 /// A checked placement search, ready to run.
 pub struct PlacementSearch {
     pub scenario: Arc<Scenario>,
@@ -175,13 +188,14 @@ impl Job {
             }
             h.waiters += 1;
         }
+        // Counted out on drop too: a waiter whose client left must not pin the map.
+        let waiter = Waiter(handover);
         self.finished().await;
-        let mut h = handover.lock().expect("job lock");
-        h.waiters -= 1;
-        let map = h.map.clone().or_else(|| h.built.as_ref()?.upgrade());
-        if h.waiters == 0 {
-            h.map = None;
-        }
+        let map = {
+            let h = handover.lock().expect("job lock");
+            h.map.clone().or_else(|| h.built.as_ref()?.upgrade())
+        };
+        drop(waiter);
         map
     }
 
