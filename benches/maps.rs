@@ -69,6 +69,27 @@ fn large_grid(c: &mut Criterion) {
     group.bench_function("widest_path_1001x1001", |b| {
         b.iter(|| graph.widest_path_threshold(start, goal))
     });
+    // The same searches the other way, and a one-step query (widest path + A*) both ways: the
+    // cost must not depend on the direction.
+    group.bench_function("astar_1001x1001_at_minus_62_db_reversed", |b| {
+        b.iter(|| graph.shortest_path(goal, start, black_box(-62.0)))
+    });
+    group.bench_function("widest_path_1001x1001_reversed", |b| {
+        b.iter(|| graph.widest_path_threshold(goal, start))
+    });
+    let centre = |cell: usize| {
+        let (i, j) = map.grid.cell_of(cell);
+        map.grid.centre(i, j)
+    };
+    let (here, next) = (map.grid.index(500, 700), map.grid.index(501, 700));
+    for (name, from, to) in [
+        ("one_step_query_forward", here, next),
+        ("one_step_query_backward", next, here),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| planner::plan(&map, centre(from), centre(to), Threshold::Max, 1.0))
+        });
+    }
     group.finish();
 }
 

@@ -272,6 +272,40 @@ impl ChannelModel {
         }
     }
 
+    /// The direct link and ‖w̃‖₁ at `user`: all that the continuous closed form (eq. 12)
+    /// needs. With `coherent` grouping every sub-surface of a surface has the same |w̃_n| (the
+    /// path losses use the surface centre's distances and N̄ elements add in phase), so a
+    /// surface's ‖w̃_s‖₁ = N_s·|w̃_s,1| costs one link budget, not N_s phasors; with `elements`
+    /// the element phasors are summed into `w` (length N) as [`Self::evaluate`] does.
+    pub fn closed_form_terms(&self, user: [f64; 3], w: &mut [C64]) -> (DirectAndScattered, f64) {
+        let mut total = self.direct(user);
+        let mut l1 = 0.0;
+        let q = P3::from(user);
+        for (s, irs) in self.surfaces.iter().enumerate() {
+            if irs.per_sub == 1 {
+                if let Some(user_link) = self.irs_user_link(irs, &q) {
+                    let amplitude =
+                        irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
+                    l1 += irs.subsurfaces as f64 * amplitude;
+                    total.tau += Self::surface_scattered_power(irs, &user_link);
+                }
+            } else {
+                let own = &mut w[irs.offset..irs.offset + irs.subsurfaces];
+                total.tau += self.surface_terms(s, user, own);
+                l1 += crate::numerics::l1_norm(own);
+            }
+        }
+        (total, l1)
+    }
+
+    /// Lemma 1 for one surface: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M /
+    /// ((K_AI+1)(K_IM+1)), the power its scattered paths add at a user it serves.
+    fn surface_scattered_power(irs: &IrsModel, user_link: &LinkBudget) -> f64 {
+        let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
+        irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
+            / ((ka + 1.0) * (ku + 1.0))
+    }
+
     /// Surface `s`'s part of the channel at `user`: fills `w` (length N_s) with its w̃_s and
     /// returns its scattered power τ_s (zeros when it cannot serve the user), so that
     /// λ(θ) = |h̃ + Σ_s w̃_sᵀθ_s|² + τ_direct + Σ_s τ_s.
@@ -283,7 +317,6 @@ impl ChannelModel {
         let Some(user_link) = self.irs_user_link(irs, &q) else {
             return 0.0;
         };
-        let (ka, ku) = (irs.ap_link.rician_k, user_link.rician_k);
         let amplitude = irs.ap_link.los_amplitude() * user_link.los_amplitude() * irs.weight;
         if amplitude > 0.0 {
             for (n, wn) in w.iter_mut().enumerate() {
@@ -298,9 +331,7 @@ impl ChannelModel {
                 *wn = sum * amplitude;
             }
         }
-        // Lemma 1: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M / ((K_AI+1)(K_IM+1)).
-        irs.ap_link.path_gain * user_link.path_gain * (ku + ka + 1.0) * irs.elements as f64
-            / ((ka + 1.0) * (ku + 1.0))
+        Self::surface_scattered_power(irs, &user_link)
     }
 
     /// ∠h̃ at `q` as eq. 11 uses it: 0 where the direct link is NLoS (h̃ = 0).

@@ -98,13 +98,7 @@ impl<'a> CellGraph<'a> {
     ) -> Result<Path, Infeasible> {
         self.check_ends(start, goal, threshold)?;
         let cells = self.values.len();
-        let (gi, gj) = self.grid.cell_of(goal);
-        // Octile distance to the goal, in units of Δ: admissible and consistent.
-        let heuristic = |c: usize| {
-            let (i, j) = self.grid.cell_of(c);
-            let (dx, dy) = ((i as f64 - gi as f64).abs(), (j as f64 - gj as f64).abs());
-            dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)
-        };
+        let heuristic = self.octile_to(goal);
         let mut dist = vec![f64::INFINITY; cells];
         let mut prev = vec![u32::MAX; cells];
         let mut heap = BinaryHeap::new();
@@ -158,28 +152,47 @@ impl<'a> CellGraph<'a> {
                 self.values[c]
             }
         };
+        // No path is wider than its narrower end: once the goal is reached at that width,
+        // nothing can improve it (a one-step query then ends at once, in either direction).
+        let ceiling = value(start).min(value(goal));
+        let to_goal = self.octile_to(goal);
         let mut best = vec![f64::NEG_INFINITY; self.values.len()];
         let mut done = vec![false; self.values.len()];
         let mut heap = BinaryHeap::new();
         best[start] = value(start);
-        heap.push((OrdF64(best[start]), start));
-        while let Some((OrdF64(b), cell)) = heap.pop() {
+        // Among entries of equal width the one nearer the goal goes first: widths tie on every
+        // cell above a narrow end, and breaking the tie by cell index made the search cost
+        // 1 ms one way and 37 ms the other on the 1001² floor.
+        heap.push((OrdF64(best[start]), Reverse(OrdF64(to_goal(start))), start));
+        while let Some((OrdF64(b), _, cell)) = heap.pop() {
             if done[cell] {
                 continue;
             }
             done[cell] = true;
-            if cell == goal {
+            if cell == goal || best[goal] >= ceiling {
                 break;
             }
             self.for_each_neighbour(cell, |n, _| {
                 let through = b.min(value(n));
                 if !done[n] && through > best[n] {
                     best[n] = through;
-                    heap.push((OrdF64(through), n));
+                    heap.push((OrdF64(through), Reverse(OrdF64(to_goal(n))), n));
                 }
             });
         }
         best[goal].is_finite().then_some(best[goal])
+    }
+
+    /// The octile distance to `goal` in units of Δ (the shortest 8-connected length on an
+    /// empty grid, so an admissible and consistent A* heuristic), with the goal's coordinates
+    /// worked out once: the searches call it for every neighbour they push.
+    fn octile_to(&self, goal: usize) -> impl Fn(usize) -> f64 + '_ {
+        let (gi, gj) = self.grid.cell_of(goal);
+        move |c: usize| {
+            let (i, j) = self.grid.cell_of(c);
+            let (dx, dy) = (i.abs_diff(gi) as f64, j.abs_diff(gj) as f64);
+            dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)
+        }
     }
 
     fn check_ends(&self, start: usize, goal: usize, threshold: f64) -> Result<(), Infeasible> {
