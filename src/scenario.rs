@@ -536,10 +536,13 @@ impl Scenario {
             ("room.y_min", r.y_min),
             ("room.y_max", r.y_max),
             ("room.ceiling_m", r.ceiling_m),
-            ("grid.resolution_m", self.grid.resolution_m),
         ] {
             finite(field, v)?;
+            if v.abs() > MAX_COORDINATE_M {
+                return err(field, &format!("must lie within ±{MAX_COORDINATE_M} m"));
+            }
         }
+        finite("grid.resolution_m", self.grid.resolution_m)?;
         if let Some(name) = &self.name
             && name.chars().count() > MAX_NAME_CHARS
         {
@@ -547,17 +550,6 @@ impl Scenario {
                 "name",
                 &format!("longer than the limit of {MAX_NAME_CHARS} characters"),
             );
-        }
-        for (field, v) in [
-            ("room.x_min", r.x_min),
-            ("room.x_max", r.x_max),
-            ("room.y_min", r.y_min),
-            ("room.y_max", r.y_max),
-            ("room.ceiling_m", r.ceiling_m),
-        ] {
-            if v.abs() > MAX_COORDINATE_M {
-                return err(field, &format!("must lie within ±{MAX_COORDINATE_M} m"));
-            }
         }
         if r.x_max <= r.x_min {
             return err("room.x_max", "must be greater than room.x_min");
