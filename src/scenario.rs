@@ -1057,11 +1057,11 @@ impl Scenario {
         hash_hex(self.canonical_json().as_bytes())
     }
 
-    /// Approximate bytes the scenario holds, for a registry's budget: about its canonical
-    /// document (numbers and the floor plan's base64 take as much parsed as written), plus the
-    /// floor plan decoded to one byte per pixel.
-    pub fn approx_bytes(&self) -> usize {
-        self.canonical_json().len() + self.raster.as_ref().map_or(0, |r| r.occupied.capacity())
+    /// Bytes of the decoded floor plan (one per pixel), which a registry weighs besides the
+    /// canonical document (numbers and the floor plan's base64 take about as much parsed as
+    /// written).
+    pub fn raster_bytes(&self) -> usize {
+        self.raster.as_ref().map_or(0, |r| r.occupied.capacity())
     }
 }
 

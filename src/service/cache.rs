@@ -5,7 +5,7 @@
 use super::auth::{Caller, Owner};
 use super::errors::ApiError;
 use crate::radiomap::RadioMap;
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, hash_hex};
 use serde::Serialize;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -19,7 +19,7 @@ pub struct StoredScenario {
     /// Where it came from: "builtin", "file", or "api". Only "api" scenarios are evicted or
     /// deleted: the others are the server's configuration.
     pub source: &'static str,
-    /// Its weight in the registry's byte budget ([`Scenario::approx_bytes`]).
+    /// Its weight in the registry's byte budget: its canonical document and decoded raster.
     bytes: usize,
     /// The tokens that registered it (empty when authentication is off): each may delete its
     /// own registration, and the scenario goes with the last one.
@@ -93,8 +93,10 @@ impl ScenarioRegistry {
         owner: Option<Owner>,
         in_use: impl FnOnce() -> HashSet<String>,
     ) -> Result<(Arc<StoredScenario>, bool), ApiError> {
-        let id = scenario.content_hash();
-        let bytes = scenario.approx_bytes();
+        // One canonical form for both the id and the weight (a floor plan's is megabytes).
+        let canonical = scenario.canonical_json();
+        let id = hash_hex(canonical.as_bytes());
+        let bytes = canonical.len() + scenario.raster_bytes();
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
             existing.last_used.store(self.tick(), Ordering::Relaxed);
