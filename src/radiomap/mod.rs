@@ -11,6 +11,7 @@
 
 pub mod body;
 pub mod cost;
+pub mod encoding;
 pub mod gain;
 pub mod key;
 pub mod rate_cells;

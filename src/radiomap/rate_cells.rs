@@ -15,13 +15,13 @@ use rayon::prelude::*;
 pub struct RateCells {
     pub upper_bound: Vec<f64>,
     /// N, phases per cell (0 for `none`).
-    subsurfaces: usize,
+    pub(super) subsurfaces: usize,
     /// N_s of each surface, to split a cell's phases per surface.
-    surface_lengths: Vec<usize>,
-    phases: Vec<f64>,
-    power_w: Vec<f64>,
-    order: Vec<u8>,
-    model: RateModel,
+    pub(super) surface_lengths: Vec<usize>,
+    pub(super) phases: Vec<f64>,
+    pub(super) power_w: Vec<f64>,
+    pub(super) order: Vec<u8>,
+    pub(super) model: RateModel,
 }
 
 impl RateCells {

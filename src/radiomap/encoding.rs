@@ -1,0 +1,308 @@
+//! A compact binary form of a built map, for storage (`serve --data-dir`): what the build
+//! computed, without what the scenario determines.
+//!
+//! Stored per cell: the value (f64), the occupancy (one byte) and the per-cell solution (gain
+//! maps: the serving AP, one byte with several APs; rate maps: the upper bound, N phases, the
+//! power split and the decoding order). Not stored: the grid and the channel models, which
+//! [`decode`] rebuilds from the scenario, the map key names (they are deterministic functions
+//! of it). The bytes are postcard (serde's compact varint format); f64 values keep their bits,
+//! so a decoded map is bit-identical to the one encoded, NaN cells included.
+//!
+//! The encoding carries no checksum of its own: the store frames it with a digest
+//! (`service::store`), and [`decode`] checks every length against the scenario's grid, so
+//! bytes that parse but belong to another scenario are refused.
+
+use super::{CellSolutions, MapKey, MapKind, RadioMap, RateCells};
+use crate::channel::ChannelModel;
+use crate::rate::RateModel;
+use crate::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// Bumped whenever the layout below changes; a stored map of another version is not decoded
+/// (it is rebuilt on request).
+pub const FORMAT_VERSION: u32 = 1;
+
+#[derive(Serialize, Deserialize)]
+struct Stored {
+    version: u32,
+    /// The key as JSON: its types (the phase mode) deserialise from JSON's self-describing
+    /// forms, which postcard does not carry.
+    key: String,
+    build_seconds: f64,
+    values: Vec<f64>,
+    occupied: Vec<bool>,
+    cells: StoredCells,
+}
+
+#[derive(Serialize, Deserialize)]
+enum StoredCells {
+    Gain {
+        serving: Vec<u8>,
+    },
+    Rate {
+        upper_bound: Vec<f64>,
+        phases: Vec<f64>,
+        power_w: Vec<f64>,
+        order: Vec<u8>,
+    },
+}
+
+/// Why stored bytes are not a map of the given scenario.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("not a stored map: {0}")]
+    Malformed(String),
+    #[error("stored in format version {found}, this build reads version {FORMAT_VERSION}")]
+    Version { found: u32 },
+    #[error("{0}")]
+    Mismatch(String),
+}
+
+/// The map's bytes.
+pub fn encode(map: &RadioMap) -> Vec<u8> {
+    let cells = match &map.cells {
+        CellSolutions::Gain { serving, .. } => StoredCells::Gain {
+            serving: serving.clone(),
+        },
+        CellSolutions::Rate(rate) => StoredCells::Rate {
+            upper_bound: rate.upper_bound.clone(),
+            phases: rate.phases.clone(),
+            power_w: rate.power_w.clone(),
+            order: rate.order.clone(),
+        },
+    };
+    let stored = Stored {
+        version: FORMAT_VERSION,
+        key: serde_json::to_string(&map.key).expect("keys serialise"),
+        build_seconds: map.build_seconds,
+        values: map.values.clone(),
+        occupied: map.occupied.clone(),
+        cells,
+    };
+    postcard::to_stdvec(&stored).expect("a map serialises to memory")
+}
+
+/// The key of the map that `bytes` encode, from their first bytes only (a prefix of a few
+/// hundred bytes is enough).
+pub fn peek_key(bytes: &[u8]) -> Result<MapKey, DecodeError> {
+    let (found, rest) = postcard::take_from_bytes::<u32>(bytes)
+        .map_err(|e| DecodeError::Malformed(e.to_string()))?;
+    if found != FORMAT_VERSION {
+        return Err(DecodeError::Version { found });
+    }
+    let (key, _) = postcard::take_from_bytes::<&str>(rest)
+        .map_err(|e| DecodeError::Malformed(e.to_string()))?;
+    parse_key(key)
+}
+
+fn parse_key(json: &str) -> Result<MapKey, DecodeError> {
+    serde_json::from_str(json).map_err(|e| DecodeError::Malformed(format!("the map key: {e}")))
+}
+
+/// The map that `bytes` encode, given the scenario it was built from (its id must be the
+/// key's `scenario_id`).
+pub fn decode(bytes: &[u8], scenario: &Scenario) -> Result<RadioMap, DecodeError> {
+    // The version comes first, so a future layout is reported as such, not as garbage.
+    let (found, _) = postcard::take_from_bytes::<u32>(bytes)
+        .map_err(|e| DecodeError::Malformed(e.to_string()))?;
+    if found != FORMAT_VERSION {
+        return Err(DecodeError::Version { found });
+    }
+    let stored: Stored =
+        postcard::from_bytes(bytes).map_err(|e| DecodeError::Malformed(e.to_string()))?;
+    let key = parse_key(&stored.key)?;
+    let mismatch = |what: &str, found: usize, expected: usize| {
+        Err(DecodeError::Mismatch(format!(
+            "{what}: {found} entries stored, the scenario's grid needs {expected}"
+        )))
+    };
+    if key.scenario_id != scenario.content_hash() {
+        return Err(DecodeError::Mismatch(format!(
+            "built from scenario {}, not {}",
+            key.scenario_id,
+            scenario.content_hash()
+        )));
+    }
+    let grid = scenario.grid();
+    let cells = grid.cells();
+    if stored.values.len() != cells {
+        return mismatch("values", stored.values.len(), cells);
+    }
+    if stored.occupied.len() != cells {
+        return mismatch("occupied", stored.occupied.len(), cells);
+    }
+    let solutions = match (key.kind, stored.cells) {
+        (MapKind::Gain, StoredCells::Gain { serving }) => {
+            let aps = scenario.access_points().len();
+            let expected = if aps > 1 { cells } else { 0 };
+            if serving.len() != expected {
+                return mismatch("serving", serving.len(), expected);
+            }
+            if serving.iter().any(|&ap| usize::from(ap) >= aps) {
+                return Err(DecodeError::Mismatch(format!(
+                    "a cell is served by an AP the scenario (with {aps}) does not have"
+                )));
+            }
+            CellSolutions::Gain {
+                models: (0..aps)
+                    .map(|ap| Arc::new(ChannelModel::for_ap(scenario, ap)))
+                    .collect(),
+                serving,
+                antenna_height_m: scenario.mru.antenna_height_m,
+            }
+        }
+        (
+            MapKind::Rate,
+            StoredCells::Rate {
+                upper_bound,
+                phases,
+                power_w,
+                order,
+            },
+        ) => {
+            let access = key.access.ok_or_else(|| {
+                DecodeError::Mismatch("a rate map's key without an access scheme".into())
+            })?;
+            let channel = ChannelModel::new(scenario);
+            let model = RateModel::for_scenario(scenario, access);
+            let with_irs = key.phases != crate::phases::PhaseMode::None;
+            let n = if with_irs { channel.subsurfaces() } else { 0 };
+            if upper_bound.len() != cells {
+                return mismatch("upper_bound", upper_bound.len(), cells);
+            }
+            if phases.len() != cells * n {
+                return mismatch("phases", phases.len(), cells * n);
+            }
+            if power_w.len() != cells * model.users() {
+                return mismatch("power_w", power_w.len(), cells * model.users());
+            }
+            if order.len() != cells {
+                return mismatch("order", order.len(), cells);
+            }
+            if order
+                .iter()
+                .any(|&o| usize::from(o) >= model.orders().len())
+            {
+                return Err(DecodeError::Mismatch(
+                    "a cell's decoding order is not one of the scenario's".into(),
+                ));
+            }
+            CellSolutions::Rate(RateCells {
+                upper_bound,
+                subsurfaces: n,
+                surface_lengths: channel.surface_lengths(),
+                phases,
+                power_w,
+                order,
+                model,
+            })
+        }
+        (kind, _) => {
+            return Err(DecodeError::Mismatch(format!(
+                "the key says a {kind} map, the cells are of the other kind"
+            )));
+        }
+    };
+    Ok(RadioMap {
+        key,
+        grid,
+        values: stored.values,
+        occupied: stored.occupied,
+        cells: solutions,
+        build_seconds: stored.build_seconds,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::radiomap::{MapKey, Progress, build};
+
+    fn builtin(name: &str) -> Scenario {
+        Scenario::builtin(name).expect("a built-in scenario")
+    }
+
+    fn round_trip(scenario: &Scenario, key: &MapKey) {
+        let map = build(scenario, key, &Progress::default()).expect("builds");
+        let bytes = encode(&map);
+        let back = decode(&bytes, scenario).expect("decodes");
+        assert_eq!(back.key, map.key);
+        assert_eq!(back.build_seconds.to_bits(), map.build_seconds.to_bits());
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.values), bits(&map.values));
+        assert_eq!(back.occupied, map.occupied);
+        // Every waypoint configuration, the part a path answer returns, is the same.
+        for index in 0..map.values.len() {
+            assert_eq!(
+                back.cell_config(index),
+                map.cell_config(index),
+                "cell {index}"
+            );
+        }
+        assert_eq!(back.body().stats, map.body().stats);
+        // At most the bytes held in memory, minus the channel models.
+        assert!(
+            bytes.len() <= map.size_bytes() + 64,
+            "{} bytes",
+            bytes.len()
+        );
+    }
+
+    #[test]
+    fn gain_and_rate_maps_round_trip_bit_for_bit() {
+        let small = builtin("small-test");
+        let id = small.content_hash();
+        for kind in [MapKind::Gain, MapKind::Rate] {
+            let key = MapKey::new(&id, &small, kind, None, None, None).unwrap();
+            round_trip(&small, &key);
+        }
+        // Two APs: the gain map stores which one serves each cell.
+        let paper = builtin("paper-single-user");
+        let mut second = paper.ap().clone();
+        second.position = [9.5, -9.5, 2.0];
+        let multi = paper
+            .with_access_points(vec![paper.ap().clone(), second])
+            .unwrap();
+        let key = MapKey::new(
+            &multi.content_hash(),
+            &multi,
+            MapKind::Gain,
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        round_trip(&multi, &key);
+    }
+
+    #[test]
+    fn bytes_of_another_scenario_or_damaged_bytes_are_refused() {
+        let small = builtin("small-test");
+        let key = MapKey::new(
+            &small.content_hash(),
+            &small,
+            MapKind::Rate,
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        let bytes = encode(&build(&small, &key, &Progress::default()).unwrap());
+        let other = builtin("paper-single-user");
+        assert!(matches!(
+            decode(&bytes, &other),
+            Err(DecodeError::Mismatch(_))
+        ));
+        assert!(matches!(
+            decode(&bytes[..bytes.len() / 2], &small),
+            Err(DecodeError::Malformed(_))
+        ));
+        let mut future = bytes.clone();
+        future[0] = 9;
+        assert_eq!(
+            decode(&future, &small).unwrap_err(),
+            DecodeError::Version { found: 9 }
+        );
+    }
+}
