@@ -52,6 +52,48 @@ pub enum Command {
     /// Rank candidate poses of an IRS (or positions of the AP) by an objective on their gain
     /// maps and print the ranking (the body of POST /v1/placements).
     Place(PlaceArgs),
+    /// GET a running server's health endpoint (for a container's HEALTHCHECK): exit 0 on a
+    /// 2xx answer, 1 on anything else or no answer within the timeout.
+    Healthcheck(HealthcheckArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct HealthcheckArgs {
+    /// The server's listening address, as `serve --bind` took it (0.0.0.0 is probed on
+    /// loopback).
+    #[arg(long, env = "IRS_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: std::net::SocketAddr,
+    /// The endpoint: /healthz (the process answers) or /readyz (it takes traffic).
+    #[arg(long, default_value = "/healthz")]
+    pub path: String,
+    /// Seconds to wait for the answer.
+    #[arg(long, default_value_t = 3.0, value_parser = parse_finite)]
+    pub timeout_s: f64,
+}
+
+/// `irs-planner healthcheck`.
+pub fn run_healthcheck(args: &HealthcheckArgs) -> Result<(), Failure> {
+    if !args.path.starts_with('/') {
+        return Err(Failure::input(format!(
+            "--path {:?}: must start with /",
+            args.path
+        )));
+    }
+    if !(args.timeout_s > 0.0 && args.timeout_s <= 600.0) {
+        return Err(Failure::input(format!(
+            "--timeout-s {}: must be in (0, 600]",
+            args.timeout_s
+        )));
+    }
+    let url = crate::service::probe::local_url(args.bind, &args.path);
+    match crate::service::probe::probe(&url, std::time::Duration::from_secs_f64(args.timeout_s)) {
+        Ok(status) if (200..300).contains(&status) => {
+            println!("{url}: {status}");
+            Ok(())
+        }
+        Ok(status) => Err(Failure::runtime(format!("{url}: {status}"))),
+        Err(reason) => Err(Failure::runtime(reason)),
+    }
 }
 
 #[derive(Debug, Args)]

@@ -34,10 +34,12 @@
 //!   checks against its budgets before a build.
 //! * [`planner`]: the feasible-map graph, shortest and widest paths, path and sweep answers.
 //! * [`montecarlo`] and [`render`]: a Monte Carlo check of a path; PNG pictures.
-//! * [`service`] (HTTP, axum) and [`cli`] (`serve`, `map`, `plan`): the two front doors, which
+//! * [`service`] (HTTP, axum) and [`cli`] (`serve`, `map`, `plan`; both behind the default
+//!   `server` feature): the two front doors, which
 //!   translate between users and the modules above and hold no physics.
 
 pub mod channel;
+#[cfg(feature = "server")]
 pub mod cli;
 pub mod export;
 pub mod floorplan;
@@ -52,6 +54,7 @@ pub mod radiomap;
 pub mod rate;
 pub mod render;
 pub mod scenario;
+#[cfg(feature = "server")]
 pub mod service;
 pub mod solver;
 pub mod timing;

@@ -1477,3 +1477,113 @@ async fn cors_only_for_configured_origins() {
     );
     assert_eq!(preflight(&open, "https://elsewhere.example").await, None);
 }
+
+/// `--data-dir`: API scenarios (with their owners), built maps and finished jobs survive a
+/// SIGKILL and a restart; nothing is built again, and a damaged map file is never served.
+#[tokio::test]
+async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
+    let dir = std::env::temp_dir().join(format!("irs-data-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (alice, bob) = ("alice-token-0123456789", "bob-token-0123456789ab");
+    let tokens = format!("{alice},{bob}");
+    let flags = ["--data-dir", dir.to_str().unwrap(), "--api-tokens", &tokens];
+    let server = start(&flags);
+    let doc = scenario("small-test.json", |v| v["name"] = "persisted".into());
+    let (s, created) = server
+        .send_as(Some(alice), "POST", "/v1/scenarios", Some(doc))
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{created}");
+    let sid = created["id"].as_str().unwrap().to_string();
+    let mut map_ids = Vec::new();
+    let mut job_id = None;
+    for request in [
+        json!({"scenario_id": sid, "kind": "gain"}),
+        json!({"scenario_id": sid, "kind": "gain", "phases": 1}),
+        json!({"scenario_id": sid, "kind": "rate"}),
+    ] {
+        let (s, answer) = server
+            .send_as(Some(alice), "POST", "/v1/maps", Some(request))
+            .await;
+        assert!(s.is_success(), "{answer}");
+        let map_id = if let Some(job) = answer["job_id"].as_str() {
+            let job = server.wait_job(job).await;
+            assert_eq!(job["state"], "done", "{job}");
+            job_id = Some(job["job_id"].as_str().unwrap().to_string());
+            job["map_id"].as_str().unwrap().to_string()
+        } else {
+            answer["map_id"].as_str().unwrap().to_string()
+        };
+        map_ids.push(map_id);
+    }
+    let path_request =
+        json!({"map_id": map_ids[0], "start": [0.5, 0.5], "goal": [3.5, 3.5], "threshold": "max"});
+    let (s, before) = server
+        .send_as(Some(alice), "POST", "/v1/paths", Some(path_request.clone()))
+        .await;
+    assert_eq!(s, StatusCode::OK, "{before}");
+    let builds = server.metric("irs_map_builds_total").await;
+    assert!(builds >= 2.0, "maps were built: {builds}");
+    drop(server); // SIGKILL: no shutdown hook runs.
+
+    // The bits map's file torn in the middle, as a crash during a plain write would leave it.
+    let torn = dir.join("maps").join(format!("{}.rec", map_ids[1]));
+    let bytes = std::fs::read(&torn).unwrap();
+    std::fs::write(&torn, &bytes[..bytes.len() / 2]).unwrap();
+
+    let server = start(&flags);
+    let (_, mine) = server
+        .send_as(Some(alice), "GET", "/v1/scenarios", None)
+        .await;
+    assert!(
+        mine.to_string().contains(&sid),
+        "alice still owns it: {mine}"
+    );
+    let (_, theirs) = server
+        .send_as(Some(bob), "GET", "/v1/scenarios", None)
+        .await;
+    assert!(
+        !theirs.to_string().contains(&sid),
+        "bob still does not: {theirs}"
+    );
+    for map_id in [&map_ids[0], &map_ids[2]] {
+        let (s, map) = server.get(&format!("/v1/maps/{map_id}")).await;
+        assert_eq!(s, StatusCode::OK, "{map}");
+    }
+    let (s, after) = server
+        .send_as(Some(alice), "POST", "/v1/paths", Some(path_request))
+        .await;
+    assert_eq!(s, StatusCode::OK, "{after}");
+    assert_eq!(after["waypoints"], before["waypoints"]);
+    let (s, gone) = server.get(&format!("/v1/maps/{}", map_ids[1])).await;
+    assert_eq!(
+        s,
+        StatusCode::NOT_FOUND,
+        "a torn file is not served: {gone}"
+    );
+    assert!(server.metric("irs_store_corrupt_total").await >= 1.0);
+    let job_id = job_id.expect("the rate map was a job");
+    let (s, job) = server
+        .send_as(Some(alice), "GET", &format!("/v1/jobs/{job_id}"), None)
+        .await;
+    assert_eq!(s, StatusCode::OK, "{job}");
+    assert_eq!(job["state"], "done");
+    assert_eq!(job["map_id"], map_ids[2].as_str());
+    assert_eq!(
+        server.metric("irs_map_builds_total").await,
+        0.0,
+        "nothing was built again"
+    );
+    // Deleting the scenario removes its maps from the disk too.
+    let (s, _) = server
+        .send_as(Some(alice), "DELETE", &format!("/v1/scenarios/{sid}"), None)
+        .await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    assert!(
+        !dir.join("maps")
+            .join(format!("{}.rec", map_ids[0]))
+            .exists()
+    );
+    assert!(!dir.join("scenarios").join(format!("{sid}.rec")).exists());
+    drop(server);
+    let _ = std::fs::remove_dir_all(&dir);
+}

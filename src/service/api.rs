@@ -10,7 +10,7 @@ use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
-use crate::placement::{self, Candidates, Objective, PlacementAnswer, Search, What};
+use crate::placement::{self, Candidates, Objective, Search, What};
 use crate::planner::{self, SweepAnswer, Threshold};
 use crate::radiomap::cost;
 use crate::radiomap::{MapKey, MapKind, MapStats, Progress, RadioMap, WorkError};
@@ -336,11 +336,7 @@ async fn delete_scenario(
         return Err(ApiError::scenario_in_use(&id, &job.id));
     }
     if state.registry().delete(&id, &caller)? {
-        for (map_id, map) in state.cache().entries() {
-            if map.key.scenario_id == id {
-                state.cache().remove(&map_id).await;
-            }
-        }
+        state.cache().remove_scenario_maps(&id).await;
         tracing::info!(scenario_id = %id, "scenario deleted");
     }
     Ok(StatusCode::NO_CONTENT)
@@ -873,7 +869,7 @@ const SYNC_PLACEMENT_MAPS: usize = 4;
 struct PlacementBody<'a> {
     placement_id: &'a str,
     #[serde(flatten)]
-    answer: &'a PlacementAnswer,
+    answer: &'a serde_json::Value,
     registered: usize,
     href: String,
 }

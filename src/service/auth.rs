@@ -26,6 +26,11 @@ use std::sync::Arc;
 pub(crate) struct Owner(Arc<str>);
 
 impl Owner {
+    /// An owner as a data directory recorded it (the digest [`Owner::of`] makes).
+    pub(crate) fn from_digest(digest: String) -> Owner {
+        Owner(digest.into())
+    }
+
     fn of(token: &str) -> Owner {
         let digest = Sha256::digest(token.as_bytes());
         let hex: String = digest[..8].iter().map(|b| format!("{b:02x}")).collect();

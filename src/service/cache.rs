@@ -4,9 +4,10 @@
 
 use super::auth::{Caller, Owner};
 use super::errors::ApiError;
+use super::store::{DataDir, Kind};
 use crate::radiomap::RadioMap;
 use crate::scenario::{Scenario, hash_hex};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
@@ -67,15 +68,67 @@ pub struct ScenarioRegistry {
     budget_bytes: usize,
     by_id: RwLock<HashMap<String, Arc<StoredScenario>>>,
     clock: AtomicU64,
+    /// With `--data-dir`: API scenarios are written there (with their owners) and removed when
+    /// they are deleted or evicted, so the directory mirrors the registry.
+    disk: Option<Arc<DataDir>>,
+    /// Serialises the writes of one scenario's record, so the last write holds the last owners.
+    disk_writes: Mutex<()>,
+}
+
+/// A scenario as the data directory keeps it.
+#[derive(Serialize, Deserialize)]
+pub(crate) struct ScenarioRecord {
+    /// The canonical document (its hash is the file's name).
+    pub document: serde_json::Value,
+    /// Owner digests (never tokens).
+    pub owners: Vec<String>,
 }
 
 impl ScenarioRegistry {
-    pub fn new(limit: usize, budget_bytes: usize) -> Self {
+    pub fn new(limit: usize, budget_bytes: usize, disk: Option<Arc<DataDir>>) -> Self {
         ScenarioRegistry {
             limit,
             budget_bytes,
             by_id: RwLock::new(HashMap::new()),
             clock: AtomicU64::new(0),
+            disk,
+            disk_writes: Mutex::new(()),
+        }
+    }
+
+    /// Writes an API scenario's record (its document and current owners) to the data directory.
+    fn persist(&self, stored: &StoredScenario) {
+        let Some(disk) = &self.disk else { return };
+        if stored.source != "api" {
+            return;
+        }
+        let _serial = self.disk_writes.lock().expect("registry disk lock");
+        // Held through the write: a deletion or eviction (which removes the file under the
+        // write lock) cannot interleave, so a removed scenario's file never comes back.
+        let by_id = self.by_id.read().expect("registry lock");
+        if !by_id.contains_key(&stored.id) {
+            return;
+        }
+        let mut owners: Vec<String> = stored
+            .owners
+            .lock()
+            .expect("owners lock")
+            .iter()
+            .map(|o| o.to_string())
+            .collect();
+        owners.sort();
+        let record = ScenarioRecord {
+            document: serde_json::from_str(&stored.scenario.canonical_json())
+                .expect("a canonical document is JSON"),
+            owners,
+        };
+        disk.save_json(Kind::Scenario, &stored.id, &record);
+    }
+
+    /// Removes a scenario's record; called under the registry's write lock.
+    fn unpersist(&self, id: &str) {
+        if let Some(disk) = &self.disk {
+            disk.remove_json(Kind::Scenario, id);
         }
     }
 
@@ -100,10 +153,14 @@ impl ScenarioRegistry {
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
             existing.last_used.store(self.tick(), Ordering::Relaxed);
-            if let Some(owner) = owner {
-                existing.owners.lock().expect("owners lock").insert(owner);
+            let added = owner
+                .is_some_and(|owner| existing.owners.lock().expect("owners lock").insert(owner));
+            let existing = existing.clone();
+            drop(by_id);
+            if added {
+                self.persist(&existing);
             }
-            return Ok((existing.clone(), false));
+            return Ok((existing, false));
         }
         if bytes > self.budget_bytes {
             return Err(ApiError::registry_full(format!(
@@ -133,6 +190,7 @@ impl ScenarioRegistry {
                     )));
                 };
                 by_id.remove(&victim);
+                self.unpersist(&victim);
                 held -= freed;
                 metrics::counter!("irs_scenarios_evicted_total").increment(1);
                 tracing::info!(scenario_id = %victim, "least recently used scenario evicted");
@@ -149,6 +207,8 @@ impl ScenarioRegistry {
         by_id.insert(id, stored.clone());
         metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
         metrics::gauge!("irs_scenario_bytes").set((held + bytes) as f64);
+        drop(by_id);
+        self.persist(&stored);
         Ok((stored, true))
     }
 
@@ -186,9 +246,14 @@ impl ScenarioRegistry {
         };
         if gone {
             by_id.remove(id);
+            self.unpersist(id);
             metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
             let held: usize = by_id.values().map(|s| s.bytes).sum();
             metrics::gauge!("irs_scenario_bytes").set(held as f64);
+        } else {
+            let stored = stored.clone();
+            drop(by_id);
+            self.persist(&stored);
         }
         Ok(gone)
     }
@@ -212,14 +277,25 @@ impl ScenarioRegistry {
     }
 }
 
-/// Built maps by map id, weighed in KiB so the budget is in bytes, not entries.
+/// Built maps by map id, weighed in KiB so the budget is in bytes, not entries; with
+/// `--data-dir`, backed by the maps on disk (a memory miss reads the disk, a new map is written
+/// to both, a deleted one leaves both).
 #[derive(Clone)]
 pub struct MapCache {
     maps: moka::future::Cache<String, Arc<RadioMap>>,
+    disk: Option<MapDisk>,
+}
+
+/// The disk behind the cache, and the registry that decodes its maps (a stored map is read
+/// against its scenario).
+#[derive(Clone)]
+pub struct MapDisk {
+    pub dir: Arc<DataDir>,
+    pub scenarios: Arc<ScenarioRegistry>,
 }
 
 impl MapCache {
-    pub fn new(budget_bytes: u64) -> Self {
+    pub fn new(budget_bytes: u64, disk: Option<MapDisk>) -> Self {
         // Least recently used, not moka's default TinyLFU: TinyLFU may refuse a new entry it
         // has seen once, and a map is requested once before it is built, so a map that was
         // just built (minutes of CPU) could be dropped at once while old ones stay.
@@ -230,21 +306,72 @@ impl MapCache {
                 (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
             })
             .build();
-        MapCache { maps }
+        MapCache { maps, disk }
     }
 
-    /// Looks a map up, counting hits and misses.
+    /// Looks a map up in memory, then on disk, counting hits (memory or disk) and misses.
     pub async fn get(&self, map_id: &str) -> Option<Arc<RadioMap>> {
-        let found = self.maps.get(map_id).await;
-        let outcome = if found.is_some() { "hit" } else { "miss" };
+        if let Some(map) = self.maps.get(map_id).await {
+            metrics::counter!("irs_map_cache_requests_total", "outcome" => "hit").increment(1);
+            return Some(map);
+        }
+        let loaded = match &self.disk {
+            Some(disk) if disk.dir.has_map(map_id) => {
+                let disk = disk.clone();
+                let id = map_id.to_string();
+                // Reading and checking a map of megabytes is blocking work.
+                tokio::task::spawn_blocking(move || {
+                    disk.dir.load_map(&id, |sid| {
+                        disk.scenarios.get(sid).map(|s| s.scenario.clone())
+                    })
+                })
+                .await
+                .ok()
+                .flatten()
+            }
+            _ => None,
+        };
+        let outcome = if loaded.is_some() { "disk" } else { "miss" };
         metrics::counter!("irs_map_cache_requests_total", "outcome" => outcome).increment(1);
-        found
+        let map = Arc::new(loaded?);
+        self.maps.insert(map_id.to_string(), map.clone()).await;
+        self.record_size();
+        Some(map)
     }
 
+    /// Caches a new map, and writes it to the data directory (before returning: a finished
+    /// job's map is on disk by the time the job says `done`).
     pub async fn insert(&self, map_id: String, map: Arc<RadioMap>) {
+        if let Some(disk) = &self.disk {
+            let (dir, id, to_save) = (disk.dir.clone(), map_id.clone(), map.clone());
+            let _ = tokio::task::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
+        }
         self.maps.insert(map_id, map).await;
         self.maps.run_pending_tasks().await;
         self.record_size();
+    }
+
+    /// Fills memory from the disk, most recently written first, up to `budget_bytes`: a
+    /// restarted server answers its listing and its first queries from memory.
+    pub async fn warm(&self, budget_bytes: u64) {
+        let Some(disk) = &self.disk else { return };
+        let mut loaded = 0usize;
+        let mut held = 0u64;
+        for map_id in disk.dir.map_ids() {
+            let Some(map) = self.get(&map_id).await else {
+                continue;
+            };
+            held += map.size_bytes() as u64;
+            loaded += 1;
+            if held >= budget_bytes {
+                break;
+            }
+        }
+        tracing::info!(
+            maps = loaded,
+            bytes = held,
+            "maps loaded from the data directory"
+        );
     }
 
     pub fn record_size(&self) {
@@ -257,11 +384,27 @@ impl MapCache {
         self.maps.iter().map(|(k, v)| ((*k).clone(), v)).collect()
     }
 
-    /// Drops a map; true if it was cached.
+    /// Drops a map from memory and disk; true if it was held.
     pub async fn remove(&self, map_id: &str) -> bool {
-        let removed = self.maps.remove(map_id).await.is_some();
+        let mut removed = self.maps.remove(map_id).await.is_some();
+        if let Some(disk) = &self.disk {
+            removed |= disk.dir.remove_map(map_id);
+        }
         self.record_size();
         removed
+    }
+
+    /// Drops every map of a deleted scenario, from memory and disk.
+    pub async fn remove_scenario_maps(&self, scenario_id: &str) {
+        for (map_id, map) in self.entries() {
+            if map.key.scenario_id == scenario_id {
+                self.maps.remove(&map_id).await;
+            }
+        }
+        if let Some(disk) = &self.disk {
+            disk.dir.remove_maps_of(scenario_id);
+        }
+        self.record_size();
     }
 
     /// The scenarios the cached maps were built from.

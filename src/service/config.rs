@@ -21,6 +21,14 @@ pub struct ServeArgs {
     /// Map cache budget in MiB (maps are weighed by their size in memory).
     #[arg(long, env = "IRS_CACHE_MB", default_value_t = 512)]
     pub cache_mb: u64,
+    /// Keep API scenarios, built maps and finished job records in this directory, so they
+    /// survive a restart (created if missing). Without it everything lives in memory only.
+    #[arg(long, env = "IRS_DATA_DIR")]
+    pub data_dir: Option<PathBuf>,
+    /// Disk budget of the data directory's maps in MiB; past it the least recently written
+    /// maps are deleted (they are built again on request).
+    #[arg(long, env = "IRS_DATA_MAPS_MB", default_value_t = 4096)]
+    pub data_maps_mb: u64,
     /// Map builds that may run at once on the blocking pool (default: the number of cores).
     #[arg(long, env = "IRS_WORKERS")]
     pub workers: Option<usize>,

@@ -13,19 +13,20 @@
 use super::auth::{Caller, Owner};
 use super::cache::MapCache;
 use super::errors::ApiError;
-use crate::placement::{self, Candidate, Placement, PlacementAnswer, Search};
+use super::store::{DataDir, Kind};
+use crate::placement::{self, Candidate, Placement, Search};
 use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
 use crate::scenario::Scenario;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, VecDeque};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::{Notify, Semaphore, watch};
 use tracing::Instrument;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum JobState {
     Queued,
@@ -104,7 +105,9 @@ pub struct PlacementSearch {
 /// A finished placement search: the answer, and how many of its best candidates were
 /// registered with their maps cached (fewer than asked only if the registry refused some).
 pub struct PlacementOutcome {
-    pub answer: PlacementAnswer,
+    /// The [`placement::PlacementAnswer`] as JSON: what the API answers, and what a data
+    /// directory keeps.
+    pub answer: serde_json::Value,
     pub registered: usize,
 }
 
@@ -154,6 +157,32 @@ pub struct JobView {
     pub href: String,
     /// Where the result is read once the job is done: the map, or the placement answer.
     pub result_href: String,
+}
+
+/// A finished job as the data directory keeps it (`serve --data-dir`): enough to show it again
+/// and, for a placement, to answer it.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct JobRecord {
+    pub job_id: String,
+    pub seq: u64,
+    /// The owner's digest (never the token).
+    pub owner: Option<String>,
+    pub scenario_id: String,
+    /// Map jobs: the map's key (its hash is the map id).
+    pub key: Option<MapKey>,
+    pub state: JobState,
+    pub cells_done: usize,
+    pub cells_total: usize,
+    pub created_at: f64,
+    pub started_at: Option<f64>,
+    pub finished_at: Option<f64>,
+    pub error: Option<String>,
+    /// Placement jobs that finished: the answer and how many candidates were registered.
+    pub placement: Option<(serde_json::Value, usize)>,
+}
+
+fn from_unix(t: f64) -> Option<SystemTime> {
+    (t.is_finite() && t >= 0.0).then(|| UNIX_EPOCH + Duration::from_secs_f64(t))
 }
 
 fn unix(t: Option<SystemTime>) -> Option<f64> {
@@ -258,6 +287,71 @@ impl Job {
         }
     }
 
+    /// The record a data directory keeps of a finished job.
+    pub(crate) fn record(&self) -> JobRecord {
+        let view = self.view();
+        JobRecord {
+            job_id: view.job_id,
+            seq: self.seq,
+            owner: self.owner.as_ref().map(|o| o.to_string()),
+            scenario_id: view.scenario_id,
+            key: view.key,
+            state: view.state,
+            cells_done: view.cells_done,
+            cells_total: view.cells_total,
+            created_at: view.created_at,
+            started_at: view.started_at,
+            finished_at: view.finished_at,
+            error: view.error,
+            placement: self
+                .placement()
+                .map(|outcome| (outcome.answer.clone(), outcome.registered)),
+        }
+    }
+
+    /// A finished job again, from its record; `None` for a record that is not of a finished
+    /// job (the store only writes finished ones) or whose map key does not match its kind.
+    fn restore(record: JobRecord) -> Option<Job> {
+        if !record.state.is_terminal() {
+            return None;
+        }
+        let work = match (record.key, record.placement) {
+            (Some(key), None) => Work::Map {
+                map_id: key.id(),
+                key,
+                handover: Mutex::new(Handover::default()),
+            },
+            (None, placement) => {
+                let outcome = OnceLock::new();
+                if let Some((answer, registered)) = placement {
+                    let _ = outcome.set(Arc::new(PlacementOutcome { answer, registered }));
+                }
+                Work::Placement { outcome }
+            }
+            (Some(_), Some(_)) => return None,
+        };
+        let progress = Progress::default();
+        progress.start(record.cells_total);
+        progress.advance(record.cells_done.min(record.cells_total));
+        let (state, _) = watch::channel(record.state);
+        Some(Job {
+            id: record.job_id,
+            seq: record.seq,
+            owner: record.owner.map(Owner::from_digest),
+            scenario_id: record.scenario_id,
+            work,
+            progress: Arc::new(progress),
+            state,
+            cancel: Notify::new(),
+            times: Mutex::new(JobTimes {
+                created: from_unix(record.created_at),
+                started: record.started_at.and_then(from_unix),
+                finished: record.finished_at.and_then(from_unix),
+            }),
+            error: Mutex::new(record.error),
+        })
+    }
+
     /// Waits until the job ends.
     pub async fn finished(&self) -> JobState {
         let mut rx = self.state.subscribe();
@@ -306,10 +400,17 @@ pub struct Jobs {
     by_id: Mutex<HashMap<String, Arc<Job>>>,
     finished_order: Mutex<VecDeque<String>>,
     in_flight: tokio::sync::Mutex<HashMap<String, Arc<Job>>>,
+    /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
+    disk: Option<Arc<DataDir>>,
 }
 
 impl Jobs {
-    pub fn new(workers: usize, queue_limit: usize, history_limit: usize) -> Self {
+    pub fn new(
+        workers: usize,
+        queue_limit: usize,
+        history_limit: usize,
+        disk: Option<Arc<DataDir>>,
+    ) -> Self {
         Jobs {
             next_seq: AtomicU64::new(0),
             workers: Arc::new(Semaphore::new(workers)),
@@ -319,7 +420,38 @@ impl Jobs {
             by_id: Mutex::new(HashMap::new()),
             finished_order: Mutex::new(VecDeque::new()),
             in_flight: tokio::sync::Mutex::new(HashMap::new()),
+            disk,
         }
+    }
+
+    /// Takes back the finished jobs the data directory recorded (oldest first, the newest
+    /// `history_limit` kept); new jobs are numbered after them. Returns how many.
+    pub fn restore(&self) -> usize {
+        let Some(disk) = &self.disk else { return 0 };
+        let mut jobs: Vec<Job> = disk
+            .load_json::<JobRecord>(Kind::Job)
+            .into_iter()
+            .filter_map(|(file_id, record)| {
+                (record.job_id == file_id)
+                    .then_some(record)
+                    .and_then(Job::restore)
+            })
+            .collect();
+        jobs.sort_by_key(|job| job.seq);
+        let surplus = jobs.len().saturating_sub(self.history_limit);
+        for old in jobs.drain(..surplus) {
+            disk.remove_json(Kind::Job, &old.id);
+        }
+        let next = jobs.last().map_or(0, |job| job.seq + 1);
+        self.next_seq.fetch_max(next, Ordering::Relaxed);
+        let mut by_id = self.by_id.lock().expect("jobs lock");
+        let mut order = self.finished_order.lock().expect("jobs lock");
+        let restored = jobs.len();
+        for job in jobs {
+            order.push_back(job.id.clone());
+            by_id.insert(job.id.clone(), Arc::new(job));
+        }
+        restored
     }
 
     pub fn get(&self, id: &str) -> Option<Arc<Job>> {
@@ -472,7 +604,7 @@ impl Jobs {
             }
             if let Work::Placement { outcome } = &job.work {
                 let _ = outcome.set(Arc::new(PlacementOutcome {
-                    answer: placement.answer,
+                    answer: serde_json::to_value(&placement.answer).expect("answers serialise"),
                     registered,
                 }));
             }
@@ -571,11 +703,20 @@ impl Jobs {
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
         }
+        if let Some(disk) = self.disk.clone() {
+            let (id, record) = (job.id.clone(), job.record());
+            // A small file, but flushed to disk: off the async threads.
+            let _ =
+                tokio::task::spawn_blocking(move || disk.save_json(Kind::Job, &id, &record)).await;
+        }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());
         while order.len() > self.history_limit {
             if let Some(old) = order.pop_front() {
                 self.by_id.lock().expect("jobs lock").remove(&old);
+                if let Some(disk) = &self.disk {
+                    disk.remove_json(Kind::Job, &old);
+                }
             }
         }
     }

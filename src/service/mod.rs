@@ -5,8 +5,8 @@
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
 //! registry and map cache), `jobs` (map builds and placement searches), `queries` (admission
 //! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
-//! timeouts), `errors` (problem+json; [`Problem`] is the body of every error answer), `viewer`
-//! (the built-in map viewer at `/`).
+//! timeouts), `store` (the data directory of `--data-dir`), `errors` (problem+json; [`Problem`]
+//! is the body of every error answer), `viewer` (the built-in map viewer at `/`).
 
 pub mod api;
 pub(crate) mod auth;
@@ -14,8 +14,10 @@ pub(crate) mod cache;
 pub mod config;
 pub(crate) mod errors;
 pub(crate) mod jobs;
+pub mod probe;
 pub(crate) mod queries;
 pub(crate) mod server;
+pub(crate) mod store;
 pub(crate) mod viewer;
 
 pub use errors::Problem;
@@ -26,7 +28,7 @@ use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::http::{HeaderValue, Method, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use cache::{MapCache, ScenarioRegistry};
+use cache::{MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use config::{LogFormat, ServeArgs};
 use errors::ApiError;
 use jobs::Jobs;
@@ -69,12 +71,14 @@ pub struct AppState {
 
 struct Inner {
     limits: Limits,
-    registry: ScenarioRegistry,
+    registry: Arc<ScenarioRegistry>,
     cache: MapCache,
     jobs: Arc<Jobs>,
     queries: QueryPool,
     tokens: Tokens,
     cors_origins: Vec<HeaderValue>,
+    /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
+    disk: Option<Arc<store::DataDir>>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
 }
@@ -102,6 +106,25 @@ impl AppState {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let mb = |v: u64| usize::try_from(v.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX);
+        let disk = match &args.data_dir {
+            Some(dir) => Some(Arc::new(store::DataDir::open(
+                dir,
+                args.data_maps_mb.saturating_mul(1024 * 1024),
+            )?)),
+            None => None,
+        };
+        let registry = Arc::new(ScenarioRegistry::new(
+            args.max_scenarios,
+            mb(args.registry_mb),
+            disk.clone(),
+        ));
+        let cache = MapCache::new(
+            args.cache_mb.saturating_mul(1024 * 1024),
+            disk.clone().map(|dir| MapDisk {
+                dir,
+                scenarios: registry.clone(),
+            }),
+        );
         Ok(AppState {
             inner: Arc::new(Inner {
                 limits: Limits {
@@ -116,12 +139,18 @@ impl AppState {
                     body_timeout: Duration::from_secs(args.body_timeout_s.max(1)),
                     request_timeout: Duration::from_secs(args.request_timeout_s.max(1)),
                 },
-                registry: ScenarioRegistry::new(args.max_scenarios, mb(args.registry_mb)),
-                cache: MapCache::new(args.cache_mb.saturating_mul(1024 * 1024)),
-                jobs: Arc::new(Jobs::new(args.workers(), args.queue, args.job_history)),
+                registry,
+                cache,
+                jobs: Arc::new(Jobs::new(
+                    args.workers(),
+                    args.queue,
+                    args.job_history,
+                    disk.clone(),
+                )),
                 queries: QueryPool::new(args.query_workers(), args.query_queue)?,
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
                 cors_origins,
+                disk,
                 ready: AtomicBool::new(false),
                 metrics,
             }),
@@ -206,6 +235,52 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
         tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
     }
     Ok(())
+}
+
+/// With `--data-dir`: registers the API scenarios recorded there (with their owners) and takes
+/// back the finished job records. A record that is damaged, or no longer a valid scenario for
+/// this build, is skipped with a warning. The maps are read from disk on demand, and into
+/// memory by [`warm_from_disk`].
+pub fn restore(state: &AppState) {
+    let Some(disk) = &state.inner.disk else {
+        return;
+    };
+    let mut scenarios = 0;
+    for (id, record) in disk.load_json::<ScenarioRecord>(store::Kind::Scenario) {
+        let parsed = Scenario::from_json(&record.document.to_string());
+        let scenario = match parsed {
+            Ok(scenario) if scenario.content_hash() == id => scenario,
+            Ok(_) => {
+                tracing::warn!(scenario_id = %id, "recorded scenario has another id in this build; skipped");
+                continue;
+            }
+            Err(e) => {
+                tracing::warn!(scenario_id = %id, error = %e, "recorded scenario is not valid in this build; skipped");
+                continue;
+            }
+        };
+        let mut owners: Vec<Caller> = record
+            .owners
+            .into_iter()
+            .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
+            .collect();
+        if owners.is_empty() {
+            owners.push(Caller::Open);
+        }
+        for owner in owners {
+            if let Err(e) = state.register_scenario(scenario.clone(), "api", &owner) {
+                tracing::warn!(scenario_id = %id, error = %e.problem.detail, "recorded scenario not registered");
+            }
+        }
+        scenarios += 1;
+    }
+    let jobs = state.jobs().restore();
+    tracing::info!(scenarios, jobs, "restored from the data directory");
+}
+
+/// Loads the data directory's maps into memory, newest first, up to the cache's budget.
+pub async fn warm_from_disk(state: &AppState) {
+    state.cache().warm(state.limits().cache_bytes).await;
 }
 
 /// The full application: routes, fallbacks, metrics, authentication, the request timeout,
@@ -419,6 +494,7 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
     let outcome = runtime.block_on(async move {
         let state = AppState::new(&args, metrics).map_err(ServeError::Config)?;
         preload(&state, &args.scenarios).map_err(ServeError::Config)?;
+        restore(&state);
         let listener = tokio::net::TcpListener::bind(args.bind)
             .await
             .map_err(|e| runtime_error(&format!("--bind {}: {e}", args.bind)))?;
@@ -440,6 +516,8 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
             header_timeout: Duration::from_secs(args.header_timeout_s.max(1)),
             idle_timeout: Duration::from_secs(args.idle_timeout_s.max(1)),
         };
+        let warming = state.clone();
+        tokio::spawn(async move { warm_from_disk(&warming).await });
         let stopping = state.clone();
         let connections = server::serve(listener, app(state.clone()), limits, async move {
             shutdown_signal().await;

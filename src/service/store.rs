@@ -1,0 +1,467 @@
+//! Persistence on one node (`serve --data-dir DIR`): the scenarios registered through the API,
+//! the built maps and the finished job records, as files that survive a restart.
+//!
+//! Layout: `DIR/scenarios/<scenario id>.rec`, `DIR/maps/<map id>.rec`, `DIR/jobs/<job id>.rec`.
+//! Scenario and map files are content-addressed (the id is the hash of the scenario's
+//! canonical form, or of the map key), so a file can only ever hold one content; a job record
+//! is rewritten only when the job ends.
+//!
+//! Every file is `MAGIC`, the SHA-256 of the payload, then the payload (JSON for scenarios and
+//! jobs, [`crate::radiomap::encoding`] for maps), written to a temporary file in the same
+//! directory, flushed to disk and renamed over the target: a reader sees the old file or the
+//! new one, never half of one. A file whose digest or content does not check out (a torn write
+//! from before this scheme, a disk error, an edit) is skipped with a warning and never served;
+//! the map is then built again on request.
+//!
+//! Maps on disk are bounded by `--data-maps-mb`: past it, the least recently written go first.
+//! The memory cache stays in front (a map read from disk enters it), so the disk is read once
+//! per map and restart, not per query.
+
+use crate::radiomap::{RadioMap, encoding};
+use crate::scenario::Scenario;
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::fs;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::SystemTime;
+
+/// The first bytes of every file: the format's name and version.
+const MAGIC: &[u8; 8] = b"IRSREC\x00\x01";
+const HEADER_BYTES: usize = MAGIC.len() + 32;
+const EXTENSION: &str = "rec";
+
+/// Which kind of record, and the directory it lives in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Kind {
+    Scenario,
+    Map,
+    Job,
+}
+
+impl Kind {
+    fn dir(self) -> &'static str {
+        match self {
+            Kind::Scenario => "scenarios",
+            Kind::Map => "maps",
+            Kind::Job => "jobs",
+        }
+    }
+}
+
+/// What the store knows about a map file without reading it again.
+#[derive(Debug, Clone)]
+struct MapFile {
+    scenario_id: String,
+    bytes: u64,
+    written: SystemTime,
+}
+
+/// A data directory, opened.
+pub(crate) struct DataDir {
+    root: PathBuf,
+    /// The maps on disk, for the byte budget and for deleting a scenario's maps.
+    maps: Mutex<HashMap<String, MapFile>>,
+    maps_budget_bytes: u64,
+    /// Distinguishes the temporary files of concurrent writes.
+    writes: AtomicU64,
+}
+
+/// Ids are lower-case hex (content hashes, UUIDs without dashes): nothing else is a file name.
+fn valid_id(id: &str) -> bool {
+    !id.is_empty() && id.len() <= 128 && id.bytes().all(|b| b.is_ascii_hexdigit())
+}
+
+/// Frames a payload with the magic bytes and its digest.
+fn frame(payload: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER_BYTES + payload.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&Sha256::digest(payload));
+    out.extend_from_slice(payload);
+    out
+}
+
+/// The payload of a framed file, if the frame and the digest check out.
+fn unframe(bytes: &[u8]) -> Result<&[u8], &'static str> {
+    if bytes.len() < HEADER_BYTES || &bytes[..MAGIC.len()] != MAGIC {
+        return Err("not a record of this format (magic bytes differ)");
+    }
+    let (digest, payload) = bytes[MAGIC.len()..].split_at(32);
+    if Sha256::digest(payload).as_slice() != digest {
+        return Err("the digest does not match the content (torn or damaged file)");
+    }
+    Ok(payload)
+}
+
+impl DataDir {
+    /// Opens (creating if needed) the directory; an error names the path and the reason.
+    pub fn open(root: &Path, maps_budget_bytes: u64) -> Result<DataDir, String> {
+        for kind in [Kind::Scenario, Kind::Map, Kind::Job] {
+            let dir = root.join(kind.dir());
+            fs::create_dir_all(&dir).map_err(|e| format!("--data-dir {}: {e}", dir.display()))?;
+            // Temporary files of writes a crash interrupted: never renamed, never valid.
+            for entry in fs::read_dir(&dir).into_iter().flatten().flatten() {
+                if entry.file_name().to_string_lossy().starts_with(".tmp-") {
+                    let _ = fs::remove_file(entry.path());
+                }
+            }
+        }
+        let store = DataDir {
+            root: root.to_path_buf(),
+            maps: Mutex::new(HashMap::new()),
+            maps_budget_bytes,
+            writes: AtomicU64::new(0),
+        };
+        // A write test now, so a read-only directory fails at start-up, not at the first map.
+        store
+            .write(Kind::Job, "0", b"probe")
+            .map_err(|e| format!("--data-dir {}: not writable: {e}", root.display()))?;
+        store.remove(Kind::Job, "0");
+        let mut maps = HashMap::new();
+        // Only each file's head (the key) is read now; the digest is checked when a map is
+        // loaded, so opening a directory of gigabytes takes milliseconds.
+        for (id, path) in store.ids(Kind::Map) {
+            let head = fs::File::open(&path).and_then(|file| {
+                let mut head = Vec::with_capacity(4096);
+                file.take(4096).read_to_end(&mut head)?;
+                Ok(head)
+            });
+            let meta = fs::metadata(&path);
+            let (Ok(head), Ok(meta)) = (head, meta) else {
+                continue;
+            };
+            let key = match head.get(..MAGIC.len()) {
+                Some(magic) if magic == MAGIC => head
+                    .get(HEADER_BYTES..)
+                    .ok_or_else(|| "shorter than its header".to_string())
+                    .and_then(|payload| encoding::peek_key(payload).map_err(|e| e.to_string())),
+                _ => Err("not a record of this format (magic bytes differ)".to_string()),
+            };
+            match key {
+                Ok(key) if key.id() == id => {
+                    maps.insert(
+                        id,
+                        MapFile {
+                            scenario_id: key.scenario_id,
+                            bytes: meta.len(),
+                            written: meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+                        },
+                    );
+                }
+                Ok(_) => {
+                    tracing::warn!(file = %path.display(), "map file holds another map's key; ignored")
+                }
+                Err(e) => {
+                    tracing::warn!(file = %path.display(), error = %e, "map file not readable by this build; ignored")
+                }
+            }
+        }
+        tracing::info!(dir = %root.display(), maps = maps.len(), "data directory opened");
+        *store.maps.lock().expect("store lock") = maps;
+        Ok(store)
+    }
+
+    fn path(&self, kind: Kind, id: &str) -> PathBuf {
+        self.root.join(kind.dir()).join(format!("{id}.{EXTENSION}"))
+    }
+
+    /// The ids of the files of `kind`, with their paths.
+    fn ids(&self, kind: Kind) -> Vec<(String, PathBuf)> {
+        let Ok(entries) = fs::read_dir(self.root.join(kind.dir())) else {
+            return Vec::new();
+        };
+        let mut ids: Vec<(String, PathBuf)> = entries
+            .flatten()
+            .filter_map(|e| {
+                let path = e.path();
+                let id = path.file_stem()?.to_str()?.to_string();
+                (path.extension()? == EXTENSION && valid_id(&id)).then_some((id, path))
+            })
+            .collect();
+        ids.sort();
+        ids
+    }
+
+    /// Writes a record atomically: a temporary file, flushed, renamed over the target.
+    fn write(&self, kind: Kind, id: &str, payload: &[u8]) -> std::io::Result<()> {
+        debug_assert!(valid_id(id));
+        let target = self.path(kind, id);
+        let n = self.writes.fetch_add(1, Ordering::Relaxed);
+        let temporary = self
+            .root
+            .join(kind.dir())
+            .join(format!(".tmp-{id}-{}-{n}", std::process::id()));
+        let result = (|| {
+            let mut file = fs::File::create(&temporary)?;
+            file.write_all(&frame(payload))?;
+            file.sync_all()?;
+            fs::rename(&temporary, &target)
+        })();
+        if result.is_err() {
+            let _ = fs::remove_file(&temporary);
+        }
+        result
+    }
+
+    /// A record's payload, or `None` (with a warning) if it is missing, torn or damaged.
+    fn read(&self, kind: Kind, id: &str) -> Option<Vec<u8>> {
+        let path = self.path(kind, id);
+        let bytes = match fs::read(&path) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
+            Err(e) => {
+                tracing::warn!(file = %path.display(), error = %e, "record not readable; ignored");
+                return None;
+            }
+        };
+        match unframe(&bytes) {
+            Ok(payload) => Some(payload.to_vec()),
+            Err(reason) => {
+                metrics::counter!("irs_store_corrupt_total", "kind" => kind.dir()).increment(1);
+                tracing::warn!(file = %path.display(), reason, "record ignored");
+                None
+            }
+        }
+    }
+
+    fn remove(&self, kind: Kind, id: &str) {
+        if valid_id(id) {
+            let _ = fs::remove_file(self.path(kind, id));
+        }
+    }
+
+    /// Saves a JSON record (a scenario or a job); a failure is logged, not fatal: the service
+    /// keeps serving from memory.
+    pub fn save_json(&self, kind: Kind, id: &str, value: &impl serde::Serialize) {
+        let payload = serde_json::to_vec(value).expect("records serialise");
+        if let Err(e) = self.write(kind, id, &payload) {
+            metrics::counter!("irs_store_write_errors_total", "kind" => kind.dir()).increment(1);
+            tracing::warn!(id, kind = kind.dir(), error = %e, "could not persist a record");
+        }
+    }
+
+    pub fn remove_json(&self, kind: Kind, id: &str) {
+        self.remove(kind, id);
+    }
+
+    /// Every readable JSON record of `kind`, with its id; unreadable ones are skipped.
+    pub fn load_json<T: serde::de::DeserializeOwned>(&self, kind: Kind) -> Vec<(String, T)> {
+        self.ids(kind)
+            .into_iter()
+            .filter_map(|(id, path)| {
+                let payload = self.read(kind, &id)?;
+                match serde_json::from_slice(&payload) {
+                    Ok(value) => Some((id, value)),
+                    Err(e) => {
+                        tracing::warn!(file = %path.display(), error = %e, "record ignored");
+                        None
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// Saves a built map, then drops the least recently written maps past the budget.
+    pub fn save_map(&self, map_id: &str, map: &RadioMap) {
+        let payload = encoding::encode(map);
+        if payload.len() as u64 + HEADER_BYTES as u64 > self.maps_budget_bytes {
+            tracing::info!(
+                map_id,
+                bytes = payload.len(),
+                "map larger than the data directory's map budget; kept in memory only"
+            );
+            return;
+        }
+        if let Err(e) = self.write(Kind::Map, map_id, &payload) {
+            metrics::counter!("irs_store_write_errors_total", "kind" => "maps").increment(1);
+            tracing::warn!(map_id, error = %e, "could not persist a map");
+            return;
+        }
+        let mut maps = self.maps.lock().expect("store lock");
+        maps.insert(
+            map_id.to_string(),
+            MapFile {
+                scenario_id: map.key.scenario_id.clone(),
+                bytes: (payload.len() + HEADER_BYTES) as u64,
+                written: SystemTime::now(),
+            },
+        );
+        let mut held: u64 = maps.values().map(|m| m.bytes).sum();
+        if held > self.maps_budget_bytes {
+            let mut oldest: Vec<(SystemTime, String, u64)> = maps
+                .iter()
+                .filter(|(id, _)| id.as_str() != map_id)
+                .map(|(id, m)| (m.written, id.clone(), m.bytes))
+                .collect();
+            oldest.sort();
+            for (_, id, bytes) in oldest {
+                if held <= self.maps_budget_bytes {
+                    break;
+                }
+                self.remove(Kind::Map, &id);
+                maps.remove(&id);
+                held -= bytes;
+                tracing::info!(map_id = %id, "map dropped from the data directory (budget)");
+            }
+        }
+        metrics::gauge!("irs_store_map_bytes").set(held as f64);
+    }
+
+    /// A stored map, decoded against its scenario (`scenario_of` finds it by id); `None` if
+    /// there is none, or it is damaged, or its scenario is not registered.
+    pub fn load_map(
+        &self,
+        map_id: &str,
+        scenario_of: impl Fn(&str) -> Option<std::sync::Arc<Scenario>>,
+    ) -> Option<RadioMap> {
+        let scenario_id = self
+            .maps
+            .lock()
+            .expect("store lock")
+            .get(map_id)?
+            .scenario_id
+            .clone();
+        let scenario = scenario_of(&scenario_id)?;
+        let payload = self.read(Kind::Map, map_id)?;
+        match encoding::decode(&payload, &scenario) {
+            Ok(map) if map.key.id() == map_id => Some(map),
+            Ok(_) => {
+                tracing::warn!(map_id, "map file holds another map; ignored");
+                None
+            }
+            Err(e) => {
+                tracing::warn!(map_id, error = %e, "map file ignored");
+                None
+            }
+        }
+    }
+
+    pub fn remove_map(&self, map_id: &str) -> bool {
+        let known = self
+            .maps
+            .lock()
+            .expect("store lock")
+            .remove(map_id)
+            .is_some();
+        self.remove(Kind::Map, map_id);
+        known
+    }
+
+    /// Drops every stored map of a scenario (it was deleted).
+    pub fn remove_maps_of(&self, scenario_id: &str) {
+        let ids: Vec<String> = self
+            .maps
+            .lock()
+            .expect("store lock")
+            .iter()
+            .filter(|(_, m)| m.scenario_id == scenario_id)
+            .map(|(id, _)| id.clone())
+            .collect();
+        for id in ids {
+            self.remove_map(&id);
+        }
+    }
+
+    /// The stored maps' ids, most recently written first.
+    pub fn map_ids(&self) -> Vec<String> {
+        let maps = self.maps.lock().expect("store lock");
+        let mut ids: Vec<(SystemTime, String)> =
+            maps.iter().map(|(id, m)| (m.written, id.clone())).collect();
+        ids.sort_by(|a, b| b.cmp(a));
+        ids.into_iter().map(|(_, id)| id).collect()
+    }
+
+    pub fn has_map(&self, map_id: &str) -> bool {
+        self.maps.lock().expect("store lock").contains_key(map_id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temporary_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("irs-store-{name}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        dir
+    }
+
+    #[test]
+    fn a_damaged_or_torn_record_is_never_read() {
+        let dir = temporary_dir("damaged");
+        let store = DataDir::open(&dir, 1 << 20).unwrap();
+        store.save_json(Kind::Job, "ab12", &serde_json::json!({"state": "done"}));
+        let loaded: Vec<(String, serde_json::Value)> = store.load_json(Kind::Job);
+        assert_eq!(loaded.len(), 1);
+        let path = store.path(Kind::Job, "ab12");
+        let good = fs::read(&path).unwrap();
+        // One flipped bit, a truncation, and another format's bytes.
+        let mut flipped = good.clone();
+        *flipped.last_mut().unwrap() ^= 1;
+        for bad in [
+            flipped,
+            good[..good.len() - 3].to_vec(),
+            b"{\"state\":1}".to_vec(),
+        ] {
+            fs::write(&path, &bad).unwrap();
+            let loaded: Vec<(String, serde_json::Value)> = store.load_json(Kind::Job);
+            assert!(loaded.is_empty());
+        }
+        // Interrupted writes leave temporary files, removed on the next open; files that are
+        // not records are not read.
+        fs::write(dir.join("jobs/.tmp-ab12-1-0"), b"half").unwrap();
+        fs::write(dir.join("jobs/notes.txt"), b"hello").unwrap();
+        let _ = DataDir::open(&dir, 1 << 20).unwrap();
+        assert!(!dir.join("jobs/.tmp-ab12-1-0").exists());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn maps_past_the_budget_go_oldest_first() {
+        use crate::radiomap::{MapKey, MapKind, Progress, build};
+        let dir = temporary_dir("budget");
+        let scenario = std::sync::Arc::new(Scenario::builtin("small-test").unwrap());
+        let id = scenario.content_hash();
+        let gain = build(
+            &scenario,
+            &MapKey::new(&id, &scenario, MapKind::Gain, None, None, None).unwrap(),
+            &Progress::default(),
+        )
+        .unwrap();
+        let bits = build(
+            &scenario,
+            &MapKey::new(
+                &id,
+                &scenario,
+                MapKind::Gain,
+                Some(crate::phases::PhaseMode::Bits(1)),
+                None,
+                None,
+            )
+            .unwrap(),
+            &Progress::default(),
+        )
+        .unwrap();
+        let one = encoding::encode(&gain).len() as u64 + HEADER_BYTES as u64;
+        // Room for one map and a half: the second write drops the first.
+        let store = DataDir::open(&dir, one * 3 / 2).unwrap();
+        store.save_map(&gain.key.id(), &gain);
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        store.save_map(&bits.key.id(), &bits);
+        assert_eq!(store.map_ids(), vec![bits.key.id()]);
+        let lookup = |sid: &str| (sid == id).then(|| scenario.clone());
+        let back = store.load_map(&bits.key.id(), lookup).expect("stored");
+        assert_eq!(back.values.len(), bits.values.len());
+        assert!(store.load_map(&gain.key.id(), lookup).is_none());
+        // Reopened, the directory knows its maps again.
+        let store = DataDir::open(&dir, one * 3 / 2).unwrap();
+        assert_eq!(store.map_ids(), vec![bits.key.id()]);
+        assert!(
+            store.load_map(&bits.key.id(), |_| None).is_none(),
+            "needs its scenario"
+        );
+        let _ = fs::remove_dir_all(&dir);
+    }
+}
