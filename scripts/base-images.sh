@@ -8,6 +8,9 @@
 #                         Rust toolchain copied in at the paths the official image uses
 #                         (CARGO_HOME=/usr/local/cargo, RUSTUP_HOME=/usr/local/rustup), and
 #                         this machine's CA bundle (crates.io is reached through its trust).
+#   redis:7, haproxy:2.6  for deploy/compose.yaml: that Debian with Debian's redis-server or
+#                         haproxy, laid out like the official images (redis in /data,
+#                         HAProxy's configuration in /usr/local/etc/haproxy/haproxy.cfg).
 # An image that already exists is kept (pass --force to rebuild both): CI reuses them between runs.
 # Downloaded packages are cached in ${IRS_BASE_CACHE:-~/.cache/irs-planner/debootstrap}.
 #   scripts/base-images.sh [--force]
@@ -18,8 +21,8 @@ cache=${IRS_BASE_CACHE:-$HOME/.cache/irs-planner/debootstrap}
 force=${1:-}
 
 have() { [ "$force" != --force ] && docker image inspect "$1" >/dev/null 2>&1; }
-if have debian:bookworm-slim && have rust:1-bookworm; then
-  echo "base images exist: debian:bookworm-slim, rust:1-bookworm"
+if have debian:bookworm-slim && have rust:1-bookworm && have redis:7 && have haproxy:2.6; then
+  echo "base images exist: debian:bookworm-slim, rust:1-bookworm, redis:7, haproxy:2.6"
   exit 0
 fi
 command -v debootstrap >/dev/null || {
@@ -84,4 +87,28 @@ if ! have rust:1-bookworm; then
     --change 'ENV PATH=/usr/local/cargo/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin' \
     --change 'CMD ["bash"]' - rust:1-bookworm >/dev/null
 fi
-docker image ls --format '{{.Repository}}:{{.Tag}}  {{.Size}}' | grep -E '^(debian:bookworm-slim|rust:1-bookworm) '
+# The compose file's services, from Debian's packages on the slim image (as non-root users).
+if ! have redis:7; then
+  echo "redis:7: Debian's redis-server on debian:bookworm-slim"
+  docker build -q -t redis:7 - >/dev/null <<'DOCKERFILE'
+FROM debian:bookworm-slim
+RUN apt-get update && apt-get install -y --no-install-recommends redis-server redis-tools \
+ && rm -rf /var/lib/apt/lists/* && mkdir -p /data && chown redis:redis /data
+WORKDIR /data
+USER redis
+EXPOSE 6379
+CMD ["redis-server", "--dir", "/data", "--protected-mode", "no"]
+DOCKERFILE
+fi
+if ! have haproxy:2.6; then
+  echo "haproxy:2.6: Debian's haproxy on debian:bookworm-slim"
+  docker build -q -t haproxy:2.6 - >/dev/null <<'DOCKERFILE'
+FROM debian:bookworm-slim
+RUN apt-get update && apt-get install -y --no-install-recommends haproxy \
+ && rm -rf /var/lib/apt/lists/* && mkdir -p /usr/local/etc/haproxy
+USER haproxy
+STOPSIGNAL SIGUSR1
+CMD ["haproxy", "-W", "-db", "-f", "/usr/local/etc/haproxy/haproxy.cfg"]
+DOCKERFILE
+fi
+docker image ls --format '{{.Repository}}:{{.Tag}}  {{.Size}}' | grep -E '^(debian:bookworm-slim|rust:1-bookworm|redis:7|haproxy:2.6) '

@@ -4,8 +4,11 @@
 use super::AppState;
 use super::auth::Caller;
 use super::cache::ScenarioSummary;
+use super::cluster::Cluster;
 use super::errors::{ApiError, parse_json};
-use super::jobs::{Job, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work};
+use super::jobs::{
+    Job, JobRecord, JobState, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work,
+};
 use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
@@ -216,6 +219,9 @@ async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiErr
     if !state.is_ready() {
         return Err(ApiError::not_ready());
     }
+    if let Some(reason) = state.cluster().and_then(|c| c.unavailable()) {
+        return Err(ApiError::store_unavailable(reason));
+    }
     Ok(Json(Readiness {
         status: "ready",
         scenarios: state.registry().len(),
@@ -291,6 +297,7 @@ async fn register_scenario(
 ) -> Result<Response, ApiError> {
     let scenario = parse_scenario(value, "")?;
     let (stored, created) = state.register_scenario(scenario, "api", &caller)?;
+    state.share_scenario(&stored).await?;
     let status = if created {
         StatusCode::CREATED
     } else {
@@ -310,8 +317,8 @@ async fn get_scenario(
     Path(id): Path<String>,
 ) -> Result<Json<ScenarioDocument>, ApiError> {
     let stored = state
-        .registry()
-        .get(&id)
+        .shared_scenario(&id)
+        .await?
         .ok_or_else(|| ApiError::not_found("scenario", &id))?;
     Ok(Json(ScenarioDocument {
         summary: stored.summary(),
@@ -337,6 +344,9 @@ async fn delete_scenario(
     }
     if state.registry().delete(&id, &caller)? {
         state.cache().remove_scenario_maps(&id).await;
+        if let Some(cluster) = state.cluster() {
+            cluster.delete_scenario(&id).await?;
+        }
         tracing::info!(scenario_id = %id, "scenario deleted");
     }
     Ok(StatusCode::NO_CONTENT)
@@ -383,6 +393,17 @@ fn summary(map: &RadioMap) -> MapSummary {
         stats: map.stats(),
         build_seconds: map.build_seconds,
     }
+}
+
+/// In a cluster: brings a scenario registered on another replica here, so the synchronous
+/// [`scenario_of`] finds it (nothing to do for an inline scenario or a local one).
+async fn fetch_scenario(state: &AppState, scenario_id: Option<&str>) -> Result<(), ApiError> {
+    if let Some(id) = scenario_id
+        && state.cluster().is_some()
+    {
+        state.shared_scenario(id).await?;
+    }
+    Ok(())
 }
 
 /// The scenario a request names: a registered one by `scenario_id`, or an inline document
@@ -492,6 +513,9 @@ async fn obtain(
     key: MapKey,
 ) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
     let cheap = key.kind == MapKind::Gain && scenario.grid().cells() <= state.limits().sync_cells;
+    if let Some(cluster) = state.cluster() {
+        return obtain_shared(state, cluster, caller, key, cheap).await;
+    }
     let outcome = state
         .jobs()
         .request(state.cache(), scenario, key, caller.owner())
@@ -511,6 +535,65 @@ async fn obtain(
     }
 }
 
+/// [`obtain`] in a cluster: the map from any replica's build. The build is queued in the
+/// shared stream (once for the whole cluster) and runs on whichever replica has a free worker;
+/// a cheap one is waited for by polling its record.
+async fn obtain_shared(
+    state: &AppState,
+    cluster: &Cluster,
+    caller: &Caller,
+    key: MapKey,
+    cheap: bool,
+) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
+    let map_id = key.id();
+    if let Some(map) = state.shared_map(&map_id).await? {
+        return Ok(Ok(map));
+    }
+    // The replica that builds it reads the scenario from the shared store.
+    let stored = state
+        .shared_scenario(&key.scenario_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("scenario", &key.scenario_id))?;
+    state.share_scenario(&stored).await?;
+    let queued = JobRecord::queued(&key, caller.owner().as_ref());
+    let (job_id, _) = cluster
+        .enqueue(&map_id, &key, queued, state.limits().cluster_queue)
+        .await?;
+    let record = |r: Option<JobRecord>| {
+        r.unwrap_or_else(|| {
+            let mut r = JobRecord::queued(&key, None);
+            r.job_id = job_id.clone();
+            r
+        })
+    };
+    if !cheap {
+        return Ok(Err(accepted(record(cluster.job(&job_id).await?).view())));
+    }
+    loop {
+        let current = record(cluster.job(&job_id).await?);
+        match current.state {
+            JobState::Done => {
+                return match state.shared_map(&map_id).await? {
+                    Some(map) => Ok(Ok(map)),
+                    None => Err(ApiError::build_failed(format!(
+                        "job {job_id} is done but its map is in no store"
+                    ))),
+                };
+            }
+            s if s.is_terminal() => {
+                return Err(ApiError::build_failed(current.error.unwrap_or_else(|| {
+                    format!("job {job_id} ended {} without a map", s.label())
+                })));
+            }
+            _ => tokio::time::sleep(SHARED_POLL).await,
+        }
+    }
+}
+
+/// How often a request waiting for another replica's build reads its record: a gain map of
+/// the sizes built inline takes tens of milliseconds, so the wait adds at most this.
+const SHARED_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+
 fn accepted(view: JobView) -> Response {
     let location = view.href.clone();
     (
@@ -527,6 +610,7 @@ async fn request_map(
     Body(request): Body<MapRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
+    fetch_scenario(&state, request.scenario_id.as_deref()).await?;
     let (scenario, key) = resolve(&state, &caller, request, "")?;
     Ok(match obtain(&state, &caller, scenario, key).await? {
         Ok(map) => Json(Timed::since(started, summary(&map))).into_response(),
@@ -557,13 +641,18 @@ async fn list_maps(
 }
 
 async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, ApiError> {
-    if let Some(map) = state.cache().get(map_id).await {
+    if let Some(map) = state.shared_map(map_id).await? {
         return Ok(map);
     }
-    Err(match state.jobs().building(map_id).await {
-        Some(job) => ApiError::map_not_ready(map_id, &job.id),
-        None => ApiError::not_found("map", map_id),
-    })
+    if let Some(job) = state.jobs().building(map_id).await {
+        return Err(ApiError::map_not_ready(map_id, &job.id));
+    }
+    if let Some(cluster) = state.cluster()
+        && let Some(job_id) = cluster.building(map_id).await?
+    {
+        return Err(ApiError::map_not_ready(map_id, &job_id));
+    }
+    Err(ApiError::not_found("map", map_id))
 }
 
 /// Drops a cached map (the next request for it builds it again). A map being built answers
@@ -575,7 +664,11 @@ async fn delete_map(
     if let Some(job) = state.jobs().building(&map_id).await {
         return Err(ApiError::map_not_ready(&map_id, &job.id));
     }
-    if !state.cache().remove(&map_id).await {
+    let mut removed = state.cache().remove(&map_id).await;
+    if let Some(cluster) = state.cluster() {
+        removed |= cluster.delete_map(&map_id).await?;
+    }
+    if !removed {
         return Err(ApiError::not_found("map", &map_id));
     }
     tracing::info!(map_id = %map_id, "map deleted");
@@ -589,8 +682,8 @@ async fn map_and_scenario(
 ) -> Result<(Arc<RadioMap>, Arc<Scenario>), ApiError> {
     let map = cached_map(state, map_id).await?;
     let stored = state
-        .registry()
-        .get(&map.key.scenario_id)
+        .shared_scenario(&map.key.scenario_id)
+        .await?
         .ok_or_else(|| ApiError::not_found("scenario", &map.key.scenario_id))?;
     Ok((map, stored.scenario.clone()))
 }
@@ -897,6 +990,7 @@ async fn place(
             format!("at most {MAX_KEEP} candidates are registered"),
         ));
     }
+    fetch_scenario(&state, request.scenario_id.as_deref()).await?;
     let (_, scenario, inline) = scenario_of(&state, request.scenario_id, request.scenario, "")?;
     let search = Search {
         what: request.what,
@@ -1012,11 +1106,16 @@ async fn get_job(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<JobView>, ApiError> {
-    let job = state
-        .jobs()
-        .get(&id)
-        .ok_or_else(|| ApiError::not_found("job", &id))?;
-    Ok(Json(job.view()))
+    if let Some(job) = state.jobs().get(&id) {
+        return Ok(Json(job.view()));
+    }
+    // Another replica's job, as its builder last recorded it.
+    if let Some(cluster) = state.cluster()
+        && let Some(record) = cluster.job(&id).await?
+    {
+        return Ok(Json(record.view()));
+    }
+    Err(ApiError::not_found("job", &id))
 }
 
 async fn cancel_job(
@@ -1024,7 +1123,26 @@ async fn cancel_job(
     caller: Caller,
     Path(id): Path<String>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
+    let local = state.jobs().get(&id).is_some();
+    if let Some(cluster) = state.cluster().filter(|_| !local) {
+        // Another replica runs it: it reads the request at its next heartbeat.
+        let record = cluster
+            .job(&id)
+            .await?
+            .filter(|r| caller.may_touch(r.owner().as_ref()))
+            .ok_or_else(|| ApiError::not_found("job", &id))?;
+        if record.state.is_terminal() {
+            return Err(ApiError::job_finished(&id, record.state.label()));
+        }
+        cluster.request_cancel(&id).await?;
+        return Ok((StatusCode::ACCEPTED, Json(record.view())));
+    }
     let job = state.jobs().cancel(&id, &caller)?;
+    if let Some(cluster) = state.cluster() {
+        // Also through the store, for a build whose local job is only a mirror; the local
+        // cancellation has happened either way, so a store that is down changes nothing.
+        let _ = cluster.request_cancel(&id).await;
+    }
     Ok((StatusCode::ACCEPTED, Json(job.view())))
 }
 
@@ -1061,6 +1179,7 @@ async fn map_for_query(
     match (map_id, map) {
         (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
         (None, Some(request)) => {
+            fetch_scenario(state, request.scenario_id.as_deref()).await?;
             let (scenario, key) = resolve(state, caller, request, "map.")?;
             Ok(obtain(state, caller, scenario.clone(), key)
                 .await?

@@ -38,6 +38,23 @@ pub struct ScenarioSummary {
 }
 
 impl StoredScenario {
+    /// What a data directory or the shared store keeps of it: the document and the owners.
+    pub(crate) fn record(&self) -> ScenarioRecord {
+        let mut owners: Vec<String> = self
+            .owners
+            .lock()
+            .expect("owners lock")
+            .iter()
+            .map(|o| o.to_string())
+            .collect();
+        owners.sort();
+        ScenarioRecord {
+            document: serde_json::from_str(&self.scenario.canonical_json())
+                .expect("a canonical document is JSON"),
+            owners,
+        }
+    }
+
     pub fn summary(&self) -> ScenarioSummary {
         ScenarioSummary {
             id: self.id.clone(),
@@ -109,19 +126,7 @@ impl ScenarioRegistry {
         if !by_id.contains_key(&stored.id) {
             return;
         }
-        let mut owners: Vec<String> = stored
-            .owners
-            .lock()
-            .expect("owners lock")
-            .iter()
-            .map(|o| o.to_string())
-            .collect();
-        owners.sort();
-        let record = ScenarioRecord {
-            document: serde_json::from_str(&stored.scenario.canonical_json())
-                .expect("a canonical document is JSON"),
-            owners,
-        };
+        let record = stored.record();
         disk.save_json(Kind::Scenario, &stored.id, &record);
     }
 

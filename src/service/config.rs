@@ -25,6 +25,11 @@ pub struct ServeArgs {
     /// survive a restart (created if missing). Without it everything lives in memory only.
     #[arg(long, env = "IRS_DATA_DIR")]
     pub data_dir: Option<PathBuf>,
+    /// Share scenarios, maps and jobs with the other replicas through this Redis
+    /// (`redis://host:port/db`): any replica answers for any of them, and each map is built
+    /// once in the cluster. Without it the replica is on its own.
+    #[arg(long, env = "IRS_REDIS_URL")]
+    pub redis_url: Option<String>,
     /// Disk budget of the data directory's maps in MiB; past it the least recently written
     /// maps are deleted (they are built again on request).
     #[arg(long, env = "IRS_DATA_MAPS_MB", default_value_t = 4096)]

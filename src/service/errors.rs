@@ -264,6 +264,20 @@ impl ApiError {
         e.retry_after_s = Some(1);
         e
     }
+    /// The shared store (Redis, `--redis-url`) cannot be used now; the replica retries by itself.
+    pub fn store_unavailable(detail: impl Into<String>) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "store_unavailable",
+            "Shared store unavailable",
+            format!(
+                "{}; maps this replica holds still answer, everything else needs the shared store: retry shortly",
+                detail.into()
+            ),
+        );
+        e.retry_after_s = Some(1);
+        e
+    }
     /// The client did not send its body within the body timeout.
     pub fn body_timeout(seconds: u64) -> Self {
         Self::new(

@@ -181,6 +181,64 @@ pub(crate) struct JobRecord {
     pub placement: Option<(serde_json::Value, usize)>,
 }
 
+impl JobRecord {
+    /// The job as the API shows it (a job another replica runs, seen from its record).
+    pub(crate) fn view(&self) -> JobView {
+        let (kind, map_id, result_href) = match &self.key {
+            Some(key) => {
+                let map_id = key.id();
+                ("map", Some(map_id.clone()), format!("/v1/maps/{map_id}"))
+            }
+            None => ("placement", None, format!("/v1/placements/{}", self.job_id)),
+        };
+        JobView {
+            job_id: self.job_id.clone(),
+            kind,
+            scenario_id: self.scenario_id.clone(),
+            map_id,
+            key: self.key.clone(),
+            state: self.state,
+            cells_done: self.cells_done,
+            cells_total: self.cells_total,
+            progress: if self.cells_total == 0 {
+                0.0
+            } else {
+                self.cells_done as f64 / self.cells_total as f64
+            },
+            created_at: self.created_at,
+            started_at: self.started_at,
+            finished_at: self.finished_at,
+            error: self.error.clone(),
+            href: format!("/v1/jobs/{}", self.job_id),
+            result_href,
+        }
+    }
+
+    /// A map job not started yet, as the replica that takes a request records it.
+    pub(crate) fn queued(key: &MapKey, owner: Option<&Owner>) -> JobRecord {
+        JobRecord {
+            job_id: uuid::Uuid::new_v4().simple().to_string(),
+            seq: 0,
+            owner: owner.map(|o| o.to_string()),
+            scenario_id: key.scenario_id.clone(),
+            key: Some(key.clone()),
+            state: JobState::Queued,
+            cells_done: 0,
+            cells_total: 0,
+            created_at: unix(Some(SystemTime::now())).unwrap_or(0.0),
+            started_at: None,
+            finished_at: None,
+            error: None,
+            placement: None,
+        }
+    }
+
+    /// The owner, as [`Caller::may_touch`] takes it.
+    pub(crate) fn owner(&self) -> Option<Owner> {
+        self.owner.clone().map(Owner::from_digest)
+    }
+}
+
 fn from_unix(t: f64) -> Option<SystemTime> {
     (t.is_finite() && t >= 0.0).then(|| UNIX_EPOCH + Duration::from_secs_f64(t))
 }
@@ -544,6 +602,75 @@ impl Jobs {
         Ok(MapRequestOutcome::Building(job))
     }
 
+    /// Builds a map another replica (or this one) queued in the cluster's stream, as the local
+    /// job `job_id` (so this replica shows its live progress). When it is done, `publish`
+    /// gets the map before the job says `done`, then the map enters `cache`. Counted in
+    /// `irs_map_builds_total`, which in a cluster counts builds, not requests.
+    pub(crate) fn build_shared<P, Fut>(
+        self: &Arc<Self>,
+        job_id: String,
+        scenario: Arc<Scenario>,
+        key: MapKey,
+        owner: Option<Owner>,
+        cache: &MapCache,
+        publish: P,
+    ) -> Arc<Job>
+    where
+        P: FnOnce(Arc<RadioMap>) -> Fut + Send + 'static,
+        Fut: std::future::Future<Output = Result<(), String>> + Send,
+    {
+        let map_id = key.id();
+        let job = self.admit_as(
+            job_id,
+            key.scenario_id.clone(),
+            owner,
+            Work::Map {
+                map_id: map_id.clone(),
+                key: key.clone(),
+                handover: Mutex::new(Handover::default()),
+            },
+        );
+        metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
+        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
+        let progress = job.progress.clone();
+        let cache = cache.clone();
+        let work = move || radiomap::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let finish = move |job: Arc<Job>, map: RadioMap| async move {
+            let map = Arc::new(map);
+            job.hand_over(&map);
+            if let Err(e) = publish(map.clone()).await {
+                tracing::warn!(error = %e, "built map not shared: other replicas will build it again");
+            }
+            cache.insert(map_id_of(&job), map).await;
+        };
+        let runner = self.clone();
+        let handle = job.clone();
+        tokio::spawn(
+            async move {
+                let in_flight = handle.map_id().unwrap_or_default().to_string();
+                runner
+                    .in_flight
+                    .lock()
+                    .await
+                    .insert(in_flight, handle.clone());
+                runner.run(handle, work, finish).await;
+            }
+            .instrument(span),
+        );
+        job
+    }
+
+    /// Asks a local job to stop (a cancellation that came through the shared store).
+    pub(crate) fn cancel_local(&self, job: &Job) {
+        job.progress.cancel();
+        job.cancel.notify_one();
+    }
+
+    /// Workers free now (the cluster's builder reads the stream only when one is).
+    pub(crate) fn free_workers(&self) -> usize {
+        self.workers.available_permits()
+    }
+
     /// Starts a placement search as a job (503 when the queue is full). When it is done, the
     /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
     /// answer's map ids answer path queries at once; then the answer is kept in the job.
@@ -615,9 +742,25 @@ impl Jobs {
 
     /// Creates a queued job and records it.
     fn admit(&self, scenario_id: String, owner: Option<Owner>, work: Work) -> Arc<Job> {
+        self.admit_as(
+            uuid::Uuid::new_v4().simple().to_string(),
+            scenario_id,
+            owner,
+            work,
+        )
+    }
+
+    /// [`Jobs::admit`] under a given id (a cluster job keeps the id its record has).
+    fn admit_as(
+        &self,
+        id: String,
+        scenario_id: String,
+        owner: Option<Owner>,
+        work: Work,
+    ) -> Arc<Job> {
         let (state, _) = watch::channel(JobState::Queued);
         let job = Arc::new(Job {
-            id: uuid::Uuid::new_v4().simple().to_string(),
+            id,
             seq: self.next_seq.fetch_add(1, Ordering::Relaxed),
             owner,
             scenario_id,

@@ -5,12 +5,14 @@
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
 //! registry and map cache), `jobs` (map builds and placement searches), `queries` (admission
 //! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
-//! timeouts), `store` (the data directory of `--data-dir`), `errors` (problem+json; [`Problem`]
+//! timeouts), `store` (the data directory of `--data-dir`), `cluster` (replicas sharing Redis,
+//! `--redis-url`), `errors` (problem+json; [`Problem`]
 //! is the body of every error answer), `viewer` (the built-in map viewer at `/`).
 
 pub mod api;
 pub(crate) mod auth;
 pub(crate) mod cache;
+pub(crate) mod cluster;
 pub mod config;
 pub(crate) mod errors;
 pub(crate) mod jobs;
@@ -57,6 +59,9 @@ pub(crate) struct Limits {
     pub cache_bytes: u64,
     pub body_timeout: Duration,
     pub request_timeout: Duration,
+    /// In a cluster: builds queued or running in the whole stream before a request gets 503
+    /// (`--queue` + `--workers` of this replica: the same bound one replica alone has).
+    pub cluster_queue: usize,
 }
 
 /// Longest `x-request-id` taken from a client (a UUID is 36 characters); a longer one, or one
@@ -79,6 +84,8 @@ struct Inner {
     cors_origins: Vec<HeaderValue>,
     /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
     disk: Option<Arc<store::DataDir>>,
+    /// `--redis-url`, if set: the store shared with the other replicas.
+    cluster: Option<Arc<cluster::Cluster>>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
 }
@@ -138,6 +145,7 @@ impl AppState {
                     cache_bytes: args.cache_mb.saturating_mul(1024 * 1024),
                     body_timeout: Duration::from_secs(args.body_timeout_s.max(1)),
                     request_timeout: Duration::from_secs(args.request_timeout_s.max(1)),
+                    cluster_queue: args.queue + args.workers(),
                 },
                 registry,
                 cache,
@@ -151,6 +159,10 @@ impl AppState {
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
                 cors_origins,
                 disk,
+                cluster: match &args.redis_url {
+                    Some(url) => Some(Arc::new(cluster::Cluster::new(url)?)),
+                    None => None,
+                },
                 ready: AtomicBool::new(false),
                 metrics,
             }),
@@ -193,6 +205,98 @@ impl AppState {
                 );
                 needed
             })
+    }
+
+    pub(crate) fn cluster(&self) -> Option<&Arc<cluster::Cluster>> {
+        self.inner.cluster.as_ref()
+    }
+
+    /// A scenario by id: registered here, or (in a cluster) registered on another replica,
+    /// which registers it here too with its owners. `Ok(None)`: nowhere; 503 while the shared
+    /// store is down and the scenario is not here.
+    pub(crate) async fn shared_scenario(
+        &self,
+        id: &str,
+    ) -> Result<Option<Arc<cache::StoredScenario>>, ApiError> {
+        if let Some(stored) = self.registry().get(id) {
+            return Ok(Some(stored));
+        }
+        let Some(cluster) = self.cluster() else {
+            return Ok(None);
+        };
+        let Some(record) = cluster.scenario(id).await? else {
+            return Ok(None);
+        };
+        let scenario = Scenario::from_json(&record.document.to_string())
+            .map_err(|e| ApiError::internal(format!("shared scenario {id}: {e}")))?;
+        if scenario.content_hash() != id {
+            return Err(ApiError::internal(format!(
+                "shared scenario {id} has another id in this build"
+            )));
+        }
+        let mut owners: Vec<Caller> = record
+            .owners
+            .into_iter()
+            .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
+            .collect();
+        if owners.is_empty() {
+            owners.push(Caller::Open);
+        }
+        let mut stored = None;
+        for owner in owners {
+            stored = Some(self.register_scenario(scenario.clone(), "api", &owner)?.0);
+        }
+        Ok(stored)
+    }
+
+    /// In a cluster: publishes an API scenario (document and owners) for the other replicas.
+    pub(crate) async fn share_scenario(
+        &self,
+        stored: &cache::StoredScenario,
+    ) -> Result<(), ApiError> {
+        match self.cluster() {
+            Some(cluster) if stored.source == "api" => {
+                cluster.put_scenario(&stored.id, &stored.record()).await
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// A built map by id: in this replica's cache (or data directory), else (in a cluster) in
+    /// the shared store, decoded against its scenario and cached here.
+    pub(crate) async fn shared_map(
+        &self,
+        map_id: &str,
+    ) -> Result<Option<Arc<crate::radiomap::RadioMap>>, ApiError> {
+        if let Some(map) = self.cache().get(map_id).await {
+            return Ok(Some(map));
+        }
+        let Some(cluster) = self.cluster() else {
+            return Ok(None);
+        };
+        let Some(encoded) = cluster.map(map_id).await? else {
+            return Ok(None);
+        };
+        let key = crate::radiomap::encoding::peek_key(&encoded)
+            .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
+        let Some(stored) = self.shared_scenario(&key.scenario_id).await? else {
+            return Ok(None);
+        };
+        let scenario = stored.scenario.clone();
+        let map = tokio::task::spawn_blocking(move || {
+            crate::radiomap::encoding::decode(&encoded, &scenario)
+        })
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
+        if map.key.id() != map_id {
+            return Err(ApiError::internal(format!(
+                "shared map {map_id} holds another map"
+            )));
+        }
+        let map = Arc::new(map);
+        self.cache().insert(map_id.to_string(), map.clone()).await;
+        Ok(Some(map))
     }
 
     pub fn is_ready(&self) -> bool {
@@ -518,6 +622,12 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
         };
         let warming = state.clone();
         tokio::spawn(async move { warm_from_disk(&warming).await });
+        if let Some(cluster) = state.cluster().cloned() {
+            let health = cluster.clone();
+            tokio::spawn(async move { health.watch_health().await });
+            tokio::spawn(cluster::run_builder(state.clone(), cluster.clone()));
+            tracing::info!(replica = %cluster.replica, "sharing scenarios, maps and jobs through Redis");
+        }
         let stopping = state.clone();
         let connections = server::serve(listener, app(state.clone()), limits, async move {
             shutdown_signal().await;

@@ -74,8 +74,8 @@ fn valid_id(id: &str) -> bool {
     !id.is_empty() && id.len() <= 128 && id.bytes().all(|b| b.is_ascii_hexdigit())
 }
 
-/// Frames a payload with the magic bytes and its digest.
-fn frame(payload: &[u8]) -> Vec<u8> {
+/// Frames a payload with the magic bytes and its digest (files, and maps in Redis).
+pub(crate) fn frame(payload: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(HEADER_BYTES + payload.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&Sha256::digest(payload));
@@ -83,8 +83,8 @@ fn frame(payload: &[u8]) -> Vec<u8> {
     out
 }
 
-/// The payload of a framed file, if the frame and the digest check out.
-fn unframe(bytes: &[u8]) -> Result<&[u8], &'static str> {
+/// The payload of a framed record, if the frame and the digest check out.
+pub(crate) fn unframe(bytes: &[u8]) -> Result<&[u8], &'static str> {
     if bytes.len() < HEADER_BYTES || &bytes[..MAGIC.len()] != MAGIC {
         return Err("not a record of this format (magic bytes differ)");
     }

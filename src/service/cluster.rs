@@ -1,0 +1,570 @@
+//! Replicas sharing Redis (`serve --redis-url URL`): any replica answers for any scenario, map
+//! or job, and a map is built once in the whole cluster.
+//!
+//! What lives in Redis (keys under `irs:`):
+//! * `irs:scenario:<id>`: a registered API scenario (its canonical document and owner digests,
+//!   the record `--data-dir` writes too);
+//! * `irs:map:<id>`: a built map in its compact binary form (`radiomap::encoding`), framed with
+//!   its SHA-256 like a data-directory file; each replica keeps its moka cache in front;
+//! * `irs:job:<id>`: a map job's record (state, progress, times, error), rewritten by the
+//!   replica building it once per heartbeat; `irs:cancel:<id>` asks that replica to cancel;
+//! * `irs:building:<map id>`: the single-flight lock, the id of the job building the map, set
+//!   with NX and an expiry that the builder renews every heartbeat;
+//! * the stream `irs:builds` with the consumer group `builders`: one entry per build. Every
+//!   replica reads it (`XREADGROUP`) when it has a free worker; an entry stays pending until
+//!   its build ends (`XACK`, then `XDEL`). The builder's heartbeat re-claims its own entry to
+//!   reset its idle time, so an entry idle for [`CLAIM_IDLE`] belongs to a dead replica and
+//!   the next replica with a free worker takes it over (`XAUTOCLAIM`) and builds the map.
+//!
+//! Redis down: a background task pings it every [`HEALTH_PERIOD`]; while it fails, `/readyz`
+//! answers 503 with the reason, a request that needs Redis answers 503 with `Retry-After`,
+//! maps already in a replica's cache still answer path queries, and everything resumes when
+//! the ping succeeds again (the client reconnects by itself).
+
+use super::cache::ScenarioRecord;
+use super::errors::ApiError;
+use super::jobs::JobRecord;
+use super::store;
+use crate::radiomap::MapKey;
+use redis::aio::{ConnectionManager, ConnectionManagerConfig};
+use redis::streams::{
+    StreamAutoClaimOptions, StreamAutoClaimReply, StreamClaimOptions, StreamId, StreamReadOptions,
+    StreamReadReply,
+};
+use redis::{AsyncCommands, ExistenceCheck, SetExpiry, SetOptions};
+use std::sync::{Mutex, RwLock};
+use std::time::Duration;
+
+pub(crate) const STREAM: &str = "irs:builds";
+const GROUP: &str = "builders";
+/// How often a builder renews its lock, re-claims its stream entry and publishes progress:
+/// progress seen from other replicas is at most this old.
+pub(crate) const HEARTBEAT: Duration = Duration::from_millis(500);
+/// The lock's expiry: ten heartbeats, so a slow Redis round trip never loses a live lock, and
+/// a dead builder's lock is gone within seconds.
+const LEASE: Duration = Duration::from_secs(5);
+/// A stream entry idle this long (no heartbeat re-claimed it) is a dead replica's build.
+pub(crate) const CLAIM_IDLE: Duration = Duration::from_secs(5);
+/// How long one `XREADGROUP` waits for an entry; also the longest a replica takes to notice
+/// that it should stop reading.
+const READ_BLOCK: Duration = Duration::from_millis(1000);
+pub(crate) const HEALTH_PERIOD: Duration = Duration::from_millis(500);
+/// Connection and response timeouts: a Redis that does not answer within them counts as down
+/// (the response timeout is above `READ_BLOCK`, which a blocking read legitimately waits).
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(1);
+const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
+/// Cancellation requests and job records outlive any job: a day.
+const RECORD_TTL_S: u64 = 86_400;
+
+fn scenario_key(id: &str) -> String {
+    format!("irs:scenario:{id}")
+}
+fn map_key(id: &str) -> String {
+    format!("irs:map:{id}")
+}
+fn job_key(id: &str) -> String {
+    format!("irs:job:{id}")
+}
+fn cancel_key(id: &str) -> String {
+    format!("irs:cancel:{id}")
+}
+fn lock_key(map_id: &str) -> String {
+    format!("irs:building:{map_id}")
+}
+
+/// One build, as the stream carries it.
+#[derive(Debug, Clone)]
+pub(crate) struct BuildEntry {
+    pub stream_id: String,
+    pub job_id: String,
+    pub map_id: String,
+    pub key: MapKey,
+}
+
+impl BuildEntry {
+    fn of(entry: &StreamId) -> Option<BuildEntry> {
+        let job_id: String = entry.get("job_id")?;
+        let map_id: String = entry.get("map_id")?;
+        let key: String = entry.get("key")?;
+        let key: MapKey = serde_json::from_str(&key).ok()?;
+        (key.id() == map_id).then(|| BuildEntry {
+            stream_id: entry.id.clone(),
+            job_id,
+            map_id,
+            key,
+        })
+    }
+}
+
+/// The connection to Redis and what the replica knows of its health.
+pub(crate) struct Cluster {
+    client: redis::Client,
+    /// This replica's consumer name in the group: unique per process.
+    pub replica: String,
+    /// Commands share one multiplexed connection (it reconnects by itself); `None` until the
+    /// first connection succeeds.
+    commands: RwLock<Option<ConnectionManager>>,
+    /// `None` while Redis answers; the reason while it does not.
+    down: Mutex<Option<String>>,
+}
+
+fn config() -> ConnectionManagerConfig {
+    ConnectionManagerConfig::new()
+        .set_connection_timeout(Some(CONNECT_TIMEOUT))
+        .set_response_timeout(Some(RESPONSE_TIMEOUT))
+        .set_number_of_retries(1)
+}
+
+impl Cluster {
+    /// Checks the URL (no connection yet: a replica starts even while Redis is down).
+    pub fn new(url: &str) -> Result<Cluster, String> {
+        let client = redis::Client::open(url).map_err(|e| format!("--redis-url: {e}"))?;
+        let replica = format!(
+            "{}-{}",
+            std::process::id(),
+            &uuid::Uuid::new_v4().simple().to_string()[..8]
+        );
+        Ok(Cluster {
+            client,
+            replica,
+            commands: RwLock::new(None),
+            down: Mutex::new(Some("not connected to Redis yet".into())),
+        })
+    }
+
+    /// A dedicated connection (the builder's blocking reads must not hold up the commands).
+    pub async fn connect(&self) -> redis::RedisResult<ConnectionManager> {
+        self.client
+            .get_connection_manager_with_config(config())
+            .await
+    }
+
+    /// Why Redis cannot be used now, if it cannot.
+    pub fn unavailable(&self) -> Option<String> {
+        self.down.lock().expect("cluster lock").clone()
+    }
+
+    fn mark(&self, down: Option<String>) {
+        let mut state = self.down.lock().expect("cluster lock");
+        if state.is_some() != down.is_some() {
+            match &down {
+                Some(reason) => tracing::warn!(reason = %reason, "Redis unavailable"),
+                None => tracing::info!("Redis available"),
+            }
+            metrics::gauge!("irs_redis_up").set(if down.is_none() { 1.0 } else { 0.0 });
+        }
+        *state = down;
+    }
+
+    fn error(&self, e: &redis::RedisError) -> ApiError {
+        let reason = format!("Redis: {e}");
+        if e.is_io_error()
+            || e.is_timeout()
+            || e.is_connection_dropped()
+            || e.is_connection_refusal()
+        {
+            self.mark(Some(reason.clone()));
+        }
+        ApiError::store_unavailable(reason)
+    }
+
+    /// The command connection, or 503 while Redis is down.
+    fn conn(&self) -> Result<ConnectionManager, ApiError> {
+        if let Some(reason) = self.unavailable() {
+            return Err(ApiError::store_unavailable(reason));
+        }
+        self.commands
+            .read()
+            .expect("cluster lock")
+            .clone()
+            .ok_or_else(|| ApiError::store_unavailable("not connected to Redis yet"))
+    }
+
+    /// Pings Redis forever: connects the first time, creates the consumer group, and keeps
+    /// the health flag that `/readyz` and [`Cluster::conn`] read.
+    pub async fn watch_health(&self) {
+        loop {
+            let existing = self.commands.read().expect("cluster lock").clone();
+            let conn = match existing {
+                Some(conn) => Ok(conn),
+                None => match self.connect().await {
+                    Ok(conn) => {
+                        *self.commands.write().expect("cluster lock") = Some(conn.clone());
+                        Ok(conn)
+                    }
+                    Err(e) => Err(e),
+                },
+            };
+            let outcome = match conn {
+                Ok(mut conn) => match redis::cmd("PING").query_async::<String>(&mut conn).await {
+                    Ok(_) => self.ensure_group(&mut conn).await,
+                    Err(e) => Err(e),
+                },
+                Err(e) => Err(e),
+            };
+            self.mark(outcome.err().map(|e| format!("Redis: {e}")));
+            tokio::time::sleep(HEALTH_PERIOD).await;
+        }
+    }
+
+    /// The consumer group, created with the stream if missing (idempotent).
+    async fn ensure_group(&self, conn: &mut ConnectionManager) -> redis::RedisResult<()> {
+        let created: redis::RedisResult<()> = conn.xgroup_create_mkstream(STREAM, GROUP, "0").await;
+        match created {
+            Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
+            other => other,
+        }
+    }
+
+    pub async fn put_scenario(&self, id: &str, record: &ScenarioRecord) -> Result<(), ApiError> {
+        let mut conn = self.conn()?;
+        let json = serde_json::to_string(record).expect("records serialise");
+        conn.set::<_, _, ()>(scenario_key(id), json)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    pub async fn scenario(&self, id: &str) -> Result<Option<ScenarioRecord>, ApiError> {
+        let mut conn = self.conn()?;
+        let json: Option<String> = conn
+            .get(scenario_key(id))
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
+    }
+
+    pub async fn delete_scenario(&self, id: &str) -> Result<(), ApiError> {
+        let mut conn = self.conn()?;
+        conn.del::<_, ()>(scenario_key(id))
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// Stores a map's encoded bytes, framed with their digest.
+    pub async fn put_map(&self, id: &str, encoded: &[u8]) -> Result<(), ApiError> {
+        let mut conn = self.conn()?;
+        conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// A map's encoded bytes, if Redis has it and its digest checks out.
+    pub async fn map(&self, id: &str) -> Result<Option<Vec<u8>>, ApiError> {
+        let mut conn = self.conn()?;
+        let framed: Option<Vec<u8>> = conn.get(map_key(id)).await.map_err(|e| self.error(&e))?;
+        Ok(framed.and_then(|bytes| match store::unframe(&bytes) {
+            Ok(payload) => Some(payload.to_vec()),
+            Err(reason) => {
+                tracing::warn!(map_id = id, reason, "map in Redis ignored");
+                None
+            }
+        }))
+    }
+
+    pub async fn delete_map(&self, id: &str) -> Result<bool, ApiError> {
+        let mut conn = self.conn()?;
+        let removed: usize = conn.del(map_key(id)).await.map_err(|e| self.error(&e))?;
+        Ok(removed > 0)
+    }
+
+    pub async fn put_job(&self, record: &JobRecord) -> Result<(), ApiError> {
+        let mut conn = self.conn()?;
+        let json = serde_json::to_string(record).expect("records serialise");
+        conn.set_ex::<_, _, ()>(job_key(&record.job_id), json, RECORD_TTL_S)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    pub async fn job(&self, id: &str) -> Result<Option<JobRecord>, ApiError> {
+        let mut conn = self.conn()?;
+        let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
+        Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
+    }
+
+    pub async fn request_cancel(&self, id: &str) -> Result<(), ApiError> {
+        let mut conn = self.conn()?;
+        conn.set_ex::<_, _, ()>(cancel_key(id), 1, RECORD_TTL_S)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    pub async fn cancel_requested(&self, id: &str) -> bool {
+        let Ok(mut conn) = self.conn() else {
+            return false;
+        };
+        conn.exists(cancel_key(id)).await.unwrap_or(false)
+    }
+
+    /// The job building `map_id` somewhere in the cluster, if one is.
+    pub async fn building(&self, map_id: &str) -> Result<Option<String>, ApiError> {
+        let mut conn = self.conn()?;
+        conn.get(lock_key(map_id)).await.map_err(|e| self.error(&e))
+    }
+
+    /// Single flight across replicas: the id of the job building `map_id`, and whether it was
+    /// started by this call (lock taken, job recorded as queued, entry added to the stream).
+    /// `queue_limit` bounds the builds queued or running in the whole cluster (503 past it).
+    pub async fn enqueue(
+        &self,
+        map_id: &str,
+        key: &MapKey,
+        queued: JobRecord,
+        queue_limit: usize,
+    ) -> Result<(String, bool), ApiError> {
+        let mut conn = self.conn()?;
+        for _ in 0..3 {
+            let existing: Option<String> = conn
+                .get(lock_key(map_id))
+                .await
+                .map_err(|e| self.error(&e))?;
+            if let Some(job_id) = existing {
+                return Ok((job_id, false));
+            }
+            let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
+            if waiting >= queue_limit {
+                return Err(ApiError::queue_full(queue_limit));
+            }
+            let options = SetOptions::default()
+                .conditional_set(ExistenceCheck::NX)
+                .with_expiration(SetExpiry::PX(LEASE.as_millis() as u64));
+            let taken: Option<String> = conn
+                .set_options(lock_key(map_id), &queued.job_id, options)
+                .await
+                .map_err(|e| self.error(&e))?;
+            if taken.is_none() {
+                continue; // another replica took it between the GET and the SET: read it
+            }
+            let key_json = serde_json::to_string(key).expect("keys serialise");
+            let recorded = match self.put_job(&queued).await {
+                Ok(()) => conn
+                    .xadd::<_, _, _, _, ()>(
+                        STREAM,
+                        "*",
+                        &[
+                            ("job_id", queued.job_id.as_str()),
+                            ("map_id", map_id),
+                            ("key", key_json.as_str()),
+                        ],
+                    )
+                    .await
+                    .map_err(|e| self.error(&e)),
+                Err(e) => Err(e),
+            };
+            if let Err(e) = recorded {
+                // No build will run under this lock: release it rather than let requests wait
+                // on a job that never starts until the lock expires.
+                let _: redis::RedisResult<()> = conn.del(lock_key(map_id)).await;
+                return Err(e);
+            }
+            return Ok((queued.job_id, true));
+        }
+        Err(ApiError::store_unavailable(
+            "the build lock changed hands three times in a row; retry",
+        ))
+    }
+
+    /// The next build for this replica: a dead replica's pending entry first, else a new one
+    /// (waiting up to [`READ_BLOCK`]). `conn` is the builder's own connection.
+    pub async fn next_build(
+        &self,
+        conn: &mut ConnectionManager,
+    ) -> redis::RedisResult<Option<BuildEntry>> {
+        let claimed: StreamAutoClaimReply = conn
+            .xautoclaim_options(
+                STREAM,
+                GROUP,
+                &self.replica,
+                CLAIM_IDLE.as_millis() as u64,
+                "0-0",
+                StreamAutoClaimOptions::default().count(1),
+            )
+            .await?;
+        if let Some(entry) = claimed.claimed.first() {
+            tracing::warn!(stream_id = %entry.id, "claimed the build of a replica that stopped");
+            metrics::counter!("irs_builds_claimed_total").increment(1);
+            return Ok(self.accept(conn, entry).await);
+        }
+        let options = StreamReadOptions::default()
+            .group(GROUP, &self.replica)
+            .count(1)
+            .block(READ_BLOCK.as_millis() as usize);
+        let read: Option<StreamReadReply> = conn.xread_options(&[STREAM], &[">"], &options).await?;
+        let entry = read
+            .and_then(|r| r.keys.into_iter().next())
+            .and_then(|k| k.ids.into_iter().next());
+        Ok(match entry {
+            Some(entry) => self.accept(conn, &entry).await,
+            None => None,
+        })
+    }
+
+    /// An entry as a build, or (malformed: not ours to build) acknowledged and dropped.
+    async fn accept(&self, conn: &mut ConnectionManager, entry: &StreamId) -> Option<BuildEntry> {
+        let build = BuildEntry::of(entry);
+        if build.is_none() {
+            tracing::warn!(stream_id = %entry.id, "malformed build entry dropped");
+            let _: redis::RedisResult<()> = conn.xack(STREAM, GROUP, &[&entry.id]).await;
+            let _: redis::RedisResult<()> = conn.xdel(STREAM, &[&entry.id]).await;
+        }
+        build
+    }
+
+    /// Keeps a running build ours: renews the lock and resets the entry's idle time.
+    pub async fn heartbeat(&self, build: &BuildEntry) {
+        let Ok(mut conn) = self.conn() else { return };
+        let _: redis::RedisResult<bool> = conn
+            .pexpire(lock_key(&build.map_id), LEASE.as_millis() as i64)
+            .await;
+        let _: redis::RedisResult<redis::Value> = conn
+            .xclaim_options(
+                STREAM,
+                GROUP,
+                &self.replica,
+                0,
+                &[&build.stream_id],
+                StreamClaimOptions::default().with_justid(),
+            )
+            .await;
+    }
+
+    /// A build ended (done, failed or cancelled): the entry is acknowledged and removed, the
+    /// lock released if it is still this job's.
+    pub async fn finish(&self, build: &BuildEntry) {
+        let Ok(mut conn) = self.conn() else { return };
+        let _: redis::RedisResult<()> = conn.xack(STREAM, GROUP, &[&build.stream_id]).await;
+        let _: redis::RedisResult<()> = conn.xdel(STREAM, &[&build.stream_id]).await;
+        let holder: Option<String> = conn.get(lock_key(&build.map_id)).await.unwrap_or(None);
+        if holder.as_deref() == Some(build.job_id.as_str()) {
+            let _: redis::RedisResult<()> = conn.del(lock_key(&build.map_id)).await;
+        }
+    }
+}
+
+/// Reads builds from the stream whenever this replica has a free worker, forever (a task
+/// per replica, started with the server).
+pub(crate) async fn run_builder(state: super::AppState, cluster: std::sync::Arc<Cluster>) {
+    let mut conn: Option<ConnectionManager> = None;
+    loop {
+        if state.jobs().free_workers() == 0 || cluster.unavailable().is_some() {
+            tokio::time::sleep(HEARTBEAT).await;
+            continue;
+        }
+        let mut active = match conn.take() {
+            Some(c) => c,
+            None => match cluster.connect().await {
+                Ok(c) => c,
+                Err(_) => {
+                    tokio::time::sleep(HEALTH_PERIOD).await;
+                    continue;
+                }
+            },
+        };
+        match cluster.next_build(&mut active).await {
+            Ok(Some(build)) => {
+                tokio::spawn(build_entry(state.clone(), cluster.clone(), build));
+            }
+            Ok(None) => {}
+            Err(e) => {
+                tracing::debug!(error = %e, "reading the build stream");
+                tokio::time::sleep(HEALTH_PERIOD).await;
+            }
+        }
+        conn = Some(active);
+    }
+}
+
+/// Builds one stream entry on this replica: the map goes to Redis, the record follows the
+/// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
+async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, build: BuildEntry) {
+    let record = cluster.job(&build.job_id).await.ok().flatten();
+    let owner = record.as_ref().and_then(|r| r.owner());
+    let end = |mut record: JobRecord, state: super::jobs::JobState, error: Option<String>| {
+        record.state = state;
+        record.error = error;
+        record.finished_at = Some(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+        );
+        record
+    };
+    let record = record.unwrap_or_else(|| {
+        let mut r = JobRecord::queued(&build.key, None);
+        r.job_id = build.job_id.clone();
+        r
+    });
+    // Built already (a build taken over just after its map was stored), or cancelled while
+    // it waited: nothing to build.
+    if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
+        if !record.state.is_terminal() {
+            let _ = cluster
+                .put_job(&end(record, super::jobs::JobState::Done, None))
+                .await;
+        }
+        cluster.finish(&build).await;
+        return;
+    }
+    if cluster.cancel_requested(&build.job_id).await {
+        let _ = cluster
+            .put_job(&end(record, super::jobs::JobState::Cancelled, None))
+            .await;
+        cluster.finish(&build).await;
+        return;
+    }
+    let scenario = match state.shared_scenario(&build.key.scenario_id).await {
+        Ok(Some(stored)) => stored.scenario.clone(),
+        other => {
+            let reason = match other {
+                Err(e) => e.problem.detail,
+                _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
+            };
+            let _ = cluster
+                .put_job(&end(record, super::jobs::JobState::Failed, Some(reason)))
+                .await;
+            cluster.finish(&build).await;
+            return;
+        }
+    };
+    let publisher = cluster.clone();
+    let map_id = build.map_id.clone();
+    let publish = move |map: std::sync::Arc<crate::radiomap::RadioMap>| async move {
+        let encoded = tokio::task::spawn_blocking(move || crate::radiomap::encoding::encode(&map))
+            .await
+            .map_err(|e| e.to_string())?;
+        publisher
+            .put_map(&map_id, &encoded)
+            .await
+            .map_err(|e| e.problem.detail)
+    };
+    let job = state.jobs().build_shared(
+        build.job_id.clone(),
+        scenario,
+        build.key.clone(),
+        owner,
+        state.cache(),
+        publish,
+    );
+    tracing::info!(job_id = %build.job_id, map_id = %build.map_id, replica = %cluster.replica, "building for the cluster");
+    loop {
+        tokio::select! {
+            _ = job.finished() => break,
+            _ = tokio::time::sleep(HEARTBEAT) => {
+                cluster.heartbeat(&build).await;
+                let _ = cluster.put_job(&job.record()).await;
+                if cluster.cancel_requested(&build.job_id).await {
+                    state.jobs().cancel_local(&job);
+                }
+            }
+        }
+    }
+    // The final record, written until it lands (Redis may be down just now): the job's
+    // waiters on other replicas read it.
+    let final_record = job.record();
+    for attempt in 0..20u32 {
+        if cluster.put_job(&final_record).await.is_ok() {
+            break;
+        }
+        tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;
+    }
+    cluster.finish(&build).await;
+}

@@ -1,0 +1,347 @@
+#!/usr/bin/env python3
+"""Replicas sharing Redis behind HAProxy, as processes on loopback (no containers): the
+cluster scenarios of `deploy/compose.yaml`, quick to reproduce on a laptop.
+
+    tests/cluster/cluster_test.py BINARY
+
+Starts redis-server (AOF on, in a temporary directory), three `irs-planner serve --redis-url`
+replicas and HAProxy health-checking their /readyz, then checks:
+  * single flight: 100 concurrent identical map requests through HAProxy, one build in the
+    sum of the replicas' /metrics; the map then answers on every replica without a build;
+  * a job's progress and its cancellation work from a replica that does not run it;
+  * killing (SIGKILL) the replica that runs a build: another claims it, the job finishes,
+    and the map is bit-identical to the CLI's single-process build;
+  * Redis stopped: /readyz 503 with the reason, a cached map still answers path queries,
+    a request that needs Redis gets 503 with Retry-After, no replica dies; Redis restarted
+    (its AOF): every replica ready again by itself, the maps still there;
+  * path-query throughput through HAProxy against one replica hit directly (wrk, same run).
+Everything binds 127.0.0.1 and stops by itself (about a minute on two cores).
+"""
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.error
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BINARY = None  # set by main
+WORK = tempfile.mkdtemp(prefix="irs-cluster-")
+PROCESSES = []
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def check(condition, message):
+    if not condition:
+        raise SystemExit(f"FAIL: {message}")
+    print(f"ok: {message}", flush=True)
+
+
+def request(base, method, path, body=None, timeout=60):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(base + path, data, {"content-type": "application/json"}, method=method)
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as resp:
+            return resp.status, json.loads(resp.read() or b"null"), {k.lower(): v for k, v in resp.headers.items()}
+    except urllib.error.HTTPError as e:
+        text = e.read()
+        try:
+            body = json.loads(text)
+        except ValueError:
+            body = text.decode(errors="replace")
+        return e.code, body, {k.lower(): v for k, v in e.headers.items()}
+
+
+def wait_until(what, predicate, seconds):
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        try:
+            if predicate():
+                return True
+        except OSError:
+            pass
+        time.sleep(0.1)
+    raise SystemExit(f"FAIL: {what} within {seconds} s")
+
+
+class Redis:
+    def __init__(self):
+        self.port = free_port()
+        self.dir = os.path.join(WORK, "redis")
+        os.makedirs(self.dir, exist_ok=True)
+        self.start()
+
+    def start(self):
+        self.proc = subprocess.Popen(
+            ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir,
+             "--appendonly", "yes", "--save", "", "--protected-mode", "no"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        PROCESSES.append(self.proc)
+        wait_until("redis-server listening", self.answers, 10)
+
+    def answers(self):
+        with socket.create_connection(("127.0.0.1", self.port), timeout=1) as s:
+            s.sendall(b"PING\r\n")
+            return s.recv(16).startswith(b"+PONG")
+
+    def stop(self):
+        self.proc.terminate()
+        self.proc.wait(10)
+
+
+class Replica:
+    def __init__(self, redis_port, name):
+        self.name = name
+        self.log = open(os.path.join(WORK, f"{name}.log"), "w")
+        empty = os.path.join(WORK, "no-scenarios")
+        os.makedirs(empty, exist_ok=True)
+        self.proc = subprocess.Popen(
+            [BINARY, "serve", "--bind", "127.0.0.1:0", "--scenarios", empty,
+             "--redis-url", f"redis://127.0.0.1:{redis_port}/", "--workers", "1"],
+            stdout=subprocess.PIPE, stderr=self.log, text=True,
+            env={**os.environ, "RUST_LOG": "info"})
+        PROCESSES.append(self.proc)
+        line = self.proc.stdout.readline()
+        assert line.startswith("listening on "), f"{name} did not start: {line!r}"
+        self.base = line.split()[-1]
+        self.port = int(self.base.rsplit(":", 1)[1])
+
+    def builds(self):
+        text = urllib.request.urlopen(self.base + "/metrics", timeout=10).read().decode()
+        return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
+                   if l.startswith("irs_map_builds_total"))
+
+    def ready(self):
+        return request(self.base, "GET", "/readyz", timeout=5)[0] == 200
+
+
+class HAProxy:
+    def __init__(self, replicas):
+        self.port = free_port()
+        config = os.path.join(WORK, "haproxy.cfg")
+        servers = "\n".join(
+            f"    server {r.name} 127.0.0.1:{r.port} check inter 500ms fall 2 rise 2" for r in replicas)
+        with open(config, "w") as f:
+            f.write(f"""global
+    maxconn 4096
+    # One thread: on a small machine HAProxy competes with the replicas for the cores.
+    nbthread 1
+defaults
+    mode http
+    timeout connect 2s
+    timeout client 60s
+    timeout server 60s
+    option http-keep-alive
+    http-reuse always
+frontend api
+    bind 127.0.0.1:{self.port}
+    default_backend replicas
+backend replicas
+    balance roundrobin
+    option httpchk GET /readyz
+    http-check expect status 200
+{servers}
+""")
+        self.proc = subprocess.Popen(["haproxy", "-f", config, "-db"],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        PROCESSES.append(self.proc)
+        self.base = f"http://127.0.0.1:{self.port}"
+
+
+def scenario(name, edit=None):
+    with open(os.path.join(ROOT, "scenarios", f"{name}.json")) as f:
+        doc = json.load(f)
+    if edit:
+        edit(doc)
+    return doc
+
+
+def wait_job(base, job_id, seconds=120):
+    result = {}
+
+    def done():
+        status, job, _ = request(base, "GET", f"/v1/jobs/{job_id}")
+        result["job"] = job
+        return status == 200 and job["state"] in ("done", "failed", "cancelled")
+
+    wait_until(f"job {job_id} finished", done, seconds)
+    return result["job"]
+
+
+def wrk(url, body, seconds=5, connections=16):
+    script = os.path.join(WORK, "path.lua")
+    with open(script, "w") as f:
+        f.write('wrk.method = "POST"\nwrk.headers["content-type"] = "application/json"\n'
+                f"wrk.body = {json.dumps(json.dumps(body))}\n")
+    out = subprocess.run(["wrk", "-t2", f"-c{connections}", f"-d{seconds}s", "-s", script, url + "/v1/paths"],
+                         capture_output=True, text=True, check=True).stdout
+    line = next(l for l in out.splitlines() if l.startswith("Requests/sec"))
+    non2xx = [l for l in out.splitlines() if "Non-2xx" in l]
+    assert not non2xx, out
+    return float(line.split()[1])
+
+
+def main():
+    global BINARY
+    BINARY = os.path.abspath(sys.argv[1])
+    redis = Redis()
+    replicas = [Replica(redis.port, f"replica{i}") for i in range(3)]
+    proxy = HAProxy(replicas)
+    wait_until("every replica ready", lambda: all(r.ready() for r in replicas), 15)
+    wait_until("HAProxy forwarding", lambda: request(proxy.base, "GET", "/readyz", timeout=5)[0] == 200, 15)
+
+    # A floor fine enough that its gain map is a job (1001² cells, above --sync-cells) and
+    # takes long enough for 100 requests to overlap it.
+    fine = scenario("paper-single-user", lambda d: (d.__setitem__("name", "fine"), d["grid"].__setitem__("resolution_m", 0.02)))
+    status, created, _ = request(proxy.base, "POST", "/v1/scenarios", fine)
+    check(status == 201, f"a scenario registered through HAProxy ({status})")
+    fine_id = created["id"]
+    answers = []
+
+    def ask():
+        answers.append(request(proxy.base, "POST", "/v1/maps", {"scenario_id": fine_id, "kind": "gain"}))
+
+    threads = [threading.Thread(target=ask) for _ in range(100)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    statuses = sorted({a[0] for a in answers})
+    check(statuses in ([202], [200, 202], [200]), f"100 concurrent identical requests answered {statuses}")
+    jobs = {a[1]["job_id"] for a in answers if a[0] == 202}
+    check(len(jobs) == 1, f"one job for all of them ({len(jobs)})")
+    job = wait_job(proxy.base, jobs.pop())
+    check(job["state"] == "done", f"the job finished: {job['state']}")
+    total = sum(r.builds() for r in replicas)
+    check(total == 1, f"exactly one build in the sum of the replicas' metrics ({total})")
+    map_id = job["map_id"]
+    for r in replicas:
+        status, _, _ = request(r.base, "GET", f"/v1/maps/{map_id}/coverage?threshold=-60")
+        check(status == 200, f"{r.name} serves the map")
+    check(sum(r.builds() for r in replicas) == 1, "none of them built it again")
+    path = {"map_id": map_id, "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    bodies = {json.dumps(request(r.base, "POST", "/v1/paths", path)[1]["waypoints"]) for r in replicas}
+    check(len(bodies) == 1, "every replica answers the same path")
+
+    # A rate map long enough to watch (a few seconds on one core), then cancelled from a
+    # replica that is not building it.
+    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.25)))
+    status, created, _ = request(proxy.base, "POST", "/v1/scenarios", slow)
+    slow_id = created["id"]
+    before = [r.builds() for r in replicas]
+    status, started, _ = request(replicas[0].base, "POST", "/v1/maps", {"scenario_id": slow_id, "kind": "rate", "access": "oma"})
+    check(status == 202, f"a rate-map job ({status})")
+    job_id = started["job_id"]
+
+    def builder_known():
+        now = [r.builds() for r in replicas]
+        return any(n > b for n, b in zip(now, before))
+
+    wait_until("a replica started the build", builder_known, 15)
+    builder = next(r for r, b in zip(replicas, before) if r.builds() > b)
+    other = next(r for r in replicas if r is not builder)
+    wait_until("progress visible from another replica",
+               lambda: request(other.base, "GET", f"/v1/jobs/{job_id}")[1]["cells_done"] > 0, 15)
+    check(True, f"{builder.name} builds, {other.name} shows its progress")
+    status, _, _ = request(other.base, "DELETE", f"/v1/jobs/{job_id}")
+    check(status == 202, f"cancelled through {other.name} ({status})")
+    job = wait_job(other.base, job_id, 20)
+    check(job["state"] == "cancelled", f"the build stopped: {job['state']}")
+
+    # The same map again; its builder is killed mid-build and another replica finishes it.
+    before = [r.builds() for r in replicas]
+    status, started, _ = request(replicas[0].base, "POST", "/v1/maps", {"scenario_id": slow_id, "kind": "rate", "access": "noma"})
+    job_id = started["job_id"]
+    wait_until("a replica started the build", builder_known, 15)
+    builder = next(r for r, b in zip(replicas, before) if r.builds() > b)
+    survivors = [r for r in replicas if r is not builder]
+    wait_until("the build under way", lambda: request(survivors[0].base, "GET", f"/v1/jobs/{job_id}")[1]["cells_done"] > 0, 15)
+    builder.proc.send_signal(signal.SIGKILL)
+    builder.proc.wait()
+    killed_at = time.time()
+    job = wait_job(survivors[0].base, job_id, 120)
+    check(job["state"] == "done", f"after SIGKILL of {builder.name} the job finished on another replica "
+                                  f"in {time.time() - killed_at:.1f} s")
+    check(sum(r.builds() for r in survivors) >= 1, "a survivor built it")
+    status, shared, _ = request(survivors[1].base, "GET", f"/v1/maps/{job['map_id']}")
+    check(status == 200, "the map answers")
+    slow_file = os.path.join(WORK, "slow.json")
+    with open(slow_file, "w") as f:
+        json.dump(slow, f)
+    cli = subprocess.run([BINARY, "map", "--scenario", slow_file, "--kind", "rate", "--access", "noma", "--quiet"],
+                         capture_output=True, text=True, check=True)
+    alone = json.loads(cli.stdout)
+    check(shared["values"] == alone["values"], "bit-identical to a single-process build (every cell)")
+
+    # Redis goes away.
+    cached = survivors[0]
+    redis.stop()
+    wait_until("readyz 503 everywhere", lambda: all(request(r.base, "GET", "/readyz", timeout=5)[0] == 503 for r in survivors), 10)
+    status, problem, _ = request(cached.base, "GET", "/readyz")
+    check("Redis" in problem.get("detail", ""), f"readyz names the reason: {problem.get('detail')!r}")
+    status, _, _ = request(cached.base, "POST", "/v1/paths", path)
+    check(status == 200, "a cached map still answers path queries")
+    status, problem, headers = request(cached.base, "POST", "/v1/scenarios", scenario("small-test", lambda d: d.__setitem__("name", "while-down")))
+    check(status == 503 and "retry-after" in headers, f"a request that needs Redis: {status}, Retry-After: {headers.get('retry-after')}")
+    status, _, headers = request(cached.base, "GET", "/v1/maps/0123456789abcdef0123456789abcdef")
+    check(status == 503, f"an unknown map cannot be looked up: {status}")
+    check(all(r.proc.poll() is None for r in survivors), "no replica died")
+    redis.start()
+    wait_until("every replica ready again by itself", lambda: all(r.ready() for r in survivors), 15)
+    status, _, _ = request(survivors[1].base, "GET", f"/v1/maps/{job['map_id']}/coverage?threshold=1")
+    check(status == 200, "the maps survived Redis's restart (AOF)")
+
+    # Throughput: HAProxy in front of the two survivors against one of them directly, on
+    # the paper's map (41², about a millisecond a query: HAProxy's own cost shows) and on the
+    # 1001² one (a search of a million cells a query: two replicas share the load).
+    wait_until("HAProxy has the replicas back", lambda: request(proxy.base, "GET", "/readyz", timeout=5)[0] == 200, 15)
+    time.sleep(1.5)  # both survivors back in rotation (rise 2 at 500 ms)
+    listed = request(proxy.base, "GET", "/v1/scenarios")[1]["scenarios"]
+    paper = next(s["id"] for s in listed if s["name"] == "paper-single-user")
+    status, built, _ = request(proxy.base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
+    small_path = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    for r in survivors:
+        request(r.base, "POST", "/v1/paths", small_path)
+        request(r.base, "POST", "/v1/paths", path)
+    ratios = {}
+    for name, body in (("41² paper map", small_path), ("1001² map", path)):
+        direct = wrk(cached.base, body)
+        through = wrk(proxy.base, body)
+        ratios[name] = through / direct
+        print(f"path queries on the {name}: {direct:.0f} req/s on one replica directly, "
+              f"{through:.0f} req/s through HAProxy to two ({through / direct:.2f}×), 16 connections, 5 s each")
+    # On the 41² map a query costs about what HAProxy's own hop costs, and on a two-core
+    # machine wrk, HAProxy and the replicas share the same cores, so the ratio there measures
+    # the machine (reported, not asserted); with real work per query the proxy must not be
+    # the bottleneck.
+    check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except BaseException:
+        # What the replicas logged, to see why.
+        for name in sorted(os.listdir(WORK)):
+            if name.endswith(".log"):
+                with open(os.path.join(WORK, name)) as f:
+                    lines = f.readlines()
+                print(f"--- {name} (last 15 lines)\n" + "".join(lines[-15:]), file=sys.stderr)
+        raise
+    finally:
+        for p in PROCESSES:
+            if p.poll() is None:
+                p.kill()
+        shutil.rmtree(WORK, ignore_errors=True)

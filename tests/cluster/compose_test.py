@@ -1,0 +1,155 @@
+#!/usr/bin/env python3
+"""deploy/compose.yaml brought up with the locally built images and checked from the host:
+single flight through HAProxy, a map served by every replica without a rebuild, `docker kill`
+of the replica running a build (another finishes it, bit-identical to the CLI's build), a
+`docker-compose restart` of everything (maps still served, from Redis's AOF, with no build),
+and path-query throughput through HAProxy against one replica directly.
+
+    tests/cluster/compose_test.py IMAGE CLI_BINARY
+
+Uses `docker-compose` (or `docker compose`), a project name of its own, loopback ports only;
+everything is taken down (volumes too) at the end.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+import uuid
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cluster_test import ROOT, check, free_port, request, scenario, wait_job, wait_until, wrk  # noqa: E402
+
+IMAGE, CLI = sys.argv[1], os.path.abspath(sys.argv[2])
+PROJECT = f"irsci{uuid.uuid4().hex[:6]}"
+PORT = free_port()
+COMPOSE = (["docker-compose"] if shutil.which("docker-compose") else ["docker", "compose"]) + [
+    "-f", os.path.join(ROOT, "deploy", "compose.yaml"), "-p", PROJECT]
+ENV = {**os.environ, "IRS_IMAGE": IMAGE, "IRS_PORT": str(PORT)}
+
+
+def compose(*args, check_rc=True):
+    out = subprocess.run([*COMPOSE, *args], capture_output=True, text=True, env=ENV)
+    if check_rc and out.returncode != 0:
+        raise SystemExit(f"{' '.join(COMPOSE[:1])} {' '.join(args)}: {out.stderr.strip()}")
+    return out.stdout.strip()
+
+
+class Replica:
+    def __init__(self, name):
+        self.name = name
+        self.refresh()
+
+    def refresh(self):
+        port = compose("port", self.name, "8080").splitlines()[-1].rsplit(":", 1)[1]
+        self.base = f"http://127.0.0.1:{port}"
+
+    def container(self):
+        return compose("ps", "-q", self.name)
+
+    def builds(self):
+        import urllib.request
+        text = urllib.request.urlopen(self.base + "/metrics", timeout=10).read().decode()
+        return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
+                   if l.startswith("irs_map_builds_total"))
+
+    def ready(self):
+        return request(self.base, "GET", "/readyz", timeout=5)[0] == 200
+
+
+def main():
+    proxy = f"http://127.0.0.1:{PORT}"
+    compose("up", "-d", "--no-build")
+    replicas = [Replica(f"irs{i}") for i in (1, 2, 3)]
+    wait_until("every replica ready", lambda: all(r.ready() for r in replicas), 60)
+    wait_until("HAProxy forwarding", lambda: request(proxy, "GET", "/readyz", timeout=5)[0] == 200, 30)
+    time.sleep(2)  # every replica in HAProxy's rotation (rise 2 at 1 s)
+
+    fine = scenario("paper-single-user", lambda d: (d.__setitem__("name", "fine"), d["grid"].__setitem__("resolution_m", 0.02)))
+    status, created, _ = request(proxy, "POST", "/v1/scenarios", fine)
+    check(status == 201, f"a scenario registered through HAProxy ({status})")
+    answers = []
+    threads = [threading.Thread(target=lambda: answers.append(request(
+        proxy, "POST", "/v1/maps", {"scenario_id": created["id"], "kind": "gain"}))) for _ in range(100)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    jobs = {a[1]["job_id"] for a in answers if a[0] == 202}
+    check(all(a[0] in (200, 202) for a in answers) and len(jobs) == 1,
+          f"100 concurrent identical map requests: one job ({len(jobs)})")
+    job = wait_job(proxy, jobs.pop())
+    check(job["state"] == "done", "it finished")
+    total = sum(r.builds() for r in replicas)
+    check(total == 1, f"exactly one build in the sum of the replicas' /metrics ({total})")
+    fine_map = job["map_id"]
+    for r in replicas:
+        check(request(r.base, "GET", f"/v1/maps/{fine_map}/coverage?threshold=-60")[0] == 200, f"{r.name} serves it")
+    check(sum(r.builds() for r in replicas) == 1, "without building it again")
+
+    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.25)))
+    status, created, _ = request(proxy, "POST", "/v1/scenarios", slow)
+    before = [r.builds() for r in replicas]
+    status, started, _ = request(proxy, "POST", "/v1/maps", {"scenario_id": created["id"], "kind": "rate"})
+    check(status == 202, "a rate-map job")
+
+    def builder():
+        return next((r for r, b in zip(replicas, before) if r.builds() > b), None)
+
+    wait_until("a replica started the build", lambda: builder() is not None, 20)
+    victim = builder()
+    survivors = [r for r in replicas if r is not victim]
+    wait_until("the build under way", lambda: request(survivors[0].base, "GET", f"/v1/jobs/{started['job_id']}")[1]["cells_done"] > 0, 20)
+    subprocess.run(["docker", "kill", victim.container()], check=True, capture_output=True)
+    killed = time.time()
+    job = wait_job(survivors[0].base, started["job_id"], 180)
+    check(job["state"] == "done", f"docker kill of {victim.name} mid-build: the job finished on another "
+                                  f"replica {time.time() - killed:.1f} s later")
+    status, shared, _ = request(survivors[1].base, "GET", f"/v1/maps/{job['map_id']}")
+    slow_file = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"{PROJECT}-slow.json")
+    with open(slow_file, "w") as f:
+        json.dump(slow, f)
+    alone = json.loads(subprocess.run([CLI, "map", "--scenario", slow_file, "--kind", "rate", "--quiet"],
+                                      capture_output=True, text=True, check=True).stdout)
+    os.remove(slow_file)
+    check(status == 200 and shared["values"] == alone["values"], "the map is bit-identical to a single-process build")
+
+    compose("restart")
+    for r in replicas:
+        r.refresh()
+    wait_until("every replica ready after the restart", lambda: all(r.ready() for r in replicas), 60)
+    wait_until("HAProxy forwarding", lambda: request(proxy, "GET", "/readyz", timeout=5)[0] == 200, 30)
+    time.sleep(2)
+    for map_id in (fine_map, job["map_id"]):
+        check(request(proxy, "GET", f"/v1/maps/{map_id}/coverage?threshold=1")[0] == 200,
+              f"after docker-compose restart, map {map_id[:8]}… is served")
+    check(sum(r.builds() for r in replicas) == 0, "with no build (Redis's append-only file kept it)")
+
+    path = {"map_id": fine_map, "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    listed = request(proxy, "GET", "/v1/scenarios")[1]["scenarios"]
+    paper = next(s["id"] for s in listed if s["name"] == "paper-single-user")
+    built = request(proxy, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})[1]
+    small = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    for r in replicas:
+        request(r.base, "POST", "/v1/paths", path)
+        request(r.base, "POST", "/v1/paths", small)
+    ratios = {}
+    for name, body in (("41² paper map", small), ("1001² map", path)):
+        direct = wrk(replicas[0].base, body)
+        through = wrk(proxy, body)
+        ratios[name] = through / direct
+        print(f"compose, path queries on the {name}: {direct:.0f} req/s on one replica directly, "
+              f"{through:.0f} req/s through HAProxy to three ({through / direct:.2f}×), 16 connections, 5 s each")
+    check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except BaseException:
+        print(compose("logs", "--tail", "20", check_rc=False), file=sys.stderr)
+        raise
+    finally:
+        compose("down", "-v", "--remove-orphans", check_rc=False)
