@@ -568,3 +568,63 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
     }
     cluster.finish(&build).await;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::radiomap::MapKind;
+    use crate::scenario::Scenario;
+
+    fn entry(fields: &[(&str, &str)]) -> StreamId {
+        StreamId {
+            id: "1-0".into(),
+            map: fields
+                .iter()
+                .map(|(k, v)| {
+                    (
+                        k.to_string(),
+                        redis::Value::BulkString(v.as_bytes().to_vec()),
+                    )
+                })
+                .collect(),
+            ..Default::default()
+        }
+    }
+
+    /// An entry is a build only if its key hashes to its map id: a replica never builds (and
+    /// stores under an id) a map other than the one the entry names.
+    #[test]
+    fn a_build_entry_must_name_the_map_its_key_defines() {
+        let scenario = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::new(
+            &scenario.content_hash(),
+            &scenario,
+            MapKind::Gain,
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        let json = serde_json::to_string(&key).unwrap();
+        let id = key.id();
+        let good = BuildEntry::of(&entry(&[("job_id", "j1"), ("map_id", &id), ("key", &json)]))
+            .expect("a well-formed entry");
+        assert_eq!((good.job_id.as_str(), good.key), ("j1", key));
+        let other = "0".repeat(32);
+        for fields in [
+            vec![
+                ("job_id", "j1"),
+                ("map_id", other.as_str()),
+                ("key", json.as_str()),
+            ],
+            vec![
+                ("job_id", "j1"),
+                ("map_id", id.as_str()),
+                ("key", "{\"kind\":1}"),
+            ],
+            vec![("map_id", id.as_str()), ("key", json.as_str())],
+        ] {
+            assert!(BuildEntry::of(&entry(&fields)).is_none(), "{fields:?}");
+        }
+    }
+}
