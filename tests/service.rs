@@ -126,33 +126,30 @@ impl Server {
             .await;
         format!("{}/v1/maps/{}", self.base, map["map_id"].as_str().unwrap())
     }
-    async fn metric(&self, needle: &str) -> f64 {
-        let text = self
-            .client
+    async fn metrics_text(&self) -> String {
+        self.client
             .get(format!("{}/metrics", self.base))
             .send()
             .await
             .unwrap()
             .text()
             .await
-            .unwrap();
-        text.lines()
+            .unwrap()
+    }
+    /// The first metric line that starts with `needle` (a name with its labels).
+    async fn metric(&self, needle: &str) -> f64 {
+        self.metrics_text()
+            .await
+            .lines()
             .find(|l| l.starts_with(needle))
             .and_then(|l| l.rsplit(' ').next())
             .map_or(0.0, |v| v.parse().unwrap())
     }
     /// The sum of a metric over all its labels (`name{…} v` and `name v` lines).
     async fn metric_total(&self, name: &str) -> f64 {
-        let text = self
-            .client
-            .get(format!("{}/metrics", self.base))
-            .send()
+        self.metrics_text()
             .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
-        text.lines()
+            .lines()
             .filter(|l| {
                 l.strip_prefix(name)
                     .is_some_and(|rest| rest.starts_with('{') || rest.starts_with(' '))

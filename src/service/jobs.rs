@@ -578,16 +578,7 @@ impl Jobs {
         {
             return Err(ApiError::queue_full(self.queue_limit));
         }
-        let job = self.admit(
-            key.scenario_id.clone(),
-            owner,
-            Work::Map {
-                map_id: map_id.clone(),
-                key: key.clone(),
-                handover: Mutex::new(Handover::default()),
-            },
-        );
-        metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
+        let job = self.admit_map(uuid::Uuid::new_v4().simple().to_string(), &key, owner);
         in_flight.insert(map_id, job.clone());
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id_of(&job), scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
@@ -620,17 +611,7 @@ impl Jobs {
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
         let map_id = key.id();
-        let job = self.admit_as(
-            job_id,
-            key.scenario_id.clone(),
-            owner,
-            Work::Map {
-                map_id: map_id.clone(),
-                key: key.clone(),
-                handover: Mutex::new(Handover::default()),
-            },
-        );
-        metrics::counter!("irs_map_builds_total", "kind" => format!("{:?}", key.kind).to_lowercase()).increment(1);
+        let job = self.admit_map(job_id, &key, owner);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
@@ -747,6 +728,21 @@ impl Jobs {
             scenario_id,
             owner,
             work,
+        )
+    }
+
+    /// A map build admitted as job `id`, counted in `irs_map_builds_total`.
+    fn admit_map(&self, id: String, key: &MapKey, owner: Option<Owner>) -> Arc<Job> {
+        metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
+        self.admit_as(
+            id,
+            key.scenario_id.clone(),
+            owner,
+            Work::Map {
+                map_id: key.id(),
+                key: key.clone(),
+                handover: Mutex::new(Handover::default()),
+            },
         )
     }
 

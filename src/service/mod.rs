@@ -234,16 +234,8 @@ impl AppState {
                 "shared scenario {id} has another id in this build"
             )));
         }
-        let mut owners: Vec<Caller> = record
-            .owners
-            .into_iter()
-            .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
-            .collect();
-        if owners.is_empty() {
-            owners.push(Caller::Open);
-        }
         let mut stored = None;
-        for owner in owners {
+        for owner in registrants(record.owners) {
             stored = Some(self.register_scenario(scenario.clone(), "api", &owner)?.0);
         }
         Ok(stored)
@@ -310,6 +302,18 @@ impl AppState {
     }
 }
 
+/// Who registers a recorded scenario again: each owner digest it was kept with, or nobody in
+/// particular (authentication was off) when it has none.
+fn registrants(owners: Vec<String>) -> Vec<Caller> {
+    if owners.is_empty() {
+        return vec![Caller::Open];
+    }
+    owners
+        .into_iter()
+        .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
+        .collect()
+}
+
 /// Loads the built-in scenarios, then every `*.json` in `dir` (a missing directory is fine; an
 /// invalid file is an error naming the file and the field).
 pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
@@ -363,15 +367,7 @@ pub fn restore(state: &AppState) {
                 continue;
             }
         };
-        let mut owners: Vec<Caller> = record
-            .owners
-            .into_iter()
-            .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
-            .collect();
-        if owners.is_empty() {
-            owners.push(Caller::Open);
-        }
-        for owner in owners {
+        for owner in registrants(record.owners) {
             if let Err(e) = state.register_scenario(scenario.clone(), "api", &owner) {
                 tracing::warn!(scenario_id = %id, error = %e.problem.detail, "recorded scenario not registered");
             }

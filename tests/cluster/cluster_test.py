@@ -193,6 +193,19 @@ def wrk(url, body, seconds=5, connections=16):
     return float(line.split()[1])
 
 
+def throughputs(direct_base, proxy_base, bodies, behind):
+    """wrk against one replica directly, then through HAProxy, per named path query: the ratios."""
+    ratios = {}
+    for name, body in bodies.items():
+        direct = wrk(direct_base, body)
+        through = wrk(proxy_base, body)
+        ratios[name] = through / direct
+        print(f"path queries on the {name}: {direct:.0f} req/s on one replica directly, "
+              f"{through:.0f} req/s through HAProxy to {behind} ({through / direct:.2f}×), "
+              "16 connections, 5 s each", flush=True)
+    return ratios
+
+
 def main():
     global BINARY
     BINARY = os.path.abspath(sys.argv[1])
@@ -315,13 +328,7 @@ def main():
     for r in survivors:
         request(r.base, "POST", "/v1/paths", small_path)
         request(r.base, "POST", "/v1/paths", path)
-    ratios = {}
-    for name, body in (("41² paper map", small_path), ("1001² map", path)):
-        direct = wrk(cached.base, body)
-        through = wrk(proxy.base, body)
-        ratios[name] = through / direct
-        print(f"path queries on the {name}: {direct:.0f} req/s on one replica directly, "
-              f"{through:.0f} req/s through HAProxy to two ({through / direct:.2f}×), 16 connections, 5 s each")
+    ratios = throughputs(cached.base, proxy.base, {"41² paper map": small_path, "1001² map": path}, "two")
     # On the 41² map a query costs about what HAProxy's own hop costs, and on a two-core
     # machine wrk, HAProxy and the replicas share the same cores, so the ratio there measures
     # the machine (reported, not asserted); with real work per query the proxy must not be

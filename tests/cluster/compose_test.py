@@ -20,7 +20,7 @@ import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cluster_test import ROOT, check, free_port, request, scenario, wait_job, wait_until, wrk  # noqa: E402
+from cluster_test import ROOT, check, free_port, request, scenario, throughputs, wait_job, wait_until  # noqa: E402
 
 IMAGE, CLI = sys.argv[1], os.path.abspath(sys.argv[2])
 PROJECT = f"irsci{uuid.uuid4().hex[:6]}"
@@ -135,13 +135,7 @@ def main():
     for r in replicas:
         request(r.base, "POST", "/v1/paths", path)
         request(r.base, "POST", "/v1/paths", small)
-    ratios = {}
-    for name, body in (("41² paper map", small), ("1001² map", path)):
-        direct = wrk(replicas[0].base, body)
-        through = wrk(proxy, body)
-        ratios[name] = through / direct
-        print(f"compose, path queries on the {name}: {direct:.0f} req/s on one replica directly, "
-              f"{through:.0f} req/s through HAProxy to three ({through / direct:.2f}×), 16 connections, 5 s each")
+    ratios = throughputs(replicas[0].base, proxy, {"41² paper map": small, "1001² map": path}, "three")
     check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
 
 
