@@ -297,7 +297,7 @@ async fn register_scenario(
 ) -> Result<Response, ApiError> {
     let scenario = parse_scenario(value, "")?;
     let (stored, created) = state.register_scenario(scenario, "api", &caller)?;
-    state.share_scenario(&stored).await?;
+    state.share_scenario(&stored, true).await?;
     let status = if created {
         StatusCode::CREATED
     } else {
@@ -554,7 +554,7 @@ async fn obtain_shared(
         .shared_scenario(&key.scenario_id)
         .await?
         .ok_or_else(|| ApiError::not_found("scenario", &key.scenario_id))?;
-    state.share_scenario(&stored).await?;
+    state.share_scenario(&stored, false).await?;
     let queued = JobRecord::queued(&key, caller.owner().as_ref());
     let (job_id, _) = cluster
         .enqueue(&map_id, &key, queued, state.limits().cluster_queue)

@@ -216,8 +216,24 @@ impl Cluster {
         }
     }
 
-    pub async fn put_scenario(&self, id: &str, record: &ScenarioRecord) -> Result<(), ApiError> {
+    /// Publishes a scenario's record; with `replace` false only when Redis has none yet (a
+    /// map request must make its scenario readable, not upload a floor plan each time).
+    pub async fn put_scenario(
+        &self,
+        id: &str,
+        record: &ScenarioRecord,
+        replace: bool,
+    ) -> Result<(), ApiError> {
         let mut conn = self.conn()?;
+        if !replace {
+            let present: bool = conn
+                .exists(scenario_key(id))
+                .await
+                .map_err(|e| self.error(&e))?;
+            if present {
+                return Ok(());
+            }
+        }
         let json = serde_json::to_string(record).expect("records serialise");
         conn.set::<_, _, ()>(scenario_key(id), json)
             .await

@@ -241,14 +241,18 @@ impl AppState {
         Ok(stored)
     }
 
-    /// In a cluster: publishes an API scenario (document and owners) for the other replicas.
+    /// In a cluster: publishes an API scenario (document and owners) for the other replicas;
+    /// `replace` false leaves a record already there as it is (see [`cluster::Cluster::put_scenario`]).
     pub(crate) async fn share_scenario(
         &self,
         stored: &cache::StoredScenario,
+        replace: bool,
     ) -> Result<(), ApiError> {
         match self.cluster() {
             Some(cluster) if stored.source == "api" => {
-                cluster.put_scenario(&stored.id, &stored.record()).await
+                cluster
+                    .put_scenario(&stored.id, &stored.record(), replace)
+                    .await
             }
             _ => Ok(()),
         }
