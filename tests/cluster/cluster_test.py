@@ -119,12 +119,21 @@ class Replica:
         self.port = int(self.base.rsplit(":", 1)[1])
 
     def builds(self):
-        text = urllib.request.urlopen(self.base + "/metrics", timeout=10).read().decode()
-        return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
-                   if l.startswith("irs_map_builds_total"))
+        return builds(self.base)
 
     def ready(self):
-        return request(self.base, "GET", "/readyz", timeout=5)[0] == 200
+        return ready(self.base)
+
+
+def builds(base):
+    """The map builds a replica ran (irs_map_builds_total over its labels)."""
+    text = urllib.request.urlopen(base + "/metrics", timeout=10).read().decode()
+    return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
+               if l.startswith("irs_map_builds_total"))
+
+
+def ready(base):
+    return request(base, "GET", "/readyz", timeout=5)[0] == 200
 
 
 class HAProxy:

@@ -20,7 +20,8 @@ import time
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cluster_test import ROOT, check, free_port, request, scenario, throughputs, wait_job, wait_until  # noqa: E402
+from cluster_test import (  # noqa: E402
+    ROOT, builds, check, free_port, ready, request, scenario, throughputs, wait_job, wait_until)
 
 IMAGE, CLI = sys.argv[1], os.path.abspath(sys.argv[2])
 PROJECT = f"irsci{uuid.uuid4().hex[:6]}"
@@ -50,13 +51,10 @@ class Replica:
         return compose("ps", "-q", self.name)
 
     def builds(self):
-        import urllib.request
-        text = urllib.request.urlopen(self.base + "/metrics", timeout=10).read().decode()
-        return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
-                   if l.startswith("irs_map_builds_total"))
+        return builds(self.base)
 
     def ready(self):
-        return request(self.base, "GET", "/readyz", timeout=5)[0] == 200
+        return ready(self.base)
 
 
 def main():
