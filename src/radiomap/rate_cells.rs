@@ -7,7 +7,7 @@ use crate::channel::ChannelModel;
 use crate::phases::PhaseMode;
 use crate::rate::{Access, RateModel};
 use crate::scenario::{Grid, Scenario};
-use crate::solver::{SolverKind, cell_problem, phases_of, solve_cell, sru_part};
+use crate::solver::{SolverKind, WarmStart, cell_problem, phases_of, solve_cell_warm, sru_part};
 use rayon::prelude::*;
 
 /// Per-cell configurations and certificates of a rate map (the values live in the map).
@@ -104,6 +104,8 @@ pub(super) fn build_rate_cells(
         .zip(order.par_chunks_mut(ny))
         .enumerate()
         .try_for_each(|(i, ((((vals, ups), ph), pw), ord))| {
+            // Each row is solved in order, every cell warm-started from the last one solved.
+            let mut warm = WarmStart::default();
             for j in 0..ny {
                 if progress.is_cancelled() {
                     return Err(Cancelled);
@@ -114,7 +116,7 @@ pub(super) fn build_rate_cells(
                 }
                 let [x, y] = grid.centre(i, j);
                 let problem = cell_problem(channel, [x, y, height], &srus, with_irs);
-                let sol = solve_cell(&problem, &model, key.phases, solver);
+                let sol = solve_cell_warm(&problem, &model, key.phases, solver, &mut warm);
                 if sol.upper_bound.is_finite() {
                     ups[j] = sol.upper_bound;
                 }

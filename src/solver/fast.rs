@@ -16,8 +16,18 @@
 //! the one-parameter family of every (MRU, SRU k) pair — the directions in which the SRUs pull
 //! apart — and polish the best two starts by the same coordinate ascent on the full objective.
 //! Either way the certificate ([`super::certificate`]) reports how far from optimal the result can be.
+//!
+//! Neighbouring cells of a map have nearly the same optimal *weighting* z of the two users
+//! (their phases differ completely: cells are several wavelengths apart), so a map starts each
+//! cell's pattern search from the previous cell's z ([`FamilyPoint`]) instead of the 400-point
+//! grid, and ascends from that start alone; [`super::solve_cell_warm`] keeps the answer only
+//! when the certificate shows it within [`super::WARM_START_ACCEPT_GAP`] of optimal, and
+//! otherwise runs the cold search too.
+//!
+//! The searches compare the rate's monotone *score* 1 + SINR ([`RateModel::mru_score`]) and take
+//! one logarithm at the end.
 
-use super::{CellProblem, objective};
+use super::{CellProblem, score};
 use crate::channel::C64;
 use crate::numerics::{golden_section_max, l1_norm};
 use crate::rate::RateModel;
@@ -31,6 +41,10 @@ const Z_DECADES: f64 = 3.0;
 const Z_MAGNITUDES: usize = 25;
 /// arg z grid points (22.5° apart), for the same reason.
 const Z_ANGLES: usize = 16;
+/// Pattern-search rounds refining z (each tries the 4 neighbours, halving the steps when none
+/// is better): 12 halvings take the grid's step to 1/4096 of itself, far below what moves the
+/// rate after the ascent.
+const PATTERN_STEPS: usize = 12;
 /// Phase grid per element in the coordinate ascent (22.5° apart): the per-element objective
 /// is a sinusoid-like curve with one maximum, which a 16-point grid brackets.
 const ELEMENT_GRID: usize = 16;
@@ -42,12 +56,39 @@ const ELEMENT_REFINEMENT_STEPS: usize = 16;
 /// scenarios, the rest is a safety margin (the loop stops early once a sweep gains < 1e-10).
 const MAX_SWEEPS: usize = 6;
 
+/// Where a (MRU, SRU) pair's family search ended: z = scale · 10^log_mag · e^{j·angle}, with
+/// `log_mag` = −∞ for z = 0. What a map hands from one cell to the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FamilyPoint {
+    log_mag: f64,
+    angle: f64,
+}
+
 /// Returns v = [e^{jθ}; 1] maximising the MRU's rate (continuous phases).
 pub fn solve(problem: &CellProblem, model: &RateModel) -> Vec<C64> {
+    solve_from(problem, model, None).0
+}
+
+/// [`solve`], warm-started from a neighbouring cell's family point when one is given and the
+/// cell has one SRU: the pattern search starts there (no grid) and only its result is
+/// ascended. Returns v and, with one SRU, the family point to hand to the next cell.
+pub fn solve_from(
+    problem: &CellProblem,
+    model: &RateModel,
+    hint: Option<FamilyPoint>,
+) -> (Vec<C64>, Option<FamilyPoint>) {
     let mut eval = Evaluator::new(problem, model);
+    let grid = PhaseGrid::new();
+    if let (Some(hint), 2) = (hint, problem.users()) {
+        let (_, mut v, point) = search_pair(&mut eval, problem, 1, Some(hint));
+        coordinate_ascent(&mut eval, &grid, problem, &mut v);
+        return (v, Some(point));
+    }
     let mut starts: Vec<(f64, Vec<C64>)> = Vec::new();
+    let mut first_point = None;
     for k in 1..problem.users() {
-        let (value, v) = search_pair(&mut eval, problem, k);
+        let (value, v, point) = search_pair(&mut eval, problem, k, None);
+        first_point.get_or_insert(point);
         starts.push((value, v));
     }
     // The MRU's own optimum (z = 0) is in every pair's family; add each SRU's own (z → ∞).
@@ -60,12 +101,25 @@ pub fn solve(problem: &CellProblem, model: &RateModel) -> Vec<C64> {
     starts.truncate(2);
     let mut best = (f64::NEG_INFINITY, starts[0].1.clone());
     for (_, mut v) in starts {
-        let value = coordinate_ascent(&mut eval, problem, &mut v);
+        let value = coordinate_ascent(&mut eval, &grid, problem, &mut v);
         if value > best.0 {
             best = (value, v);
         }
     }
-    best.1
+    (best.1, first_point.filter(|_| problem.users() == 2))
+}
+
+/// e^{jφ} at the coordinate ascent's grid phases, computed once per solve rather than once per
+/// element and sweep.
+struct PhaseGrid([(f64, C64); ELEMENT_GRID]);
+
+impl PhaseGrid {
+    fn new() -> PhaseGrid {
+        PhaseGrid(std::array::from_fn(|g| {
+            let phi = TAU * g as f64 / ELEMENT_GRID as f64;
+            (phi, C64::from_polar(1.0, phi))
+        }))
+    }
 }
 
 /// v_n(z) for the pair (MRU = user `m`, SRU `k`); `z = None` is the limit z → ∞.
@@ -83,8 +137,14 @@ fn family(problem: &CellProblem, m: usize, k: usize, z: Option<C64>, v: &mut [C6
     v.iter_mut().for_each(|x| *x *= reference);
 }
 
-/// Grid search and pattern-search refinement of z for one (MRU, SRU) pair.
-fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, Vec<C64>) {
+/// Grid search (or a neighbour's `hint`) and pattern-search refinement of z for one
+/// (MRU, SRU) pair; returns the best score, its v and where it is.
+fn search_pair(
+    eval: &mut Evaluator,
+    problem: &CellProblem,
+    k: usize,
+    hint: Option<FamilyPoint>,
+) -> (f64, Vec<C64>, FamilyPoint) {
     let l1 = |l: usize| l1_norm(problem.user(l));
     // Balance the two users' terms; if either has no IRS term the family does not depend on the
     // scale, and a degenerate one (0 or ∞) would push z into subnormal arithmetic.
@@ -103,27 +163,47 @@ fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, V
         );
         eval.value(v)
     };
-    let mut best = (f64::NEG_INFINITY, -Z_DECADES - 1.0, 0.0);
-    for mi in 0..Z_MAGNITUDES {
-        let log_mag = -Z_DECADES + 2.0 * Z_DECADES * mi as f64 / (Z_MAGNITUDES - 1) as f64;
-        for ai in 0..Z_ANGLES {
-            let angle = TAU * ai as f64 / Z_ANGLES as f64;
-            let value = at(log_mag, angle, &mut v);
-            if value > best.0 {
-                best = (value, log_mag, angle);
-            }
-        }
-    }
+    let grid_step_mag = 2.0 * Z_DECADES / (Z_MAGNITUDES - 1) as f64;
+    let grid_step_angle = TAU / Z_ANGLES as f64;
+    let zero = FamilyPoint {
+        log_mag: f64::NEG_INFINITY,
+        angle: 0.0,
+    };
     // z = 0 (the MRU's own optimum, eq. 11's analogue) always competes.
-    let at_zero = at(f64::NEG_INFINITY, 0.0, &mut v);
+    let at_zero = at(zero.log_mag, zero.angle, &mut v);
+    let (mut best, mut step_mag, mut step_angle) = match hint {
+        // A neighbour's point is near this cell's: a quarter of the grid's steps.
+        Some(h) if h.log_mag.is_finite() => (
+            (at(h.log_mag, h.angle, &mut v), h.log_mag, h.angle),
+            grid_step_mag / 4.0,
+            grid_step_angle / 4.0,
+        ),
+        // The neighbour's optimum was z = 0: so, likely, is this one's.
+        Some(_) => (
+            (f64::NEG_INFINITY, 0.0, 0.0),
+            grid_step_mag,
+            grid_step_angle,
+        ),
+        None => {
+            let mut best = (f64::NEG_INFINITY, -Z_DECADES - 1.0, 0.0);
+            for mi in 0..Z_MAGNITUDES {
+                let log_mag = -Z_DECADES + grid_step_mag * mi as f64;
+                for ai in 0..Z_ANGLES {
+                    let angle = grid_step_angle * ai as f64;
+                    let value = at(log_mag, angle, &mut v);
+                    if value > best.0 {
+                        best = (value, log_mag, angle);
+                    }
+                }
+            }
+            (best, grid_step_mag, grid_step_angle)
+        }
+    };
     if at_zero >= best.0 || !best.0.is_finite() {
-        return (at_zero, v);
+        at(zero.log_mag, zero.angle, &mut v);
+        return (at_zero, v, zero);
     }
-    let (mut step_mag, mut step_angle) = (
-        2.0 * Z_DECADES / (Z_MAGNITUDES - 1) as f64,
-        TAU / Z_ANGLES as f64,
-    );
-    for _ in 0..12 {
+    for _ in 0..PATTERN_STEPS {
         let mut moved = false;
         for (dm, da) in [
             (step_mag, 0.0),
@@ -143,7 +223,11 @@ fn search_pair(eval: &mut Evaluator, problem: &CellProblem, k: usize) -> (f64, V
         }
     }
     let value = at(best.1, best.2, &mut v);
-    (value, v)
+    let point = FamilyPoint {
+        log_mag: best.1,
+        angle: best.2.rem_euclid(TAU),
+    };
+    (value, v, point)
 }
 
 /// Reusable buffers for evaluating the objective without allocating.
@@ -167,19 +251,21 @@ impl<'a> Evaluator<'a> {
         }
     }
 
+    /// The score (1 + the MRU's SINR, monotone in its rate) at v; −∞ where an SRU cannot be
+    /// served.
     fn value(&mut self, v: &[C64]) -> f64 {
         self.problem.lambdas(v, &mut self.lambdas);
-        objective(self.model, &self.lambdas)
+        score(self.model, &self.lambdas)
     }
 
-    /// Objective with element n set to e^{jφ}, given `base_l = a_lᵀv − a_ln v_n` in `self.base`.
+    /// The score with element n set to e^{jφ}, given `base_l = a_lᵀv − a_ln v_n` in `self.base`.
     #[inline]
     fn value_with(&mut self, n: usize, phasor: C64) -> f64 {
         for l in 0..self.problem.users() {
             let s = self.base[l] + self.problem.user(l)[n] * phasor;
             self.lambdas[l] = s.norm_sqr() + self.problem.tau[l];
         }
-        objective(self.model, &self.lambdas)
+        score(self.model, &self.lambdas)
     }
 
     fn load_sums(&mut self, v: &[C64]) {
@@ -201,8 +287,13 @@ impl<'a> Evaluator<'a> {
     }
 }
 
-/// Element-wise coordinate ascent on the true objective (continuous phases). Returns the value.
-fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64]) -> f64 {
+/// Element-wise coordinate ascent on the true objective (continuous phases). Returns the score.
+fn coordinate_ascent(
+    eval: &mut Evaluator,
+    grid: &PhaseGrid,
+    problem: &CellProblem,
+    v: &mut [C64],
+) -> f64 {
     eval.load_sums(v);
     let mut current = eval.value(v);
     for _ in 0..MAX_SWEEPS {
@@ -210,9 +301,8 @@ fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64])
         for (n, vn) in v[..problem.dim - 1].iter_mut().enumerate() {
             eval.exclude(n, *vn);
             let mut best = (current, vn.arg());
-            for g in 0..ELEMENT_GRID {
-                let phi = TAU * g as f64 / ELEMENT_GRID as f64;
-                let value = eval.value_with(n, C64::from_polar(1.0, phi));
+            for &(phi, phasor) in &grid.0 {
+                let value = eval.value_with(n, phasor);
                 if value > best.0 {
                     best = (value, phi);
                 }
@@ -234,7 +324,8 @@ fn coordinate_ascent(eval: &mut Evaluator, problem: &CellProblem, v: &mut [C64])
             }
             eval.include(n, *vn);
         }
-        if current - before <= 1e-10 * current.abs().max(1e-3) {
+        // Scores are ≥ 1 where finite: a relative test.
+        if current - before <= 1e-10 * current.abs().max(1.0) {
             break;
         }
     }
@@ -264,7 +355,7 @@ pub fn discrete_ascent(problem: &CellProblem, model: &RateModel, bits: u8, v: &m
             for offset in 0..window {
                 let level = (here + levels + offset - window / 2) % levels;
                 let value = eval.value_with(n, phasor(level));
-                if value > current + 1e-12 * current.abs().max(1e-3) {
+                if value > current + 1e-12 * current.abs().max(1.0) {
                     current = value;
                     *vn = phasor(level);
                     improved = true;
