@@ -2,13 +2,17 @@
 # Load test: path queries on the cached paper single-user map, over loopback only, bounded in
 # time. Starts the release server on a free port, warms the map, runs wrk, stops the server.
 #   scripts/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
+# Environment: IRS_BIN, a server binary to test instead of this checkout's release build (to
+# compare two builds in one run); PHASE_PRECISION, the queries' phase_precision (the server's
+# default when unset). The answer's size is printed before the figures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
 command -v wrk >/dev/null || { apt-get update -qq && apt-get install -y -qq wrk >/dev/null; }
-cargo build --release --quiet
+binary=${IRS_BIN:-}
+if [ -z "$binary" ]; then cargo build --release --quiet; binary=./target/release/irs-planner; fi
 log=$(mktemp); lua=$(mktemp --suffix=.lua)
-RUST_LOG=warn ./target/release/irs-planner serve --bind 127.0.0.1:0 >"$log" 2>/dev/null &
+RUST_LOG=warn "$binary" serve --bind 127.0.0.1:0 >"$log" 2>/dev/null &
 server=$!
 trap 'kill $server 2>/dev/null || true; rm -f "$log" "$lua"' EXIT
 for _ in $(seq 100); do grep -q listening "$log" && break; sleep 0.1; done
@@ -16,8 +20,10 @@ url=$(sed -n 's/^listening on //p' "$log")
 sid=$(curl -s "$url/v1/scenarios" | python3 -c "import json,sys; print([s['id'] for s in json.load(sys.stdin)['scenarios'] if s['name']=='paper-single-user'][0])")
 map=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' \
   -d "{\"scenario_id\":\"$sid\",\"kind\":\"gain\"}" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
-body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62}"
-curl -sf -X POST "$url/v1/paths" -H 'content-type: application/json' -d "$body" >/dev/null
+precision=${PHASE_PRECISION:+,\"phase_precision\":\"$PHASE_PRECISION\"}
+body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62$precision}"
+bytes=$(curl -sf -X POST "$url/v1/paths" -H 'content-type: application/json' -d "$body" | wc -c)
+echo "answer: $bytes bytes"
 cat >"$lua" <<LUA
 wrk.method = "POST"
 wrk.body = '$body'

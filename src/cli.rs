@@ -10,7 +10,7 @@ use crate::input::{parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::phases::PhaseMode;
 use crate::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
-use crate::planner::{self, Threshold};
+use crate::planner::{self, PhasePrecision, Threshold};
 use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
 use crate::rate::Access;
 use crate::render::{self, RenderOptions};
@@ -252,6 +252,9 @@ pub struct PlanArgs {
     /// Check the path by Monte Carlo with this many Rician draws per waypoint (paper Fig. 10).
     #[arg(long, value_name = "DRAWS")]
     pub monte_carlo: Option<usize>,
+    /// How finely the waypoints' phases are written: 1e-2, 1e-3, 1e-4, 1e-6 (rad) or full.
+    #[arg(long, value_name = "STEP", default_value = "1e-4")]
+    pub phase_precision: PhasePrecision,
     /// Seed of the Monte Carlo check.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -420,7 +423,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
     let started = Instant::now();
-    let path = planner::plan(
+    let mut path = planner::plan(
         &map,
         args.start,
         args.goal,
@@ -428,6 +431,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(format!("--{e}")))?;
+    path.round_phases(args.phase_precision);
     write_png(
         &args.map,
         &map,

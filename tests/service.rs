@@ -336,6 +336,44 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
     assert!(path["took_ms"].as_f64().unwrap() >= 0.0);
     assert!((path["max_feasible_threshold"].as_f64().unwrap() - -59.6).abs() < 0.3);
 
+    // Phases are written to 1e-4 rad by default; `full` keeps every bit, and the two agree to
+    // half a step. An unknown precision is refused, naming the field.
+    let phases = |answer: &Value| -> Vec<f64> {
+        answer["waypoints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|w| w["irs_phases_rad"][0].as_array().unwrap().clone())
+            .map(|t| t.as_f64().unwrap())
+            .collect()
+    };
+    let mut full_request = request.clone();
+    full_request["phase_precision"] = "full".into();
+    let (status, full) = server.post("/v1/paths", full_request.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{full}");
+    let (rounded, exact) = (phases(&path), phases(&full));
+    assert_eq!(rounded.len(), exact.len());
+    assert!(!rounded.is_empty() && rounded.len() % 60 == 0);
+    for (r, e) in rounded.iter().zip(&exact) {
+        let error = (r - e).abs();
+        assert!(
+            error.min(std::f64::consts::TAU - error) <= 5e-5 + 1e-12,
+            "{r} vs {e}"
+        );
+        assert_eq!(*r, (r * 1e4).round() / 1e4, "{r} has more than 4 decimals");
+    }
+    assert!(exact.iter().any(|e| *e != (e * 1e4).round() / 1e4));
+    let full_bytes = serde_json::to_string(&full).unwrap().len();
+    assert!(
+        api_body.len() * 2 < full_bytes,
+        "rounded {} B vs full {full_bytes} B",
+        api_body.len()
+    );
+    full_request["phase_precision"] = "1e-5".into();
+    let (status, body) = server.post("/v1/paths", full_request).await;
+    problem(status, &body, StatusCode::UNPROCESSABLE_ENTITY, "invalid_field");
+    assert_eq!(body["field"], "phase_precision", "{body}");
+
     // A sweep over thresholds, defined by the map key instead of the id.
     let (status, sweep) = server
         .post("/v1/sweeps", json!({"map": {"scenario_id": id, "kind": "gain"}, "start": [-10, 0], "goal": [10, 0], "thresholds": [-65, -62, -59]}))

@@ -235,6 +235,80 @@ pub fn plan(
     Ok(answer)
 }
 
+/// How finely a path answer's IRS phases are written. A phase written with 17 significant
+/// digits is ≈ 20 bytes of JSON and most of a path answer (a 961-waypoint N = 256 path was
+/// 3.84 MB); no IRS resolves anything near that: 2-bit to 8-bit surfaces have steps of
+/// 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a reflected term's
+/// amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum PhasePrecision {
+    /// Rounded to 2 decimals (error ≤ 0.005 rad).
+    #[serde(rename = "1e-2")]
+    Centi,
+    /// Rounded to 3 decimals (error ≤ 5·10⁻⁴ rad).
+    #[serde(rename = "1e-3")]
+    Milli,
+    /// Rounded to 4 decimals (error ≤ 5·10⁻⁵ rad), the default.
+    #[default]
+    #[serde(rename = "1e-4")]
+    TenthMilli,
+    /// Rounded to 6 decimals (error ≤ 5·10⁻⁷ rad).
+    #[serde(rename = "1e-6")]
+    Micro,
+    /// Every bit of the f64 (the shortest decimal that reads back to the same number).
+    #[serde(rename = "full")]
+    Full,
+}
+
+impl PhasePrecision {
+    /// Decimals kept, `None` for full precision.
+    fn decimals(self) -> Option<i32> {
+        match self {
+            PhasePrecision::Centi => Some(2),
+            PhasePrecision::Milli => Some(3),
+            PhasePrecision::TenthMilli => Some(4),
+            PhasePrecision::Micro => Some(6),
+            PhasePrecision::Full => None,
+        }
+    }
+
+    /// θ rounded to this precision: the double nearest the decimal, which JSON writes as that
+    /// decimal ("4.7124"). A phase rounding up to 2π is written as 0, staying in [0, 2π).
+    pub fn round(self, theta: f64) -> f64 {
+        let Some(decimals) = self.decimals() else {
+            return theta;
+        };
+        let scale = 10f64.powi(decimals);
+        let rounded = (theta * scale).round() / scale;
+        if rounded >= std::f64::consts::TAU {
+            0.0
+        } else {
+            rounded
+        }
+    }
+}
+
+impl FromStr for PhasePrecision {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::input::parse_name(s)
+    }
+}
+
+impl PathAnswer {
+    /// Rounds every waypoint's IRS phases to `precision`.
+    pub fn round_phases(&mut self, precision: PhasePrecision) {
+        if precision == PhasePrecision::Full {
+            return;
+        }
+        for waypoint in &mut self.waypoints {
+            for surface in &mut waypoint.config.irs_phases_rad {
+                surface.iter_mut().for_each(|t| *t = precision.round(*t));
+            }
+        }
+    }
+}
+
 /// Distance versus threshold for a list of thresholds, in one request. `progress` counts the
 /// thresholds done; cancelling it stops the sweep before the next threshold.
 pub fn sweep(
@@ -279,6 +353,38 @@ pub fn sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Rounded phases stay in [0, 2π), are within half a step of the original, and print as
+    /// the short decimal; `full` keeps every bit.
+    #[test]
+    fn phase_precision_rounds_within_half_a_step() {
+        use std::f64::consts::TAU;
+        let p = PhasePrecision::default();
+        assert_eq!(p, PhasePrecision::TenthMilli);
+        assert_eq!(
+            serde_json::to_string(&p.round(4.71238898038469)).unwrap(),
+            "4.7124"
+        );
+        assert_eq!(p.round(TAU - 1e-6), 0.0);
+        for k in 0..10_000 {
+            let theta = TAU * k as f64 / 10_000.0 + 1e-7;
+            for (precision, half_step) in [
+                (PhasePrecision::Centi, 5e-3),
+                (PhasePrecision::Milli, 5e-4),
+                (PhasePrecision::TenthMilli, 5e-5),
+                (PhasePrecision::Micro, 5e-7),
+            ] {
+                let r = precision.round(theta);
+                assert!((0.0..TAU).contains(&r));
+                let error = (r - theta).abs().min(TAU - (r - theta).abs());
+                assert!(error <= half_step * (1.0 + 1e-9), "{precision:?} {theta}");
+                assert!(serde_json::to_string(&r).unwrap().len() <= 9);
+            }
+            assert_eq!(PhasePrecision::Full.round(theta), theta);
+        }
+        assert_eq!("1e-6".parse::<PhasePrecision>(), Ok(PhasePrecision::Micro));
+        assert!("1e-5".parse::<PhasePrecision>().is_err());
+    }
 
     #[test]
     fn thresholds_parse_as_in_json() {

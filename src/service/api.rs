@@ -14,7 +14,7 @@ use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
 use crate::placement::{self, Candidates, Objective, Search, What};
-use crate::planner::{self, SweepAnswer, Threshold};
+use crate::planner::{self, PhasePrecision, SweepAnswer, Threshold};
 use crate::radiomap::cost;
 use crate::radiomap::{MapKey, MapKind, MapStats, Progress, RadioMap, WorkError};
 use crate::rate::Access;
@@ -1167,6 +1167,9 @@ struct PathRequest {
     monte_carlo_draws: Option<usize>,
     #[serde(default, deserialize_with = "present")]
     seed: Option<u64>,
+    /// How finely the waypoints' phases are written (default 1e-4 rad).
+    #[serde(default, deserialize_with = "present")]
+    phase_precision: Option<PhasePrecision>,
 }
 
 /// The map a path or sweep query names, or the 202 answer while it is built.
@@ -1236,10 +1239,12 @@ async fn plan_path(
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let planned = map.clone();
-    let path = heavy(&state, "path", cells, move |_| {
+    let mut path = heavy(&state, "path", cells, move |_| {
         planner::plan(&planned, start, goal, threshold, v_max)
     })
     .await??;
+    // Rounded before the Monte Carlo check, which then evaluates the phases as sent.
+    path.round_phases(request.phase_precision.unwrap_or_default());
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
