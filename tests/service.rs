@@ -371,7 +371,12 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
     );
     full_request["phase_precision"] = "1e-5".into();
     let (status, body) = server.post("/v1/paths", full_request).await;
-    problem(status, &body, StatusCode::UNPROCESSABLE_ENTITY, "invalid_field");
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+    );
     assert_eq!(body["field"], "phase_precision", "{body}");
 
     // A sweep over thresholds, defined by the map key instead of the id.
