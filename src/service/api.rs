@@ -1268,8 +1268,24 @@ async fn plan_path(
         }
         _ => None,
     };
+    // Sized up front: ~10 bytes per rounded phase and ~150 per waypoint's other fields, so the
+    // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
+    let phases: usize = path
+        .waypoints
+        .first()
+        .map_or(0, |w| w.config.irs_phases_rad.iter().map(Vec::len).sum());
+    let capacity = 512 + path.waypoints.len() * (150 + 10 * phases);
     let answer = Timed::since(started, CheckedPath { path, monte_carlo });
-    Ok(Json(answer).into_response())
+    Ok(json_sized(&answer, capacity))
+}
+
+/// A JSON answer serialised straight into one buffer of about `capacity` bytes.
+fn json_sized(value: &impl Serialize, capacity: usize) -> Response {
+    let mut body = Vec::with_capacity(capacity);
+    match serde_json::to_writer(&mut body, value) {
+        Ok(()) => ([(header::CONTENT_TYPE, "application/json")], body).into_response(),
+        Err(e) => ApiError::internal(e.to_string()).into_response(),
+    }
 }
 
 #[derive(Debug, Deserialize)]
