@@ -75,7 +75,7 @@ pub struct RateModel {
     /// r̄ per user; entry 0 (the MRU) is unused.
     targets: Vec<f64>,
     /// 2^{r̄_l} per user (NOMA's tail growth), precomputed: the solvers evaluate the split
-    /// millions of times per map, and `exp2` was a third of its cost.
+    /// millions of times per map, each of which took two `exp2` per SRU before.
     growth: Vec<f64>,
     /// The SINR each user's target needs: 2^{r̄_l} − 1 (NOMA), 2^{(K+1) r̄_l} − 1 (OMA, K+1 bands).
     excess: Vec<f64>,

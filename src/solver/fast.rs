@@ -21,8 +21,8 @@
 //! (their phases differ completely: cells are several wavelengths apart), so a map starts each
 //! cell's pattern search from the previous cell's z ([`FamilyPoint`]) instead of the 400-point
 //! grid, and ascends from that start alone; [`super::solve_cell_warm`] keeps the answer only
-//! when the certificate shows it within [`super::WARM_START_ACCEPT_GAP`] of optimal, and
-//! otherwise runs the cold search too.
+//! when the certificate vouches for it ([`super::WARM_START_ACCEPT_GAP`]), and otherwise runs
+//! the cold search too.
 //!
 //! The searches compare the rate's monotone *score* 1 + SINR ([`RateModel::mru_score`]) and take
 //! one logarithm at the end.
@@ -41,9 +41,9 @@ const Z_DECADES: f64 = 3.0;
 const Z_MAGNITUDES: usize = 25;
 /// arg z grid points (22.5° apart), for the same reason.
 const Z_ANGLES: usize = 16;
-/// Pattern-search rounds refining z (each tries the 4 neighbours, halving the steps when none
-/// is better): 12 halvings take the grid's step to 1/4096 of itself, far below what moves the
-/// rate after the ascent.
+/// Pattern-search rounds refining z (each tries the 4 neighbours and halves the steps when none
+/// is better): the kept value of the cold search before warm starts, under which the step ends
+/// at 1/4096 of the grid's at most, far below what moves the rate after the ascent.
 const PATTERN_STEPS: usize = 12;
 /// Phase grid per element in the coordinate ascent (22.5° apart): the per-element objective
 /// is a sinusoid-like curve with one maximum, which a 16-point grid brackets.

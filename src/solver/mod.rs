@@ -234,8 +234,14 @@ pub fn solve_cell_warm(
                     (v, point) = (cold, cold_point);
                 }
             }
-            warm.family = point;
-            warm.gap = upper_bound - rate_of(&v);
+            // Only a served cell hands on its z: an infinite gap would make the next cell
+            // accept any warm answer.
+            let gap = upper_bound - rate_of(&v);
+            (warm.family, warm.gap) = if gap.is_finite() {
+                (point, gap)
+            } else {
+                (None, 0.0)
+            };
             v
         }
         #[cfg(feature = "sdp")]
