@@ -227,16 +227,17 @@ pub fn solve_cell_warm(
         SolverKind::Fast => {
             let hint = warm.family.take();
             let (mut v, mut point) = fast::solve_from(problem, model, hint);
-            let gap = upper_bound - rate_of(&v);
-            if hint.is_some() && gap > WARM_START_ACCEPT_GAP.max(warm.gap * 1.01) {
+            let mut rate = rate_of(&v);
+            if hint.is_some() && upper_bound - rate > WARM_START_ACCEPT_GAP.max(warm.gap * 1.01) {
                 let (cold, cold_point) = fast::solve_from(problem, model, None);
-                if rate_of(&cold) >= rate_of(&v) {
-                    (v, point) = (cold, cold_point);
+                let cold_rate = rate_of(&cold);
+                if cold_rate >= rate {
+                    (v, point, rate) = (cold, cold_point, cold_rate);
                 }
             }
             // Only a served cell hands on its z: an infinite gap would make the next cell
             // accept any warm answer.
-            let gap = upper_bound - rate_of(&v);
+            let gap = upper_bound - rate;
             (warm.family, warm.gap) = if gap.is_finite() {
                 (point, gap)
             } else {
