@@ -181,7 +181,7 @@ impl RateModel {
     }
 
     /// A number that orders like the MRU's rate for one order, without its logarithm: 1 + SINR
-    /// (NOMA: (S_k + σ²/λ_m)/(S_{k+1} + σ²/λ_m); OMA: 1 + (K+1) λ_m p_m/σ²). Searches compare
+    /// (NOMA, eq. 22: (S_k + σ²/λ_m)/(S_{k+1} + σ²/λ_m); OMA, eq. 24: 1 + (K+1) λ_m p_m/σ²). Searches compare
     /// scores and take one logarithm at the end ([`Self::rate_of_score`]).
     #[inline]
     pub fn mru_score(&self, lambdas: &[f64], order: usize) -> Option<f64> {
