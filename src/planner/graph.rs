@@ -290,7 +290,7 @@ impl<T: Copy> Stamped<T> {
 /// of allocation and zeroing per query.
 #[derive(Debug)]
 struct Scratch {
-    /// A*: g per cell (unset = ∞); widest path: minus the best width (unset = −(−∞)).
+    /// A*: g per cell; widest path: minus the best width. Unset reads +∞ (no width: −∞).
     dist: Stamped<f64>,
     /// Widest path: cells already settled.
     done: Stamped<bool>,
