@@ -202,3 +202,48 @@ fn warm_started_cells_match_the_cold_solver() {
         assert!(checked > 250, "{checked}");
     }
 }
+
+/// A rate map stores each cell's phases as 16-bit codes (within 4.8e-5 rad, docs/model.md §5):
+/// the rate recomputed from a cell's decoded phases is within 1e-6 bit/s/Hz of the map's value
+/// in every cell of both access schemes.
+#[test]
+fn stored_phase_codes_reproduce_every_rate() {
+    use irs_planner::channel::{C64, ChannelModel};
+    use irs_planner::rate::RateModel;
+    use irs_planner::solver::{self, objective};
+    let s = multi_user();
+    let channel = ChannelModel::new(s);
+    let srus = solver::sru_part(&channel, s, true);
+    for access in [Access::Noma, Access::Oma] {
+        let map = rate_map(access, PhaseMode::Continuous);
+        let model = RateModel::for_scenario(s, access);
+        let (mut checked, mut worst) = (0, 0.0f64);
+        for (k, value) in map.values.iter().enumerate() {
+            if !value.is_finite() {
+                continue;
+            }
+            let (i, j) = map.grid.cell_of(k);
+            let [x, y] = map.grid.centre(i, j);
+            let problem =
+                solver::cell_problem(&channel, [x, y, s.mru.antenna_height_m], &srus, true);
+            let mut v: Vec<C64> = map
+                .cell_config(k)
+                .concatenated_phases()
+                .into_iter()
+                .map(|theta| C64::from_polar(1.0, theta))
+                .collect();
+            v.push(C64::new(1.0, 0.0));
+            let mut lambdas = vec![0.0; problem.users()];
+            problem.lambdas(&v, &mut lambdas);
+            let error = (objective(&model, &lambdas) - value).abs();
+            worst = worst.max(error);
+            checked += 1;
+        }
+        assert!(
+            worst <= 1e-6,
+            "{access:?}: a decoded cell is {worst} bit/s/Hz off"
+        );
+        assert!(checked > 1000, "{checked}");
+        eprintln!("{access:?}: {checked} cells, worst |Δrate| {worst:.2e} bit/s/Hz");
+    }
+}

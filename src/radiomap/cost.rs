@@ -20,13 +20,15 @@ const GAIN_S_PER_POINT: f64 = 10e-9;
 /// A `bits` gain map also quantises the phases and sums the channel at them: about twice the
 /// work of the closed form.
 const BITS_FACTOR: f64 = 2.0;
-/// Seconds per (cell · decoding order · N²) of a rate map with the `fast` solver and its
-/// certificate: 1.76 ms per cell at N = 60 with 2 orders (244 ns a unit); at N = 256 the unit
-/// costs less (20 ms a cell), so N² over-estimates large surfaces, never under.
-const RATE_S_PER_POINT2_ORDER: f64 = 250e-9;
-/// The paper's SDR+SCA solves an SDP of size N + 1 per order and iteration: two orders of
-/// magnitude slower than `fast` at N = 60 (examples/solver_ratio.rs).
-const SDR_SCA_FACTOR: f64 = 100.0;
+/// Seconds per (cell · decoding order · N) of a rate map with the `fast` solver and its
+/// certificate, one core: a cold cell of the paper's NOMA map (2 orders) costs 0.5–0.6 ms at
+/// N = 60 and 1.4–2.1 ms at N = 256 (README "Performance"), 4.2–4.6 µs a unit; the warm-started
+/// cells of a map cost less, so 5 µs over-estimates a map, never under.
+const RATE_S_PER_POINT_ORDER: f64 = 5e-6;
+/// Seconds per (cell · decoding order · (N + 1)³) of `sdr-sca`, which solves SDPs of size N + 1
+/// (interior-point work grows as its cube): 0.22–0.33 s a cell at N = 10 with 2 orders
+/// (`scripts/solver-ratio.sh`), 83–124 µs a unit.
+const SDR_SCA_S_PER_CUBE_ORDER: f64 = 150e-6;
 
 /// Scattering points the channel model evaluates per cell and AP: N sub-surface centres for a
 /// `coherent` surface, M elements for an `elements` one.
@@ -69,12 +71,12 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
             let orders = (1..=scenario.srus.len() + 1)
                 .map(|k| k as f64)
                 .product::<f64>();
-            let solver = if key.solver == Some(SolverKind::SdrSca) {
-                SDR_SCA_FACTOR
+            let per_order = if key.solver == Some(SolverKind::SdrSca) {
+                (n + 1.0).powi(3) * SDR_SCA_S_PER_CUBE_ORDER
             } else {
-                1.0
+                n * RATE_S_PER_POINT_ORDER
             };
-            cells * orders * n * n * RATE_S_PER_POINT2_ORDER * solver
+            cells * orders * per_order
         }
     }
 }
@@ -103,7 +105,8 @@ pub fn map_bytes(scenario: &Scenario, key: &MapKey) -> f64 {
                     .sum()
             };
             let users = 1.0 + scenario.srus.len() as f64;
-            base + cells * (8.0 * (n + users + 1.0) + 1.0)
+            // f64 bound and powers, u16 phase codes, one order byte.
+            base + cells * (8.0 * (users + 1.0) + 2.0 * n + 1.0)
         }
     }
 }
@@ -128,9 +131,9 @@ mod tests {
         assert!(more > 5.0 * seconds, "{more} vs {seconds}");
         let multi = Scenario::builtin("paper-multi-user").unwrap();
         let rate = MapKey::new("x", &multi, MapKind::Rate, None, None, None).unwrap();
-        // The paper's NOMA map: 1.18 s measured; the estimate must not be below it.
+        // The paper's NOMA map: 0.5 s measured on one core; the estimate must not be below it.
         let rate_seconds = build_seconds(&multi, &rate);
-        assert!((1.18..20.0).contains(&rate_seconds), "{rate_seconds}");
+        assert!((0.5..5.0).contains(&rate_seconds), "{rate_seconds}");
     }
 
     /// The size estimate is what the cache will weigh, within 10 %, for both kinds.

@@ -3,9 +3,9 @@
 //!
 //! Stored: the map key (as JSON), the build time, and per cell the value (f64), the occupancy
 //! (one byte) and the per-cell solution (gain maps: the serving AP, one byte, only with several
-//! APs; rate maps: the upper bound, N phases, the power split and the decoding order). Not
-//! stored: the grid, the channel models and the rate model, which [`decode`] rebuilds from the
-//! scenario (they are deterministic functions of it). The bytes are postcard (serde's compact
+//! APs; rate maps: the upper bound, N phase codes (`u16`, as the map holds them), the power split
+//! and the decoding order). Not stored: the grid, the channel models and the rate model, which
+//! [`decode`] rebuilds from the scenario (they are deterministic functions of it). The bytes are postcard (serde's compact
 //! format); f64 values keep their bits, so a decoded map is bit-identical to the one encoded,
 //! NaN cells included. The paper's 41² gain map is 15 kB; a 1001² one about 9 MB.
 //!
@@ -22,7 +22,7 @@ use std::sync::Arc;
 
 /// Bumped whenever the layout below changes; a stored map of another version is not decoded
 /// (it is rebuilt on request).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Serialize, Deserialize)]
 struct Stored {
@@ -43,7 +43,7 @@ enum StoredCells {
     },
     Rate {
         upper_bound: Vec<f64>,
-        phases: Vec<f64>,
+        phases: Vec<u16>,
         power_w: Vec<f64>,
         order: Vec<u8>,
     },
