@@ -1,7 +1,7 @@
 //! Speed targets (README "Performance"): gain maps of the paper scenario in both groupings,
 //! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, the per-cell
 //! cost of the `fast` solver and of the certificate, and the warehouse floor plan (decode +
-//! gain map at 0.25 m and 0.1 m, a path query on it).
+//! gain map at 0.25 m and 0.1 m, a path query on it) and a factory hall with 40 machines.
 //!
 //! `cargo bench` runs everything; `cargo bench -- gain` a subset. Single-core figures come from
 //! `RAYON_NUM_THREADS=1 cargo bench`.
@@ -173,6 +173,49 @@ fn floors(c: &mut Criterion) {
     group.finish();
 }
 
+/// A 100 × 60 m factory hall at 0.1 m (1001 × 601 cells): 40 machines of 2–4 × 1.5–3 m and
+/// 1.5–3.1 m high in a 8 × 5 layout, the AP high on the north wall, a 16 × 16 IRS (N = 256) on
+/// the south wall. Most links pass near several machines, so this is what the per-source
+/// direction index of the obstacles (geometry::SightLines) is for.
+fn factory_hall() -> Scenario {
+    let mut obstacles = Vec::new();
+    for row in 0..5 {
+        for column in 0..8 {
+            let k = row * 8 + column;
+            obstacles.push(serde_json::json!({
+                "center": [-40.0 + column as f64 * 11.5, -22.0 + row as f64 * 11.0],
+                "size": [2.0 + (k % 3) as f64, 1.5 + (k % 4) as f64 * 0.5],
+                "height_m": 1.5 + (k % 5) as f64 * 0.4,
+            }));
+        }
+    }
+    Scenario::from_value(serde_json::json!({
+        "name": "factory-hall",
+        "room": {"x_min": -50.0, "x_max": 50.0, "y_min": -30.0, "y_max": 30.0, "ceiling_m": 6.0},
+        "grid": {"resolution_m": 0.1},
+        "obstacles": obstacles,
+        "ap": {"position": [0.0, 30.0, 4.0], "tx_power_dbm": 20.0, "noise_dbm": -90.0,
+               "carrier_ghz": 2.0},
+        "irs": {"center": [0.0, -30.0, 3.0], "normal": [0.0, 1.0, 0.0], "nx_sub": 16,
+                "nz_sub": 16, "elements_per_sub": 4, "sub_pitch_m": 0.03, "grouping": "coherent"},
+        "mru": {"antenna_height_m": 1.0, "v_max_mps": 1.0},
+        "srus": [],
+        "channel": {"rician_k_db": 3.0, "path_loss": "3gpp_inf_sh"}
+    }))
+    .unwrap()
+}
+
+fn factory(c: &mut Criterion) {
+    let s = factory_hall();
+    let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
+    let mut group = c.benchmark_group("factory");
+    group.sample_size(10);
+    group.bench_function("gain_map_1001x601_40_machines_n256", |b| {
+        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+    });
+    group.finish();
+}
+
 /// Every 0.5 m of the paper floor's four walls (164 IRS poses, 123 valid), ranked by the largest
 /// threshold q_I → q_F.
 fn placement(c: &mut Criterion) {
@@ -208,5 +251,7 @@ fn placement(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, gain_maps, large_grid, rate_maps, floors, placement);
+criterion_group!(
+    benches, gain_maps, large_grid, rate_maps, floors, factory, placement
+);
 criterion_main!(benches);

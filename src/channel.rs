@@ -24,7 +24,7 @@
 //! * The IRS reflects only into its front half-space: a user on or behind the surface's plane
 //!   gets no IRS term at all (neither w̃ nor the scattered part of τ).
 
-use crate::geometry::Obstructions;
+use crate::geometry::{Obstructions, SightLines};
 use crate::scenario::{Grouping, Irs, SPEED_OF_LIGHT, Scenario};
 use nalgebra::{Complex, Vector3};
 use rand::Rng;
@@ -89,6 +89,9 @@ struct IrsModel {
     /// d(AP, point) for every point.
     ap_distance: Vec<f64>,
     ap_link: LinkBudget,
+    /// The floor's obstacles indexed by direction from the surface's centre, where every
+    /// IRS–user link starts (geometry::SightLines).
+    sight: SightLines,
     /// False when this AP is on or behind the surface's plane: the surface then reflects
     /// nothing of it (with several APs a surface may face only some of them).
     faces_ap: bool,
@@ -103,6 +106,9 @@ pub struct ChannelModel {
     ap: P3,
     /// Boxes, walls and the floor plan: what blocks a link.
     obstructions: Obstructions,
+    /// The same indexed by direction from the AP, where every direct link starts: a map's
+    /// cells test only the obstacles in their direction (geometry::SightLines).
+    ap_sight: SightLines,
     /// The IRSs in scenario order; their sub-surfaces are numbered one after the other.
     surfaces: Vec<IrsModel>,
     /// N = Σ_s N_s.
@@ -130,9 +136,13 @@ impl ChannelModel {
                 std::mem::size_of::<IrsModel>()
                     + irs.points.capacity() * std::mem::size_of::<P3>()
                     + irs.ap_distance.capacity() * std::mem::size_of::<f64>()
+                    + irs.sight.heap_bytes()
             })
             .sum();
-        std::mem::size_of::<ChannelModel>() + surfaces + self.obstructions.heap_bytes()
+        std::mem::size_of::<ChannelModel>()
+            + surfaces
+            + self.obstructions.heap_bytes()
+            + self.ap_sight.heap_bytes()
     }
 
     /// Builds the model of a validated scenario, for its first AP.
@@ -144,12 +154,14 @@ impl ChannelModel {
     /// [`Scenario::access_points`]) sees it: that AP's position and carrier, every IRS.
     pub fn for_ap(scenario: &Scenario, ap: usize) -> ChannelModel {
         let access_point = &scenario.access_points()[ap];
+        let obstructions = scenario.obstructions();
         let mut model = ChannelModel {
             wavelength_m: SPEED_OF_LIGHT / (access_point.carrier_ghz * 1e9),
             carrier_ghz: access_point.carrier_ghz,
             kappa: 10f64.powf(scenario.channel.rician_k_db / 10.0),
             ap: P3::from(access_point.position),
-            obstructions: scenario.obstructions(),
+            ap_sight: SightLines::new(&obstructions, access_point.position),
+            obstructions,
             surfaces: Vec::new(),
             subsurfaces: 0,
         };
@@ -199,6 +211,7 @@ impl ChannelModel {
             elements: irs.elements(),
             ap_distance,
             ap_link: self.link_budget(&self.ap, &centre),
+            sight: SightLines::new(&self.obstructions, irs.center),
             faces_ap: (self.ap - centre).dot(&normal) > 0.0,
         }
     }
@@ -219,8 +232,16 @@ impl ChannelModel {
     }
 
     fn link_budget(&self, a: &P3, b: &P3) -> LinkBudget {
-        let los = !self.obstructions.blocks_segment(a, b);
-        let pl = path_loss_db((a - b).norm(), self.carrier_ghz, los);
+        self.budget((a - b).norm(), !self.obstructions.blocks_segment(a, b))
+    }
+
+    /// [`ChannelModel::link_budget`] from an indexed source (the AP, an IRS centre) to `q`.
+    fn link_seen(&self, sight: &SightLines, q: &P3) -> LinkBudget {
+        self.budget((q - sight.source()).norm(), !sight.blocks(q))
+    }
+
+    fn budget(&self, distance_m: f64, los: bool) -> LinkBudget {
+        let pl = path_loss_db(distance_m, self.carrier_ghz, los);
         LinkBudget {
             los,
             path_gain: 10f64.powf(-pl / 10.0),
@@ -240,7 +261,7 @@ impl ChannelModel {
     /// not in front of it, or the AP is not.
     fn irs_user_link(&self, irs: &IrsModel, user: &P3) -> Option<LinkBudget> {
         (irs.faces_ap && (user - irs.centre).dot(&irs.normal) > 0.0)
-            .then(|| self.link_budget(&irs.centre, user))
+            .then(|| self.link_seen(&irs.sight, user))
     }
 
     /// Evaluates (h̃, w̃, τ) at `user`. `w` must have length N; it is filled with w̃, the
@@ -265,7 +286,7 @@ impl ChannelModel {
     /// h̃ and the direct link's scattered power at `user`: λ without any IRS.
     pub fn direct(&self, user: [f64; 3]) -> DirectAndScattered {
         let q = P3::from(user);
-        let direct = self.link_budget(&self.ap, &q);
+        let direct = self.link_seen(&self.ap_sight, &q);
         DirectAndScattered {
             h: self.los_phase((q - self.ap).norm()) * direct.los_amplitude(),
             tau: direct.scattered_power(),
@@ -336,7 +357,7 @@ impl ChannelModel {
 
     /// ∠h̃ at `q` as eq. 11 uses it: 0 where the direct link is NLoS (h̃ = 0).
     fn direct_angle(&self, q: &P3) -> f64 {
-        if self.link_budget(&self.ap, q).los {
+        if self.link_seen(&self.ap_sight, q).los {
             -TAU * ((q - self.ap).norm() / self.wavelength_m).fract()
         } else {
             0.0
@@ -443,7 +464,7 @@ impl ChannelModel {
             .iter()
             .map(|u| {
                 let q = P3::from(*u);
-                let direct = self.link_budget(&self.ap, &q);
+                let direct = self.link_seen(&self.ap_sight, &q);
                 let links: Vec<Option<LinkBudget>> = surfaces
                     .iter()
                     .map(|irs| self.irs_user_link(irs, &q))

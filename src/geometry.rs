@@ -16,6 +16,9 @@
 
 use nalgebra::Vector3;
 
+mod sightlines;
+pub use sightlines::SightLines;
+
 type P3 = Vector3<f64>;
 
 /// A segment overlapping a box for less than this fraction of its length only grazes it: well
