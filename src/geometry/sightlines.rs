@@ -113,12 +113,14 @@ fn sector(angle: f64) -> usize {
     ((angle * (SECTORS as f64 / 4.0)) as usize).min(SECTORS - 1)
 }
 
-/// The sectors a convex footprint with these corners covers from `source`: the cone of the
-/// corner directions (a convex polygon not containing the source subtends less than a half
-/// turn, bounded by its vertices), one sector wider each side; every sector when `near`.
-fn sectors_of(source: &P3, corners: &[[f64; 2]; 4], near: bool) -> Vec<usize> {
+/// The sectors a convex footprint with these corners covers from `source`, as a run
+/// `first..=last` that may wrap past the last sector: the cone of the corner directions (a
+/// convex polygon not containing the source subtends less than a half turn, bounded by its
+/// vertices), one sector wider each side; every sector when `near`.
+fn sectors_of(source: &P3, corners: &[[f64; 2]; 4], near: bool) -> (i64, i64) {
+    let every = (0, SECTORS as i64 - 1);
     if near {
-        return (0..SECTORS).collect();
+        return every;
     }
     let angle = |c: &[f64; 2]| pseudo_angle(c[0] - source[0], c[1] - source[1]);
     let centre = [
@@ -142,28 +144,37 @@ fn sectors_of(source: &P3, corners: &[[f64; 2]; 4], near: bool) -> Vec<usize> {
     let first = ((middle + lo) * per_unit).floor() as i64 - 1;
     let last = ((middle + hi) * per_unit).floor() as i64 + 1;
     if last - first + 1 >= SECTORS as i64 {
-        return (0..SECTORS).collect();
+        every
+    } else {
+        (first, last)
     }
-    (first..=last)
-        .map(|s| s.rem_euclid(SECTORS as i64) as usize)
-        .collect()
 }
 
-/// Compressed per-sector lists of the items, each copied into the sectors `sectors` gives.
-fn bucket<T: Copy>(items: &[T], sectors: impl Fn(&T) -> Vec<usize>) -> (Vec<u32>, Vec<T>) {
-    let mut lists = vec![Vec::new(); SECTORS];
-    for item in items {
-        for s in sectors(item) {
-            lists[s].push(*item);
+/// Compressed per-sector lists of the items (counted, then filled: no list per sector), each
+/// copied into the run of sectors `sectors` gives.
+fn bucket<T: Copy>(items: &[T], sectors: impl Fn(&T) -> (i64, i64)) -> (Vec<u32>, Vec<T>) {
+    let runs: Vec<(i64, i64)> = items.iter().map(sectors).collect();
+    let wrapped = |s: i64| s.rem_euclid(SECTORS as i64) as usize;
+    let mut start = vec![0u32; SECTORS + 1];
+    for &(first, last) in &runs {
+        (first..=last).for_each(|s| start[wrapped(s) + 1] += 1);
+    }
+    for s in 0..SECTORS {
+        start[s + 1] += start[s];
+    }
+    let mut next = start.clone();
+    let mut flat = Vec::with_capacity(start[SECTORS] as usize);
+    // Filled in place through `next`; `T: Copy` has no default, so seed with the first item.
+    if let Some(&seed) = items.first() {
+        flat.resize(start[SECTORS] as usize, seed);
+    }
+    for (item, &(first, last)) in items.iter().zip(&runs) {
+        for s in first..=last {
+            let slot = &mut next[wrapped(s)];
+            flat[*slot as usize] = *item;
+            *slot += 1;
         }
     }
-    let mut start = Vec::with_capacity(SECTORS + 1);
-    let mut flat = Vec::new();
-    for list in lists {
-        start.push(flat.len() as u32);
-        flat.extend(list);
-    }
-    start.push(flat.len() as u32);
     (start, flat)
 }
 
