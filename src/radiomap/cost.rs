@@ -9,6 +9,7 @@
 //! represented to a few parts in 10¹⁶.
 
 use super::{MapKey, MapKind};
+use crate::geometry::SightLines;
 use crate::phases::PhaseMode;
 use crate::scenario::{Grouping, Scenario};
 use crate::solver::SolverKind;
@@ -84,15 +85,20 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
 /// Estimated bytes of the built map, as the cache weighs it ([`super::RadioMap::size_bytes`]):
 /// per cell a value and an occupancy flag, and then per cell the serving AP (gain maps) or the
 /// phases, powers, bound and decoding order (rate maps); a gain map also keeps one channel
-/// model per AP (32 bytes per scattering point).
+/// model per AP (32 bytes per scattering point and its obstacle index).
 pub fn map_bytes(scenario: &Scenario, key: &MapKey) -> f64 {
     let cells = scenario.grid().cells() as f64;
     let base = cells * 9.0;
     match key.kind {
         MapKind::Gain => {
             let aps = scenario.access_points().len() as f64;
-            let boxes = (scenario.obstacles.len() + scenario.walls.len()) as f64;
-            base + cells + aps * (32.0 * scattering_points(scenario) + 64.0 * boxes)
+            let (boxes, walls) = (scenario.obstacles.len(), scenario.walls.len());
+            // Each AP's model: its scattering points, the obstacles, and a direction index of
+            // them from the AP and from every IRS centre.
+            let sources = (1 + scenario.surfaces().len()) as f64;
+            let index = SightLines::estimated_heap_bytes(boxes, walls) as f64;
+            let model = 32.0 * scattering_points(scenario) + 64.0 * (boxes + walls) as f64;
+            base + cells + aps * (model + sources * index)
         }
         MapKind::Rate => {
             let n = if key.phases == PhaseMode::None {
