@@ -1276,9 +1276,10 @@ async fn placements_rank_candidates_and_keep_the_best_ready() {
 #[tokio::test]
 async fn a_placement_job_can_be_cancelled() {
     let server = start(&["--sync-cells", "1000"]);
-    // The paper floor at 0.1 m (201² cells) and every 0.5 m of three walls: 9.9 M evaluations.
+    // The paper floor at 0.05 m (401² cells) and every 0.25 m of three walls: 78 M evaluations,
+    // seconds of work (at 0.1 m and 0.5 m it could finish before the cancel arrived).
     let doc = scenario("paper-single-user.json", |v| {
-        v["grid"]["resolution_m"] = 0.1.into();
+        v["grid"]["resolution_m"] = 0.05.into();
         v["name"] = "paper-fine".into();
     });
     let corners = [[-10, 10], [-10, -10], [10, -10], [10, 10]];
@@ -1289,7 +1290,7 @@ async fn a_placement_job_can_be_cancelled() {
         .post(
             "/v1/placements",
             json!({
-                "scenario": doc, "candidates": {"walls": walls, "step_m": 0.5},
+                "scenario": doc, "candidates": {"walls": walls, "step_m": 0.25},
                 "objective": {"kind": "coverage", "threshold": -62},
             }),
         )

@@ -26,8 +26,8 @@ pub fn best_gain(
     match mode {
         // O(1) per coherent surface: ‖w̃_s‖₁ from one link budget (ChannelModel docs).
         PhaseMode::Continuous => {
-            let (direct, l1) = model.closed_form_terms(user, w);
-            (direct.h.norm() + l1).powi(2) + direct.tau
+            let terms = model.closed_form_terms(user, w);
+            (terms.direct_amplitude + terms.l1).powi(2) + terms.tau
         }
         PhaseMode::None => {
             let direct = model.direct(user);
