@@ -105,18 +105,28 @@ fn rate_maps(c: &mut Criterion) {
     });
     group.finish();
 
-    // Per cell, at a cell behind the central obstacle.
-    let channel = ChannelModel::new(&s);
-    let srus = solver::sru_part(&channel, &s, true);
-    let problem = solver::cell_problem(&channel, [3.0, -6.0, 1.0], &srus, true);
-    let model = RateModel::for_scenario(&s, Access::Noma);
+    // Per cell, at a cell behind the central obstacle: the paper's surface (N = 60) and a
+    // 16 × 16 one of 4 elements each (N = 256, M = 1024).
     let mut group = c.benchmark_group("rate_cell");
-    group.bench_function("fast_n60", |b| {
-        b.iter(|| fast::solve(black_box(&problem), &model))
-    });
-    group.bench_function("certificate_n60", |b| {
-        b.iter(|| certificate::upper_bound(black_box(&problem), &model))
-    });
+    for (n, edit) in [(60, None), (256, Some((16, 16, 4)))] {
+        let s = paper("paper-multi-user", |v| {
+            if let Some((nx, nz, per_sub)) = edit {
+                v["irs"]["nx_sub"] = nx.into();
+                v["irs"]["nz_sub"] = nz.into();
+                v["irs"]["elements_per_sub"] = per_sub.into();
+            }
+        });
+        let channel = ChannelModel::new(&s);
+        let srus = solver::sru_part(&channel, &s, true);
+        let problem = solver::cell_problem(&channel, [3.0, -6.0, 1.0], &srus, true);
+        let model = RateModel::for_scenario(&s, Access::Noma);
+        group.bench_function(format!("fast_n{n}"), |b| {
+            b.iter(|| fast::solve(black_box(&problem), &model))
+        });
+        group.bench_function(format!("certificate_n{n}"), |b| {
+            b.iter(|| certificate::upper_bound(black_box(&problem), &model))
+        });
+    }
     group.finish();
 }
 

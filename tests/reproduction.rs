@@ -1,11 +1,13 @@
 //! The paper's Section IV figures (docs/model.md §9) as regression tests, with stated tolerances.
 //! Maps are built once per configuration and shared between tests.
 
+use irs_planner::channel::{C64, ChannelModel};
 use irs_planner::phases::PhaseMode;
 use irs_planner::planner::{self, Threshold};
 use irs_planner::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
-use irs_planner::rate::Access;
+use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
+use irs_planner::solver::{self, SolverKind, objective};
 use std::sync::OnceLock;
 
 const Q_I: [f64; 2] = [-10.0, 0.0];
@@ -161,20 +163,34 @@ fn noma_map_is_certified_within_the_targets() {
     assert!(cert.max_gap.unwrap() <= 0.003, "{cert:?}");
 }
 
+/// The multi-user rate map of `access` (continuous phases), its rate model, and each cell's
+/// problem by cell index: what the per-cell checks below recompute.
+fn rate_map_cells(
+    access: Access,
+) -> (
+    &'static RadioMap,
+    RateModel,
+    impl Fn(usize) -> solver::CellProblem,
+) {
+    let s = multi_user();
+    let channel = ChannelModel::new(s);
+    let srus = solver::sru_part(&channel, s, true);
+    let map = rate_map(access, PhaseMode::Continuous);
+    let problem = move |k| {
+        let (i, j) = map.grid.cell_of(k);
+        let [x, y] = map.grid.centre(i, j);
+        solver::cell_problem(&channel, [x, y, s.mru.antenna_height_m], &srus, true)
+    };
+    (map, RateModel::for_scenario(s, access), problem)
+}
+
 /// Map cells are warm-started from their row neighbour; each must still be within 1e-5 bit/s/Hz
 /// of the cold solve of the same cell (6e-6 measured; solver::WARM_START_ACCEPT_GAP), for both
 /// access schemes.
 #[test]
 fn warm_started_cells_match_the_cold_solver() {
-    use irs_planner::channel::ChannelModel;
-    use irs_planner::rate::RateModel;
-    use irs_planner::solver::{self, SolverKind};
-    let s = multi_user();
-    let channel = ChannelModel::new(s);
-    let srus = solver::sru_part(&channel, s, true);
     for access in [Access::Noma, Access::Oma] {
-        let map = rate_map(access, PhaseMode::Continuous);
-        let model = RateModel::for_scenario(s, access);
+        let (map, model, problem_of) = rate_map_cells(access);
         let mut checked = 0;
         // Every 5th cell: a spread over the floor, all columns and rows.
         for k in (0..map.values.len()).step_by(5) {
@@ -182,11 +198,12 @@ fn warm_started_cells_match_the_cold_solver() {
                 continue;
             }
             let (i, j) = map.grid.cell_of(k);
-            let [x, y] = map.grid.centre(i, j);
-            let problem =
-                solver::cell_problem(&channel, [x, y, s.mru.antenna_height_m], &srus, true);
-            let cold =
-                solver::solve_cell(&problem, &model, PhaseMode::Continuous, SolverKind::Fast);
+            let cold = solver::solve_cell(
+                &problem_of(k),
+                &model,
+                PhaseMode::Continuous,
+                SolverKind::Fast,
+            );
             let warm = map.values[k];
             if cold.rate.is_finite() {
                 assert!(
@@ -208,24 +225,14 @@ fn warm_started_cells_match_the_cold_solver() {
 /// in every cell of both access schemes.
 #[test]
 fn stored_phase_codes_reproduce_every_rate() {
-    use irs_planner::channel::{C64, ChannelModel};
-    use irs_planner::rate::RateModel;
-    use irs_planner::solver::{self, objective};
-    let s = multi_user();
-    let channel = ChannelModel::new(s);
-    let srus = solver::sru_part(&channel, s, true);
     for access in [Access::Noma, Access::Oma] {
-        let map = rate_map(access, PhaseMode::Continuous);
-        let model = RateModel::for_scenario(s, access);
+        let (map, model, problem_of) = rate_map_cells(access);
         let (mut checked, mut worst) = (0, 0.0f64);
         for (k, value) in map.values.iter().enumerate() {
             if !value.is_finite() {
                 continue;
             }
-            let (i, j) = map.grid.cell_of(k);
-            let [x, y] = map.grid.centre(i, j);
-            let problem =
-                solver::cell_problem(&channel, [x, y, s.mru.antenna_height_m], &srus, true);
+            let problem = problem_of(k);
             let mut v: Vec<C64> = map
                 .cell_config(k)
                 .concatenated_phases()
