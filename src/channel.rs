@@ -254,7 +254,10 @@ impl ChannelModel {
 
     /// [`ChannelModel::link_budget`] from an indexed source (the AP, an IRS centre) to `q`.
     fn link_seen(&self, sight: &SightLines, q: &P3) -> LinkBudget {
-        self.budget((q - sight.source()).norm(), !sight.blocks(q))
+        self.budget(
+            (q - sight.source()).norm(),
+            !sight.blocks(&self.obstructions, q),
+        )
     }
 
     fn budget(&self, distance_m: f64, los: bool) -> LinkBudget {

@@ -11,8 +11,7 @@
 //! has no horizontal extent (a user straight below the source). The raster of a floor plan is
 //! walked as before: its cost is already the pixels crossed.
 
-use super::{Aabb, Obstructions, P3, Raster, Wall};
-use std::sync::Arc;
+use super::{Aabb, Obstructions, P3, Wall};
 
 /// Sectors of the full turn. At 1024 a sector is 0.35°: a 2 m machine 20 m from the AP spans
 /// 5.7°, 17 sectors, so a link meets the one or two obstacles in its direction instead of all
@@ -25,7 +24,8 @@ const SECTORS: usize = 1024;
 /// sector. Far below any mounting offset, above rounding.
 const NEAR_M: f64 = 1e-6;
 
-/// The boxes and walls of a floor indexed by direction from one source point.
+/// The boxes and walls of a floor indexed by direction from one source point. It holds indices
+/// only: queries take the [`Obstructions`] it was built from.
 #[derive(Debug, Clone)]
 pub struct SightLines {
     source: P3,
@@ -36,9 +36,6 @@ pub struct SightLines {
     box_in_sector: Vec<u32>,
     wall_start: Vec<u32>,
     wall_in_sector: Vec<u32>,
-    boxes: Vec<Aabb>,
-    walls: Vec<Wall>,
-    raster: Option<Arc<Raster>>,
 }
 
 impl SightLines {
@@ -57,9 +54,6 @@ impl SightLines {
             box_in_sector,
             wall_start,
             wall_in_sector,
-            boxes: obstructions.boxes.clone(),
-            walls: obstructions.walls.clone(),
-            raster: obstructions.raster.clone(),
         }
     }
 
@@ -68,50 +62,46 @@ impl SightLines {
         &self.source
     }
 
-    /// [`Obstructions::blocks_segment`] from the source to `q`.
-    pub fn blocks(&self, q: &P3) -> bool {
-        let (dx, dy) = (q[0] - self.source[0], q[1] - self.source[1]);
+    /// [`Obstructions::blocks_segment`] from the source to `q`; `obstructions` are the ones
+    /// this index was built from.
+    pub fn blocks(&self, obstructions: &Obstructions, q: &P3) -> bool {
+        let source = &self.source;
+        let (dx, dy) = (q[0] - source[0], q[1] - source[1]);
         let listed = if dx.abs() + dy.abs() > 0.0 {
             let s = sector(pseudo_angle(dx, dy));
             let boxes = in_sector(&self.box_start, &self.box_in_sector, s);
             let walls = in_sector(&self.wall_start, &self.wall_in_sector, s);
             boxes
                 .iter()
-                .any(|&k| self.boxes[k as usize].blocks(&self.source, q))
+                .any(|&k| obstructions.boxes[k as usize].blocks(source, q))
                 || walls
                     .iter()
-                    .any(|&k| self.walls[k as usize].blocks(&self.source, q))
+                    .any(|&k| obstructions.walls[k as usize].blocks(source, q))
         } else {
-            self.boxes.iter().any(|b| b.blocks(&self.source, q))
-                || self.walls.iter().any(|w| w.blocks(&self.source, q))
+            obstructions.boxes.iter().any(|b| b.blocks(source, q))
+                || obstructions.walls.iter().any(|w| w.blocks(source, q))
         };
         listed
-            || self
+            || obstructions
                 .raster
                 .as_ref()
-                .is_some_and(|r| r.blocks(&self.source, q))
+                .is_some_and(|r| r.blocks(source, q))
     }
 
     /// Bytes an index of `boxes` boxes and `walls` walls is expected to hold, before it is built:
-    /// the sector starts of each kind present, a copy of each obstacle, and each listed in 100
-    /// sectors (35°; on the paper's 20 m floor an obstacle spans 78 on average, on a 100 × 60 m
-    /// hall 17).
+    /// the sector starts of each kind present and each obstacle listed in 100 sectors (35°; on
+    /// the paper's 20 m floor an obstacle spans 78 on average, on a 100 × 60 m hall 17).
     pub fn estimated_heap_bytes(boxes: usize, walls: usize) -> usize {
         let starts = 4 * (SECTORS + 1) * (usize::from(boxes > 0) + usize::from(walls > 0));
-        starts
-            + boxes * std::mem::size_of::<Aabb>()
-            + walls * std::mem::size_of::<Wall>()
-            + 4 * 100 * (boxes + walls)
+        starts + 4 * 100 * (boxes + walls)
     }
 
-    /// Bytes of the index (the raster is shared).
+    /// Bytes of the index.
     pub fn heap_bytes(&self) -> usize {
         4 * (self.box_start.capacity()
             + self.wall_start.capacity()
             + self.box_in_sector.capacity()
             + self.wall_in_sector.capacity())
-            + self.boxes.capacity() * std::mem::size_of::<Aabb>()
-            + self.walls.capacity() * std::mem::size_of::<Wall>()
     }
 }
 
@@ -310,7 +300,7 @@ mod tests {
             for q in aimed {
                 let q = P3::from(q);
                 prop_assert_eq!(
-                    sight.blocks(&q),
+                    sight.blocks(&scene, &q),
                     scene.blocks_segment(&P3::from(source), &q),
                     "source {:?} to {:?}", source, q
                 );
@@ -337,7 +327,7 @@ mod tests {
             let t = (k as f64 + 0.5) * std::f64::consts::TAU / 64.0;
             let q = P3::new(1.0 + 5.0 * t.cos(), 5.0 * t.sin(), 1.5);
             let expected = scene.blocks_segment(&P3::from(source), &q);
-            assert_eq!(sight.blocks(&q), expected, "direction {t}");
+            assert_eq!(sight.blocks(&scene, &q), expected, "direction {t}");
             blocked += usize::from(expected);
         }
         assert_eq!(blocked, 32);
