@@ -237,9 +237,11 @@ pub fn plan(
 
 /// How finely a path answer's IRS phases are written. A phase written with 17 significant
 /// digits is ≈ 20 bytes of JSON and most of a path answer (the paper map's path: 49.6 kB in
-/// full, 21.1 kB at the default); no IRS resolves anything near that: 2-bit to 8-bit surfaces have steps of
-/// 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a reflected term's
-/// amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad.
+/// full, 21.1 kB at the default); no IRS resolves anything near that: 2-bit to 8-bit surfaces
+/// have steps of 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a
+/// reflected term's amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad. A rate
+/// map's phases are already stored to 2π/2¹⁶ (`phases::encode_phase`), so for them `1e-6` and
+/// `full` write the stored phases.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum PhasePrecision {
     /// Rounded to 2 decimals (error ≤ 0.005 rad).

@@ -11,10 +11,10 @@
 //! plus its limit z → ∞. We evaluate the true objective on a log-polar grid of z, refine the best
 //! z by pattern search, then polish with element-wise coordinate ascent on the true objective.
 //! Each element's λ_l is a sinusoid in its phase, λ_l(φ) = |b_l|² + |a_ln|² + τ_l +
-//! 2 Re(conj(b_l) a_ln e^{jφ}) (b_l the sum without the element), so the score is one whenever
-//! a single user's λ moves it, and close to one otherwise: the ascent fits a sinusoid through
-//! three samples and jumps to its peak in closed form ([`sinusoid_peak`]), then fits once more
-//! around that point at a finer spacing.
+//! 2 Re(conj(b_l) a_ln e^{jφ}) (b_l the sum without the element), so the score is exactly a
+//! sinusoid where one user's λ alone moves it, and close to one otherwise: the ascent fits one
+//! through three samples and jumps to its peak in closed form ([`sinusoid_peak`]), then fits
+//! once more around that point at a finer spacing.
 //!
 //! For K > 1 the family has K complex parameters; rather than a K-dimensional grid we search
 //! the one-parameter family of every (MRU, SRU k) pair — the directions in which the SRUs pull
