@@ -1299,6 +1299,17 @@ async fn a_placement_job_can_be_cancelled() {
     let id = job["job_id"].as_str().unwrap();
     let (status, body) = server.get(&format!("/v1/placements/{id}")).await;
     problem(status, &body, StatusCode::CONFLICT, "placement_not_ready");
+    // Cancelled once it is scoring (it has a total), so the cancel is seen to stop the work
+    // itself, not only the listing of the candidates before it.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let (_, job) = server.get(&format!("/v1/jobs/{id}")).await;
+        if job["cells_total"].as_u64().unwrap_or(0) > 0 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the search never started: {job}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
     let (status, _) = server.send("DELETE", &format!("/v1/jobs/{id}"), None).await;
     assert_eq!(status, StatusCode::ACCEPTED);
     let done = server.wait_job(id).await;
