@@ -89,8 +89,9 @@ impl SightLines {
     }
 
     /// Bytes an index of `boxes` boxes and `walls` walls is expected to hold, before it is built:
-    /// the sector starts of each kind present and each obstacle listed in 100 sectors (35°; on
-    /// the paper's 20 m floor an obstacle spans 78 on average, on a 100 × 60 m hall 17).
+    /// the sector starts of each kind present and each obstacle listed in 100 sectors (35°): on
+    /// the paper's 20 m floor its five 4 m boxes are listed in about 73 sectors per source on
+    /// average (from the map's weighed bytes), a 2 m machine 20 m away in 17.
     pub fn estimated_heap_bytes(boxes: usize, walls: usize) -> usize {
         let starts = 4 * (SECTORS + 1) * (usize::from(boxes > 0) + usize::from(walls > 0));
         starts + 4 * 100 * (boxes + walls)
