@@ -49,9 +49,9 @@ const REFINEMENT_SETTLED: f64 = 1e-6;
 /// barrier method had it (2.8e-7 bit/s/Hz; 3.3e-7 at 1e-6).
 const GAP_TOLERANCE: f64 = 1e-9;
 /// Newton steps of the support-function maximisation; it converges quadratically and closes
-/// [`GAP_TOLERANCE`] in a handful (measured on the paper's NOMA map: 1.8 steps per direction on average, warm-started
-/// from the neighbouring direction; the barrier method this replaced took 47.5 steps of 8.7
-/// line-search trials each).
+/// [`GAP_TOLERANCE`] in a handful (measured on the paper's NOMA map: 1.8 steps per direction
+/// on average, warm-started from the neighbouring direction; the barrier method this replaced
+/// took 47.5 steps of 8.7 line-search trials each).
 const MAX_NEWTON_STEPS: usize = 30;
 /// Step halvings before a Newton step is given up as lost in rounding (2^-30 of the step).
 const LINE_SEARCH_HALVINGS: usize = 30;
