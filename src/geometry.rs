@@ -30,6 +30,70 @@ const GRAZE_T: f64 = 1e-12;
 /// typed to the nanometre on an edge are occupied as intended.
 const ON_BOUNDARY_M: f64 = 1e-9;
 
+/// The parameters t where the line p + t(q − p) lies inside the open slab (lo, hi) of one axis,
+/// as an interval [t0, t1]: everything when the line runs inside the slab parallel to it, an
+/// empty interval (t0 > t1) when it runs outside.
+#[inline(always)]
+fn slab(p: f64, q: f64, lo: f64, hi: f64) -> (f64, f64) {
+    let d = q - p;
+    if d == 0.0 {
+        if p <= lo || p >= hi {
+            (f64::INFINITY, f64::NEG_INFINITY)
+        } else {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        }
+    } else {
+        let (t0, t1) = ((lo - p) / d, (hi - p) / d);
+        (t0.min(t1), t0.max(t1))
+    }
+}
+
+/// `blocked[j] |= ` the segment from p to ys[j] (one axis) meets the open slab (lo, hi) for more
+/// than [`GRAZE_T`] of the parameter interval `within`, which the other axes left: a grid row's
+/// last slab, vectorised.
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512dq+avx512vl",
+    "x86_64+avx2+fma",
+    "aarch64+neon"
+))]
+fn slab_row(p: f64, lo: f64, hi: f64, within: (f64, f64), ys: &[f64], blocked: &mut [bool]) {
+    for (blocked, &y) in blocked.iter_mut().zip(ys) {
+        let (t0, t1) = slab(p, y, lo, hi);
+        *blocked |= within.1.min(t1) - within.0.max(t0) > GRAZE_T;
+    }
+}
+
+/// `blocked[j] |= ` the segment from (s, w) to targets[j] meets the open rectangle `lo`–`hi`
+/// of the (s, w) plane for more than [`GRAZE_T`] of `within`: a wall's row, in its frame.
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512dq+avx512vl",
+    "x86_64+avx2+fma",
+    "aarch64+neon"
+))]
+fn rectangle_row(
+    from: [f64; 2],
+    lo: [f64; 2],
+    hi: [f64; 2],
+    within: (f64, f64),
+    targets: &[[f64; 2]],
+    blocked: &mut [bool],
+) {
+    for (blocked, to) in blocked.iter_mut().zip(targets) {
+        let (s0, s1) = slab(from[0], to[0], lo[0], hi[0]);
+        let (w0, w1) = slab(from[1], to[1], lo[1], hi[1]);
+        *blocked |= within.1.min(s1).min(w1) - within.0.max(s0).max(w0) > GRAZE_T;
+    }
+}
+
+/// A row of grid users seen from one source, for [`Obstructions::blocks_row`]: the users are
+/// (x, ys[j], z).
+#[derive(Debug, Clone, Copy)]
+pub struct RowOfUsers<'a> {
+    pub x: f64,
+    pub ys: &'a [f64],
+    pub z: f64,
+}
+
 /// A pixel coordinate this close (in pixels) to a whole number is taken as that number, so a
 /// point on a pixel edge written in metres (x = −7 with 0.05 m pixels is 59.999… pixels from
 /// the origin in floating point) is on the edge, exactly as the same point on a box's face is.
@@ -50,19 +114,7 @@ impl Aabb {
         let mut t_low = 0.0f64;
         let mut t_high = 1.0f64;
         for axis in 0..3 {
-            let p = a[axis];
-            let d = b[axis] - a[axis];
-            if d == 0.0 {
-                if p <= self.lo[axis] || p >= self.hi[axis] {
-                    return false;
-                }
-                continue;
-            }
-            let (t0, t1) = {
-                let t0 = (self.lo[axis] - p) / d;
-                let t1 = (self.hi[axis] - p) / d;
-                if t0 < t1 { (t0, t1) } else { (t1, t0) }
-            };
+            let (t0, t1) = slab(a[axis], b[axis], self.lo[axis], self.hi[axis]);
             t_low = t_low.max(t0);
             t_high = t_high.min(t1);
             if t_high - t_low <= GRAZE_T {
@@ -70,6 +122,20 @@ impl Aabb {
             }
         }
         true
+    }
+
+    /// [`Aabb::blocks`] from `a` to every user (x, ys[j], z) of a grid row, or-ed into
+    /// `blocked`. The x and z slabs do not change along the row, so they are intersected once
+    /// (a row they already exclude costs nothing more); per user only the y slab remains. Max
+    /// and min are exact, so each answer is bit for bit the per-segment test's.
+    fn block_row(&self, a: &P3, x: f64, z: f64, ys: &[f64], blocked: &mut [bool]) {
+        let (x0, x1) = slab(a[0], x, self.lo[0], self.hi[0]);
+        let (z0, z1) = slab(a[2], z, self.lo[2], self.hi[2]);
+        let (t_low, t_high) = (x0.max(z0).max(0.0), x1.min(z1).min(1.0));
+        if t_high - t_low <= GRAZE_T {
+            return;
+        }
+        slab_row(a[1], self.lo[1], self.hi[1], (t_low, t_high), ys, blocked);
     }
 
     /// True when (x, y) lies in or on the footprint.
@@ -115,9 +181,43 @@ impl Wall {
 
     /// (s, w, z) of a point in the wall's frame.
     fn local_coordinates(&self, p: &P3) -> P3 {
-        let (dx, dy) = (p[0] - self.from[0], p[1] - self.from[1]);
+        let [s, w] = self.local_plane(p[0], p[1]);
+        P3::new(s, w, p[2])
+    }
+
+    /// (s, w) of a floor point in the wall's frame.
+    #[inline(always)]
+    fn local_plane(&self, x: f64, y: f64) -> [f64; 2] {
+        let (dx, dy) = (x - self.from[0], y - self.from[1]);
         let [ax, ay] = self.axis;
-        P3::new(dx * ax + dy * ay, dy * ax - dx * ay, p[2])
+        [dx * ax + dy * ay, dy * ax - dx * ay]
+    }
+
+    /// [`Wall::blocks`] from `a` to every user of a row, or-ed into `blocked`: the z slab once,
+    /// the wall's two floor axes per user (`targets` is scratch for the users' (s, w)).
+    fn block_row(
+        &self,
+        a: &P3,
+        users: RowOfUsers,
+        targets: &mut Vec<[f64; 2]>,
+        blocked: &mut [bool],
+    ) {
+        let (z0, z1) = slab(a[2], users.z, self.local.lo[2], self.local.hi[2]);
+        let (t_low, t_high) = (z0.max(0.0), z1.min(1.0));
+        if t_high - t_low <= GRAZE_T {
+            return;
+        }
+        targets.clear();
+        targets.extend(users.ys.iter().map(|&y| self.local_plane(users.x, y)));
+        let (lo, hi) = (self.local.lo, self.local.hi);
+        rectangle_row(
+            self.local_plane(a[0], a[1]),
+            [lo[0], lo[1]],
+            [hi[0], hi[1]],
+            (t_low, t_high),
+            targets,
+            blocked,
+        );
     }
 
     fn blocks(&self, a: &P3, b: &P3) -> bool {
@@ -329,6 +429,35 @@ impl Obstructions {
             || self.raster.as_ref().is_some_and(|r| r.blocks(a, b))
     }
 
+    /// `blocked[j]` = [`Obstructions::blocks_segment`] from `source` to each user of a grid
+    /// row where `wanted[j]` holds (false elsewhere), bit for bit, a row at a time: what the
+    /// gain map's rows test (docs/model.md §2). `targets` is scratch kept by the caller.
+    pub fn blocks_row(
+        &self,
+        source: &P3,
+        users: RowOfUsers,
+        wanted: &[bool],
+        targets: &mut Vec<[f64; 2]>,
+        blocked: &mut [bool],
+    ) {
+        blocked.fill(false);
+        for bx in &self.boxes {
+            bx.block_row(source, users.x, users.z, users.ys, blocked);
+        }
+        for wall in &self.walls {
+            wall.block_row(source, users, targets, blocked);
+        }
+        for (j, blocked) in blocked.iter_mut().enumerate() {
+            let user = || P3::new(users.x, users.ys[j], users.z);
+            *blocked = wanted[j]
+                && (*blocked
+                    || self
+                        .raster
+                        .as_ref()
+                        .is_some_and(|r| r.blocks(source, &user())));
+        }
+    }
+
     /// True when (x, y) lies in or on a footprint: such a grid cell is occupied.
     pub fn covers(&self, x: f64, y: f64) -> bool {
         self.boxes.iter().any(|bx| bx.covers(x, y))
@@ -362,7 +491,7 @@ impl Obstructions {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use proptest::prelude::*;
 
@@ -535,6 +664,71 @@ mod tests {
             }
         }
         kept
+    }
+
+    pub(super) fn point() -> impl Strategy<Value = [f64; 3]> {
+        (-12.0..12.0f64, -12.0..12.0f64, 0.0..4.0f64).prop_map(|(x, y, z)| [x, y, z])
+    }
+
+    /// Random boxes and walls of any direction, no raster.
+    pub(super) fn scene() -> impl Strategy<Value = Obstructions> {
+        let aabb = (
+            -10.0..8.0f64,
+            -10.0..8.0f64,
+            0.1..4.0f64,
+            0.1..4.0f64,
+            0.5..3.0f64,
+        )
+            .prop_map(|(x, y, w, d, h)| Aabb {
+                lo: [x, y, 0.0],
+                hi: [x + w, y + d, h],
+            });
+        let wall = (point(), point(), 0.05..0.5f64, 0.5..3.0f64)
+            .prop_filter("distinct ends", |(a, b, _, _)| {
+                (a[0] - b[0]).hypot(a[1] - b[1]) > 0.1
+            })
+            .prop_map(|(a, b, t, h)| Wall::new([a[0], a[1]], [b[0], b[1]], t, h));
+        (
+            proptest::collection::vec(aabb, 0..12),
+            proptest::collection::vec(wall, 0..6),
+        )
+            .prop_map(|(boxes, walls)| Obstructions {
+                boxes,
+                walls,
+                raster: None,
+            })
+    }
+
+    proptest! {
+        /// A row at a time answers what each segment's test answers, bit for bit: random
+        /// scenes, sources and rows, rows through the source (a vertical segment) and along
+        /// box faces, users level with the source and on the faces.
+        #[test]
+        fn a_row_of_links_is_blocked_as_each_link_is(
+            scene in scene(),
+            source in point(),
+            row_x in -12.0..12.0f64,
+            z in 0.0..4.0f64,
+            ys in proptest::collection::vec(-12.0..12.0f64, 30),
+        ) {
+            let mut xs = vec![row_x, source[0]];
+            let mut ys = ys;
+            ys.push(source[1]);
+            for b in &scene.boxes {
+                xs.extend([b.lo[0], b.hi[0]]);
+                ys.extend([b.lo[1], b.hi[1]]);
+            }
+            let wanted: Vec<bool> = (0..ys.len()).map(|j| j % 7 != 3).collect();
+            let (mut targets, mut blocked) = (Vec::new(), vec![true; ys.len()]);
+            let source = P3::from(source);
+            for x in xs {
+                scene.blocks_row(&source, RowOfUsers { x, ys: &ys, z }, &wanted, &mut targets, &mut blocked);
+                for (j, &y) in ys.iter().enumerate() {
+                    let expected = wanted[j] && scene.blocks_segment(&source, &P3::new(x, y, z));
+                    prop_assert_eq!(blocked[j], expected, "{:?} to ({}, {}, {})", source, x, y, z);
+                }
+            }
+        }
     }
 
     proptest! {

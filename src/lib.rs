@@ -22,9 +22,10 @@
 //!
 //! Data flows one way; each module uses only those above it in this list.
 //!
-//! * [`input`], [`numerics`], [`timing`]: the field error every rejection carries and the
-//!   parsers the CLI and the API share; small numerical tools (ℓ₁ norm, golden section, Monte
-//!   Carlo means); the `took_ms` every answer carries.
+//! * [`input`], [`numerics`], [`vecmath`], [`timing`]: the field error every rejection carries
+//!   and the parsers the CLI and the API share; small numerical tools (ℓ₁ norm, golden section,
+//!   Monte Carlo means); ln and exp over whole rows, vectorised; the `took_ms` every answer
+//!   carries.
 //! * [`scenario`]: the scenario document — strict parsing, validation, canonical hash, grid.
 //! * [`channel`]: geometry, blockage, path loss and the per-location (h̃, w̃, τ) of Lemma 1;
 //!   [`phases`]: continuous, b-bit and no-IRS phase modes.
@@ -58,3 +59,4 @@ pub mod scenario;
 pub mod service;
 pub mod solver;
 pub mod timing;
+pub mod vecmath;

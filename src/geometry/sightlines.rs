@@ -224,6 +224,7 @@ fn wall_is_near(w: &Wall, source: &P3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::tests::{point, scene};
     use proptest::prelude::*;
 
     #[test]
@@ -237,38 +238,6 @@ mod tests {
             assert!(((opposite - a).rem_euclid(4.0) - 2.0).abs() < 1e-12, "{t}");
             previous = a;
         }
-    }
-
-    fn point() -> impl Strategy<Value = [f64; 3]> {
-        (-12.0..12.0f64, -12.0..12.0f64, 0.0..4.0f64).prop_map(|(x, y, z)| [x, y, z])
-    }
-
-    fn scene() -> impl Strategy<Value = Obstructions> {
-        let aabb = (
-            -10.0..8.0f64,
-            -10.0..8.0f64,
-            0.1..4.0f64,
-            0.1..4.0f64,
-            0.5..3.0f64,
-        )
-            .prop_map(|(x, y, w, d, h)| Aabb {
-                lo: [x, y, 0.0],
-                hi: [x + w, y + d, h],
-            });
-        let wall = (point(), point(), 0.05..0.5f64, 0.5..3.0f64)
-            .prop_filter("distinct ends", |(a, b, _, _)| {
-                (a[0] - b[0]).hypot(a[1] - b[1]) > 0.1
-            })
-            .prop_map(|(a, b, t, h)| Wall::new([a[0], a[1]], [b[0], b[1]], t, h));
-        (
-            proptest::collection::vec(aabb, 0..12),
-            proptest::collection::vec(wall, 0..6),
-        )
-            .prop_map(|(boxes, walls)| Obstructions {
-                boxes,
-                walls,
-                raster: None,
-            })
     }
 
     proptest! {

@@ -7,9 +7,10 @@
 //! otherwise hold 480 MB of phases).
 
 use super::{Cancelled, Progress};
-use crate::channel::{C64, ChannelModel, expected_gain};
+use crate::channel::{C64, ChannelModel, ClosedFormRow, expected_gain};
 use crate::phases::{PhaseMode, phases_for_mode};
 use crate::scenario::Grid;
+use crate::vecmath;
 use rayon::prelude::*;
 
 /// The best expected gain λ (linear) at `user` for a phase mode, using the buffers `w` (N) and
@@ -44,7 +45,8 @@ pub fn best_gain(
 /// The map values in dB (NaN where occupied) and, with several APs, the AP serving each cell:
 /// the one whose optimised gain is highest there, all IRSs configured for it (docs/model.md §3).
 /// Rows of the grid are spread over rayon's pool; progress advances and cancellation is checked
-/// once per row.
+/// once per row. The continuous closed form over `coherent` surfaces is evaluated a row at a
+/// time ([`ChannelModel::closed_form_row`]); other modes cell by cell.
 pub(super) fn gain_values(
     models: &[ChannelModel],
     grid: &Grid,
@@ -55,13 +57,49 @@ pub(super) fn gain_values(
 ) -> Result<(Vec<f64>, Vec<u8>), Cancelled> {
     let mut values = vec![f64::NAN; grid.cells()];
     let mut serving = vec![0u8; grid.cells()];
-    let n = models.first().map_or(0, |m| m.subsurfaces());
-    values
+    let rows = values
         .par_chunks_mut(grid.ny)
         .zip(occupied.par_chunks(grid.ny))
         .zip(serving.par_chunks_mut(grid.ny))
-        .enumerate()
-        .try_for_each_init(
+        .enumerate();
+    if mode == PhaseMode::Continuous && models.iter().all(|m| m.closed_form_by_rows()) {
+        rows.try_for_each_init(
+            ClosedFormRow::default,
+            |row, (i, ((values_row, occupied_row), serving_row))| {
+                if progress.is_cancelled() {
+                    return Err(Cancelled);
+                }
+                let x = grid.x_min + i as f64 * grid.resolution_m;
+                // λ of the best AP so far, in place of the dB value until the last AP is seen.
+                for (k, model) in models.iter().enumerate() {
+                    model.closed_form_row(
+                        x,
+                        grid.y_min,
+                        grid.resolution_m,
+                        height,
+                        occupied_row,
+                        row,
+                    );
+                    let cells = values_row.iter_mut().zip(serving_row.iter_mut());
+                    for ((best, ap), (a, t)) in cells.zip(row.amplitude.iter().zip(&row.tau)) {
+                        let gain = a * a + t;
+                        if k == 0 || gain > *best {
+                            (*best, *ap) = (gain, k as u8);
+                        }
+                    }
+                }
+                vecmath::ln_in_place(values_row);
+                let db_per_neper = 10.0 * std::f64::consts::LOG10_E;
+                for (value, &occ) in values_row.iter_mut().zip(occupied_row) {
+                    *value = if occ { f64::NAN } else { *value * db_per_neper };
+                }
+                progress.advance(values_row.len());
+                Ok(())
+            },
+        )?;
+    } else {
+        let n = models.first().map_or(0, |m| m.subsurfaces());
+        rows.try_for_each_init(
             || (vec![C64::new(0.0, 0.0); n], vec![0.0; n]),
             |(w, theta), (i, ((row, occupied_row), serving_row))| {
                 if progress.is_cancelled() {
@@ -87,6 +125,7 @@ pub(super) fn gain_values(
                 Ok(())
             },
         )?;
+    }
     if models.len() == 1 {
         // One AP serves every cell: nothing to keep.
         serving = Vec::new();

@@ -22,6 +22,7 @@ pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
 use crate::scenario::{Grid, Scenario};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -183,15 +184,20 @@ impl RadioMap {
 }
 
 /// Per cell of `grid`: true when something on the floor covers its centre (docs/model.md §1).
+/// Rows in parallel: on a 1001² grid this pass was a tenth of a gain map's time on one core.
 pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
     let obstructions = scenario.obstructions();
-    (0..grid.cells())
-        .map(|k| {
-            let (i, j) = grid.cell_of(k);
-            let [x, y] = grid.centre(i, j);
-            obstructions.covers(x, y)
-        })
-        .collect()
+    let mut occupied = vec![false; grid.cells()];
+    occupied
+        .par_chunks_mut(grid.ny)
+        .enumerate()
+        .for_each(|(i, row)| {
+            for (j, cell) in row.iter_mut().enumerate() {
+                let [x, y] = grid.centre(i, j);
+                *cell = obstructions.covers(x, y);
+            }
+        });
+    occupied
 }
 
 /// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# This crate against vectorised NumPy and SciPy on the same two workloads, in one run: the
+# paper floor's continuous gain map at 2 cm (1001 × 1001 cells) and the shortest path through
+# a 19-wall serpentine maze on the same grid (issue 14's comparisons). Each side checks that the
+# other computed the same thing (map values to 1e-9 dB, path length to 1e-9 m) before any time
+# is printed.
+#   scripts/vs-python.sh [REPEATS=7]
+# Installs numpy and scipy with pip when missing. NumPy's elementwise loops run on one thread,
+# so the Rust figure to compare the map with is the one-thread one (printed beside the two-thread
+# one). OPENBLAS_CORETYPE does not matter here: neither workload calls BLAS.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+repeats=${1:-7}
+python3 -c 'import numpy, scipy' 2>/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check numpy scipy
+cargo build --release --quiet --example python_comparison
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+./target/release/examples/python_comparison gain "$out" "$repeats" >"$out/gain.json"
+./target/release/examples/python_comparison maze "$out" "$repeats" >"$out/maze.json"
+python3 scripts/vs_python.py "$out/gain.json" "$out/maze.json" "$out" "$repeats"
