@@ -58,29 +58,27 @@ pub struct CellGraph<'a> {
 }
 
 impl<'a> CellGraph<'a> {
-    /// Calls `visit(neighbour, step_length_in_cells)` for every neighbour of `cell` that is free
-    /// and reachable without cutting an occupied corner.
+    /// Calls `visit(neighbour, its (i, j), step_length_in_cells)` for every neighbour of `cell`
+    /// that is free and reachable without cutting an occupied corner. The coordinates come
+    /// along so that a search's heuristic needs no division per neighbour.
     #[inline]
-    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, f64)) {
+    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, (usize, usize), f64)) {
         let (i, j) = self.grid.cell_of(cell);
-        let (nx, ny) = (self.grid.nx as isize, self.grid.ny as isize);
+        let (nx, ny) = (self.grid.nx, self.grid.ny);
         for &(di, dj, len) in &NEIGHBOURS {
-            let (a, b) = (i as isize + di, j as isize + dj);
-            if a < 0 || b < 0 || a >= nx || b >= ny {
+            // Off the grid on either side: a step below 0 wraps to a huge index.
+            let (a, b) = (i.wrapping_add_signed(di), j.wrapping_add_signed(dj));
+            if a >= nx || b >= ny {
                 continue;
             }
-            let n = self.grid.index(a as usize, b as usize);
+            let n = a * ny + b;
             if self.occupied[n] {
                 continue;
             }
-            if di != 0 && dj != 0 {
-                let side1 = self.grid.index(a as usize, j);
-                let side2 = self.grid.index(i, b as usize);
-                if self.occupied[side1] || self.occupied[side2] {
-                    continue;
-                }
+            if di != 0 && dj != 0 && (self.occupied[a * ny + j] || self.occupied[i * ny + b]) {
+                continue;
             }
-            visit(n, len);
+            visit(n, (a, b), len);
         }
     }
 
@@ -100,54 +98,49 @@ impl<'a> CellGraph<'a> {
         self.check_ends(start, goal, threshold)?;
         let heuristic = self.octile_to(goal);
         with_scratch(self.values.len(), |scratch| {
-            let Scratch {
-                dist, prev, heap, ..
-            } = scratch;
-            dist.set(start, 0.0);
-            // Entries of equal f are taken farther-from-the-goal first (larger h): a rule that
-            // does not depend on which end is the start. On the 1001² floor at −62 dB, ties by
-            // cell index cost 16 ms one way and 27–30 ms the other; larger h first 14–18 ms and
-            // 12–17 ms; smaller h first 27–35 ms both ways (interleaved runs, one session).
-            heap.push(Reverse((
-                OrdF64(heuristic(start)),
-                OrdF64(-heuristic(start)),
-                start,
-            )));
-            while let Some(Reverse((OrdF64(f), OrdF64(minus_h), cell))) = heap.pop() {
-                let h = -minus_h;
+            let Scratch { nodes, heap, .. } = scratch;
+            heap.clear();
+            nodes.reach(start, 0.0, start as u32);
+            let start_h = heuristic(self.grid.cell_of(start));
+            heap.push(Reverse(start_h.to_bits()), start as u32);
+            while let Some((_, cell)) = heap.pop() {
+                let cell = cell as usize;
+                if nodes.is_settled(cell) {
+                    continue; // stale: reached again by a shorter way, and settled from there
+                }
+                nodes.settle(cell);
                 if cell == goal {
                     break;
                 }
-                let g = dist.get(cell);
-                if f > g + h + 1e-9 {
-                    continue; // stale entry
-                }
-                self.for_each_neighbour(cell, |n, len| {
+                let g = nodes.g(cell);
+                self.for_each_neighbour(cell, |n, at, len| {
                     if !self.is_feasible(n, threshold) {
                         return;
                     }
                     let candidate = g + len;
-                    if candidate < dist.get(n) {
-                        dist.set(n, candidate);
-                        prev[n] = cell as u32;
-                        let h = heuristic(n);
-                        heap.push(Reverse((OrdF64(candidate + h), OrdF64(-h), n)));
+                    if candidate < nodes.g(n) {
+                        nodes.reach(n, candidate, cell as u32);
+                        let key = Reverse((candidate + heuristic(at)).to_bits());
+                        // f never decreases along a consistent heuristic's pops, but rounding
+                        // can put a key an ulp below the last one popped, which a monotone
+                        // queue refuses: it is queued at that last key instead.
+                        let key = heap.top().map_or(key, |top| key.min(top));
+                        heap.push(key, n as u32);
                     }
                 });
             }
             heap.clear();
-            let length = dist.get(goal);
-            if !length.is_finite() {
+            if !nodes.is_settled(goal) {
                 return Err(Infeasible::Disconnected);
             }
             let mut path = vec![goal];
             while *path.last().unwrap() != start {
-                path.push(prev[*path.last().unwrap()] as usize);
+                path.push(nodes.prev(*path.last().unwrap()) as usize);
             }
             path.reverse();
             Ok(Path {
                 cells: path,
-                distance_m: length * self.grid.resolution_m,
+                distance_m: nodes.g(goal) * self.grid.resolution_m,
             })
         })
     }
@@ -171,48 +164,52 @@ impl<'a> CellGraph<'a> {
         let ceiling = value(start).min(value(goal));
         let to_goal = self.octile_to(goal);
         with_scratch(self.values.len(), |scratch| {
-            // `dist` holds the widest width found so far, negated (its unset value is +∞).
+            // A node's g holds the widest width found so far, negated (unset reads +∞).
             let Scratch {
-                dist: narrowest,
-                done,
+                nodes,
                 widest_heap: heap,
                 ..
             } = scratch;
-            let best = |narrowest: &Stamped<f64>, c: usize| -narrowest.get(c);
-            narrowest.set(start, -value(start));
+            let best = |nodes: &Nodes, c: usize| -nodes.g(c);
+            heap.clear();
+            nodes.reach(start, -value(start), start as u32);
             // Among entries of equal width the one nearer the goal goes first: widths tie on
             // every cell above a narrow end, and breaking the tie by cell index made the search
             // cost 1 ms one way and 37 ms the other on the 1001² floor.
-            heap.push((OrdF64(value(start)), Reverse(OrdF64(to_goal(start))), start));
+            heap.push((
+                OrdF64(value(start)),
+                Reverse(OrdF64(to_goal(self.grid.cell_of(start)))),
+                start,
+            ));
             while let Some((OrdF64(b), _, cell)) = heap.pop() {
-                if done.get(cell) {
+                if nodes.is_settled(cell) {
                     continue;
                 }
-                done.set(cell, true);
-                if cell == goal || best(narrowest, goal) >= ceiling {
+                nodes.settle(cell);
+                if cell == goal || best(nodes, goal) >= ceiling {
                     break;
                 }
-                self.for_each_neighbour(cell, |n, _| {
+                self.for_each_neighbour(cell, |n, at, _| {
                     let through = b.min(value(n));
-                    if !done.get(n) && through > best(narrowest, n) {
-                        narrowest.set(n, -through);
-                        heap.push((OrdF64(through), Reverse(OrdF64(to_goal(n))), n));
+                    if !nodes.is_settled(n) && through > best(nodes, n) {
+                        nodes.reach(n, -through, cell as u32);
+                        heap.push((OrdF64(through), Reverse(OrdF64(to_goal(at))), n));
                     }
                 });
             }
             heap.clear();
-            let width = best(narrowest, goal);
+            let width = best(nodes, goal);
             width.is_finite().then_some(width)
         })
     }
 
-    /// The octile distance to `goal` in units of Δ (the shortest 8-connected length on an
-    /// empty grid, so an admissible and consistent A* heuristic), with the goal's coordinates
-    /// worked out once: the searches call it for every neighbour they push.
-    fn octile_to(&self, goal: usize) -> impl Fn(usize) -> f64 + '_ {
+    /// The octile distance from a cell's (i, j) to `goal` in units of Δ (the shortest
+    /// 8-connected length on an empty grid, so an admissible and consistent A* heuristic),
+    /// with the goal's coordinates worked out once: the searches call it for every neighbour
+    /// they push.
+    fn octile_to(&self, goal: usize) -> impl Fn((usize, usize)) -> f64 + use<> {
         let (gi, gj) = self.grid.cell_of(goal);
-        move |c: usize| {
-            let (i, j) = self.grid.cell_of(c);
+        move |(i, j): (usize, usize)| {
             let (dx, dy) = (i.abs_diff(gi) as f64, j.abs_diff(gj) as f64);
             dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)
         }
@@ -235,76 +232,106 @@ impl<'a> CellGraph<'a> {
     }
 }
 
-/// A per-cell array whose entries read as `unset` until written in the current search:
-/// starting a search bumps the generation instead of refilling millions of entries.
-#[derive(Debug)]
-struct Stamped<T: Copy> {
-    values: Vec<T>,
-    stamps: Vec<u32>,
-    generation: u32,
-    unset: T,
+/// One cell's search state, in one place so that looking at a neighbour touches one cache
+/// line (three arrays cost three misses a neighbour on a 1001² map): g (A*: the shortest
+/// length found, in cells; the widest path: minus the widest width), the predecessor, and which
+/// search wrote it.
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    g: f64,
+    prev: u32,
+    /// The search's generation when reached, one more once settled; older reads as unset.
+    stamp: u32,
 }
 
-impl<T: Copy> Stamped<T> {
-    fn new(unset: T) -> Self {
-        Stamped {
-            values: Vec::new(),
-            stamps: Vec::new(),
-            generation: 0,
-            unset,
-        }
-    }
+/// Every cell's [`Node`], reset for a new search by bumping the generation instead of
+/// rewriting millions of entries.
+#[derive(Debug, Default)]
+struct Nodes {
+    nodes: Vec<Node>,
+    generation: u32,
+}
 
-    /// Makes every entry unset for a search over `cells` cells.
+impl Nodes {
+    /// Makes every cell unset for a search over `cells` cells.
     fn reset(&mut self, cells: usize) {
-        if self.values.len() != cells {
-            self.values = vec![self.unset; cells];
-            self.stamps = vec![0; cells];
+        let unset = Node {
+            g: f64::INFINITY,
+            prev: u32::MAX,
+            stamp: 0,
+        };
+        if self.nodes.len() != cells {
+            self.nodes = vec![unset; cells];
             self.generation = 0;
         }
-        self.generation = self.generation.wrapping_add(1);
-        if self.generation == 0 {
-            // After 2³² searches the stamps wrap: clear them once.
-            self.stamps.iter_mut().for_each(|s| *s = 0);
-            self.generation = 1;
-        }
+        // Two stamps per search (reached, settled); after 2³¹ searches they wrap: clear once.
+        self.generation = match self.generation.checked_add(2) {
+            Some(next) if next < u32::MAX => next,
+            _ => {
+                self.nodes.iter_mut().for_each(|n| *n = unset);
+                2
+            }
+        };
     }
 
+    /// g of `cell`, +∞ where this search has not reached it.
     #[inline]
-    fn get(&self, cell: usize) -> T {
-        if self.stamps[cell] == self.generation {
-            self.values[cell]
+    fn g(&self, cell: usize) -> f64 {
+        let node = self.nodes[cell];
+        if node.stamp >= self.generation {
+            node.g
         } else {
-            self.unset
+            f64::INFINITY
         }
     }
 
     #[inline]
-    fn set(&mut self, cell: usize, value: T) {
-        self.stamps[cell] = self.generation;
-        self.values[cell] = value;
+    fn prev(&self, cell: usize) -> u32 {
+        self.nodes[cell].prev
+    }
+
+    #[inline]
+    fn is_settled(&self, cell: usize) -> bool {
+        self.nodes[cell].stamp == self.generation + 1
+    }
+
+    /// Records a better way to `cell` (open again if it was settled, which a rounding-level
+    /// improvement can do; it is then simply expanded once more).
+    #[inline]
+    fn reach(&mut self, cell: usize, g: f64, prev: u32) {
+        self.nodes[cell] = Node {
+            g,
+            prev,
+            stamp: self.generation,
+        };
+    }
+
+    #[inline]
+    fn settle(&mut self, cell: usize) {
+        self.nodes[cell].stamp = self.generation + 1;
     }
 }
 
 /// One search's working memory, kept between queries: on a 1001² map a fresh set was 12–21 MB
 /// of allocation and zeroing per query.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 struct Scratch {
-    /// A*: g per cell; widest path: minus the best width. Unset reads +∞ (no width: −∞).
-    dist: Stamped<f64>,
-    /// Widest path: cells already settled.
-    done: Stamped<bool>,
-    /// A*: each cell's predecessor, valid where `dist` is set.
-    prev: Vec<u32>,
-    /// A*'s open list: (f, −h, cell), smallest f then largest h first.
-    heap: BinaryHeap<Reverse<(OrdF64, OrdF64, usize)>>,
+    nodes: Nodes,
+    /// A*'s open list: cells keyed by f = g + h, smallest first (f ≥ 0, whose bits order as
+    /// the number does). A monotone queue: with a consistent heuristic A* pops f in order, so
+    /// a radix heap serves it with O(1) pushes; entries of equal f come out last in, first
+    /// out, a rule that does not depend on which end is the start. On the 19-wall maze of
+    /// `scripts/vs-python.sh` (every cell settled) the search took 150–180 ms with a binary heap
+    /// of (f, −h, cell), 109–117 ms with this; keyed by (f, h) pairs the radix heap was no
+    /// faster than the binary heap (its redistributions of 128-bit keys took 43 %).
+    heap: radix_heap::RadixHeapMap<Reverse<u64>, u32>,
     /// The widest path's open list: (width, −distance to goal, cell), largest first.
     widest_heap: BinaryHeap<(OrdF64, Reverse<OrdF64>, usize)>,
 }
 
 /// Scratch sets kept for reuse: as many as searches usually run at once (the query pool's
-/// workers); beyond that a search allocates its own and drops it. At most 4 × 21 B per cell of
-/// the largest map queried stay allocated: 84 MB at the grid limit of 1001² cells.
+/// workers); beyond that a search allocates its own and drops it. At most 4 × 16 B per cell of
+/// the largest map queried stay allocated: 64 MB at the grid limit of 1001² cells.
 const POOLED_SCRATCH: usize = 4;
 static SCRATCH_POOL: Mutex<Vec<Scratch>> = Mutex::new(Vec::new());
 
@@ -315,18 +342,8 @@ fn with_scratch<R>(cells: usize, search: impl FnOnce(&mut Scratch) -> R) -> R {
         .map(|mut pool| pool.pop())
         .ok()
         .flatten();
-    let mut scratch = pooled.unwrap_or_else(|| Scratch {
-        dist: Stamped::new(f64::INFINITY),
-        done: Stamped::new(false),
-        prev: Vec::new(),
-        heap: BinaryHeap::new(),
-        widest_heap: BinaryHeap::new(),
-    });
-    scratch.dist.reset(cells);
-    scratch.done.reset(cells);
-    if scratch.prev.len() != cells {
-        scratch.prev = vec![u32::MAX; cells];
-    }
+    let mut scratch = pooled.unwrap_or_default();
+    scratch.nodes.reset(cells);
     let result = search(&mut scratch);
     if let Ok(mut pool) = SCRATCH_POOL.lock()
         && pool.len() < POOLED_SCRATCH
@@ -384,7 +401,7 @@ mod tests {
                 if !dist[c].is_finite() {
                     continue;
                 }
-                g.for_each_neighbour(c, |n, len| {
+                g.for_each_neighbour(c, |n, _, len| {
                     if g.is_feasible(n, threshold) && dist[c] + len < dist[n] - 1e-12 {
                         dist[n] = dist[c] + len;
                         changed = true;
@@ -431,7 +448,7 @@ mod tests {
                     let mut len = 0.0;
                     for w in p.cells.windows(2) {
                         let mut step = None;
-                        g.for_each_neighbour(w[0], |n, l| if n == w[1] { step = Some(l) });
+                        g.for_each_neighbour(w[0], |n, _, l| if n == w[1] { step = Some(l) });
                         len += step.expect("consecutive waypoints are neighbours");
                     }
                     prop_assert!(p.cells.iter().all(|&c| g.is_feasible(c, threshold)));
