@@ -3,8 +3,9 @@
 # time. Starts the release server on a free port, warms the map, runs wrk, stops the server.
 #   scripts/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
 # Environment: IRS_BIN, a server binary to test instead of this checkout's release build (to
-# compare two builds in one run); PHASE_PRECISION, the queries' phase_precision (the server's
-# default when unset). The answer's size is printed before the figures.
+# compare two builds in one run); PHASE_PRECISION and PHASE_FORMAT, the queries' phase_precision
+# and phase_format (the server's defaults when unset). The answer's size is printed before the
+# figures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
@@ -21,7 +22,8 @@ sid=$(curl -s "$url/v1/scenarios" | python3 -c "import json,sys; print([s['id'] 
 map=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' \
   -d "{\"scenario_id\":\"$sid\",\"kind\":\"gain\"}" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
 precision=${PHASE_PRECISION:+,\"phase_precision\":\"$PHASE_PRECISION\"}
-body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62$precision}"
+format=${PHASE_FORMAT:+,\"phase_format\":\"$PHASE_FORMAT\"}
+body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62$precision$format}"
 bytes=$(curl -sf -X POST "$url/v1/paths" -H 'content-type: application/json' -d "$body" | wc -c)
 echo "answer: $bytes bytes"
 cat >"$lua" <<LUA

@@ -10,7 +10,7 @@ use crate::input::{parse_finite, parse_point};
 use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
 use crate::phases::PhaseMode;
 use crate::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
-use crate::planner::{self, PhasePrecision, Threshold};
+use crate::planner::{self, PhaseFormat, PhasePrecision, Threshold};
 use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
 use crate::rate::Access;
 use crate::render::{self, RenderOptions};
@@ -252,9 +252,14 @@ pub struct PlanArgs {
     /// Check the path by Monte Carlo with this many Rician draws per waypoint (paper Fig. 10).
     #[arg(long, value_name = "DRAWS")]
     pub monte_carlo: Option<usize>,
-    /// How finely the waypoints' phases are written: 1e-2, 1e-3, 1e-4, 1e-6 (rad) or full.
-    #[arg(long, value_name = "STEP", default_value = "1e-4")]
-    pub phase_precision: PhasePrecision,
+    /// How finely the waypoints' phases are written in radians: 1e-2, 1e-3, 1e-4, 1e-6 or full
+    /// (default 1e-4).
+    #[arg(long, value_name = "STEP")]
+    pub phase_precision: Option<PhasePrecision>,
+    /// How the waypoints' phases are written: radians (irs_phases_rad) or codes (16-bit codes
+    /// in base64, irs_phase_codes; θ = 2π·c/65536).
+    #[arg(long, value_name = "FORMAT", default_value = "radians")]
+    pub phase_format: PhaseFormat,
     /// Seed of the Monte Carlo check.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -431,7 +436,12 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(format!("--{e}")))?;
-    path.round_phases(args.phase_precision);
+    if args.phase_format == PhaseFormat::Codes && args.phase_precision.is_some() {
+        return Err(Failure::input(
+            "--phase-precision: applies to --phase-format radians only (codes are 2π/65536 steps)",
+        ));
+    }
+    path.write_phases(args.phase_format, args.phase_precision.unwrap_or_default());
     write_png(
         &args.map,
         &map,

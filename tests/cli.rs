@@ -49,6 +49,36 @@ fn plan_prints_the_path_body() {
     assert!((body["travel_time_s"].as_f64().unwrap() - distance / 0.5).abs() < 1e-9);
 }
 
+/// `--phase-format codes`: each surface's phases as one base64 string of 16-bit codes (N = 4:
+/// eight bytes, twelve characters); a precision is for radians only (exit 2, naming it).
+#[test]
+fn plan_writes_phase_codes_on_request() {
+    let args = [
+        "plan",
+        "--scenario",
+        SMALL,
+        "--kind",
+        "gain",
+        "--start",
+        "0.5,0.5",
+        "--goal",
+        "5.5,3.5",
+        "--max-threshold",
+        "--quiet",
+        "--phase-format",
+        "codes",
+    ];
+    let (code, out, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let body: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let waypoint = &body["waypoints"][0];
+    assert!(waypoint.get("irs_phases_rad").is_none());
+    assert_eq!(waypoint["irs_phase_codes"][0].as_str().unwrap().len(), 12);
+    let (code, _, err) = run(&[&args[..], &["--phase-precision", "1e-2"]].concat());
+    assert_eq!(code, 2);
+    assert!(err.contains("--phase-precision"), "{err}");
+}
+
 #[test]
 fn rate_plan_carries_powers_order_and_monte_carlo() {
     let (code, out, err) = run(&[

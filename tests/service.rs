@@ -379,6 +379,37 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
     );
     assert_eq!(body["field"], "phase_precision", "{body}");
 
+    // As 16-bit codes: the same phases to π/2¹⁶, in at most a third of the full answer's bytes,
+    // and no radians beside them; a precision applies to radians only.
+    let mut codes_request = request.clone();
+    codes_request["phase_format"] = "codes".into();
+    let (status, codes) = server.post("/v1/paths", codes_request.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{codes}");
+    let decoded = decode_codes(&codes);
+    assert_eq!(decoded.len(), exact.len());
+    for (d, e) in decoded.iter().zip(&exact) {
+        let error = (d - e).abs();
+        assert!(
+            error.min(std::f64::consts::TAU - error) <= std::f64::consts::PI / 65536.0 + 1e-12,
+            "{d} vs {e}"
+        );
+    }
+    assert!(codes["waypoints"][0].get("irs_phases_rad").is_none());
+    let codes_bytes = serde_json::to_string(&codes).unwrap().len();
+    assert!(
+        codes_bytes * 3 <= full_bytes,
+        "codes {codes_bytes} B vs full {full_bytes} B"
+    );
+    codes_request["phase_precision"] = "1e-2".into();
+    let (status, body) = server.post("/v1/paths", codes_request).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+    );
+    assert_eq!(body["field"], "phase_precision", "{body}");
+
     // A sweep over thresholds, defined by the map key instead of the id.
     let (status, sweep) = server
         .post("/v1/sweeps", json!({"map": {"scenario_id": id, "kind": "gain"}, "start": [-10, 0], "goal": [10, 0], "thresholds": [-65, -62, -59]}))
@@ -440,10 +471,53 @@ async fn rate_map_job_reports_progress_and_serves_paths_with_powers() {
     assert_eq!(wp["irs_phases_rad"].as_array().unwrap().len(), 1);
     assert_eq!(wp["power_w"].as_array().unwrap().len(), 2);
     assert_eq!(wp["decoding_order"].as_array().unwrap().len(), 2);
+    // A rate map keeps its phases as 16-bit codes: written as codes they decode to exactly the
+    // phases written in full.
+    let query = |format: &str, precision: Option<&str>| {
+        let mut q = json!({"map_id": job["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": 6.0, "phase_format": format});
+        if let Some(p) = precision {
+            q["phase_precision"] = p.into();
+        }
+        q
+    };
+    let (_, codes) = server.post("/v1/paths", query("codes", None)).await;
+    let (_, full) = server
+        .post("/v1/paths", query("radians", Some("full")))
+        .await;
+    let full_phases: Vec<f64> = full["waypoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|w| w["irs_phases_rad"][0].as_array().unwrap().clone())
+        .map(|t| t.as_f64().unwrap())
+        .collect();
+    assert_eq!(decode_codes(&codes), full_phases);
     let (_, body) = server
         .get(&format!("/v1/maps/{}", job["map_id"].as_str().unwrap()))
         .await;
     assert!(body["certificate"]["max_gap"].as_f64().unwrap() <= 0.05);
+}
+
+/// Every waypoint's first-surface phases of a `phase_format: codes` answer, decoded
+/// (little-endian 16-bit codes in base64, θ = 2π·c/65536).
+fn decode_codes(answer: &Value) -> Vec<f64> {
+    use base64::Engine;
+    answer["waypoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|w| {
+            let text = w["irs_phase_codes"][0].as_str().unwrap();
+            base64::engine::general_purpose::STANDARD
+                .decode(text)
+                .unwrap()
+                .chunks_exact(2)
+                .map(|c| {
+                    f64::from(u16::from_le_bytes([c[0], c[1]])) * std::f64::consts::TAU / 65536.0
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// A long build: the paper's multi-user floor at 0.2 m (101 × 101 cells).

@@ -6,7 +6,7 @@ pub mod graph;
 pub use graph::{CellGraph, Infeasible, Path};
 
 use crate::input::{FieldError, parse_finite};
-use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, WorkError};
+use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, SurfacePhases, WorkError};
 use crate::scenario::Grid;
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
@@ -297,15 +297,41 @@ impl FromStr for PhasePrecision {
     }
 }
 
+/// How a path answer writes its IRS phases: decimals in radians (`irs_phases_rad`, rounded to
+/// a [`PhasePrecision`]), or 16-bit codes in base64 (`irs_phase_codes`,
+/// [`SurfacePhases::Codes`]): within π/2¹⁶ ≈ 4.8·10⁻⁵ rad, as fine as the default 10⁻⁴ rad,
+/// in 2.7 characters a phase instead of 6–7, and directly the levels a b-bit surface
+/// controller takes (c >> (16 − b)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PhaseFormat {
+    #[default]
+    Radians,
+    Codes,
+}
+
+impl FromStr for PhaseFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::input::parse_name(s)
+    }
+}
+
 impl PathAnswer {
-    /// Rounds every waypoint's IRS phases to `precision`.
-    pub fn round_phases(&mut self, precision: PhasePrecision) {
-        if precision == PhasePrecision::Full {
-            return;
-        }
+    /// Writes every waypoint's IRS phases as `format` asks, radians rounded to `precision`.
+    pub fn write_phases(&mut self, format: PhaseFormat, precision: PhasePrecision) {
         for waypoint in &mut self.waypoints {
-            for surface in &mut waypoint.config.irs_phases_rad {
-                surface.iter_mut().for_each(|t| *t = precision.round(*t));
+            let phases = &mut waypoint.config.phases;
+            match format {
+                PhaseFormat::Codes => *phases = phases.to_codes(),
+                PhaseFormat::Radians if precision == PhasePrecision::Full => {}
+                PhaseFormat::Radians => {
+                    if let SurfacePhases::Radians(surfaces) = phases {
+                        for surface in surfaces {
+                            surface.iter_mut().for_each(|t| *t = precision.round(*t));
+                        }
+                    }
+                }
             }
         }
     }

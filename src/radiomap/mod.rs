@@ -22,6 +22,8 @@ pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
 use crate::scenario::{Grid, Scenario};
+use base64::Engine;
+use base64::engine::general_purpose::STANDARD as BASE64;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Arc;
@@ -93,8 +95,9 @@ pub enum CellSolutions {
 pub struct CellConfig {
     /// The AP serving this cell (an index into the scenario's APs; 0 with one AP).
     pub ap: usize,
-    /// θ in [0, 2π) per IRS, in scenario order (N_s values each; empty for phases `none`).
-    pub irs_phases_rad: Vec<Vec<f64>>,
+    /// The IRS phases, written as `irs_phases_rad` or `irs_phase_codes`.
+    #[serde(flatten)]
+    pub phases: SurfacePhases,
     /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub power_w: Option<Vec<f64>>,
@@ -134,10 +137,75 @@ pub(crate) fn per_surface(flat: &[f64], lengths: &[usize]) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
+/// each; none for phases `none`), in radians or as the compact codes a path answer may be
+/// asked for (planner::PhaseFormat).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum SurfacePhases {
+    /// θ in [0, 2π).
+    #[serde(rename = "irs_phases_rad")]
+    Radians(Vec<Vec<f64>>),
+    /// Each surface's phases as 16-bit codes c, θ = 2π·c/2¹⁶ ([`crate::phases::encode_phase`],
+    /// within π/2¹⁶ of the phase), little-endian, two bytes a phase, in base64 (RFC 4648 with
+    /// padding): 2.7 characters a phase against 6–7 for a decimal at 10⁻⁴ rad.
+    #[serde(rename = "irs_phase_codes")]
+    Codes(Vec<String>),
+}
+
+impl SurfacePhases {
+    /// The same phases as codes (exact for phases already on the 2π/2¹⁶ grid: rate maps, `bits`).
+    pub fn to_codes(&self) -> SurfacePhases {
+        match self {
+            SurfacePhases::Radians(surfaces) => SurfacePhases::Codes(
+                surfaces
+                    .iter()
+                    .map(|phases| {
+                        let bytes: Vec<u8> = phases
+                            .iter()
+                            .flat_map(|&theta| crate::phases::encode_phase(theta).to_le_bytes())
+                            .collect();
+                        BASE64.encode(bytes)
+                    })
+                    .collect(),
+            ),
+            codes => codes.clone(),
+        }
+    }
+
+    /// Every surface's phases in radians (codes decoded).
+    pub fn radians(&self) -> Vec<Vec<f64>> {
+        match self {
+            SurfacePhases::Radians(surfaces) => surfaces.clone(),
+            SurfacePhases::Codes(surfaces) => surfaces
+                .iter()
+                .map(|text| {
+                    let bytes = BASE64.decode(text).expect("codes this module wrote");
+                    bytes
+                        .chunks_exact(2)
+                        .map(|pair| {
+                            crate::phases::decode_phase(u16::from_le_bytes([pair[0], pair[1]]))
+                        })
+                        .collect()
+                })
+                .collect(),
+        }
+    }
+
+    /// How many phases there are over every surface.
+    pub fn count(&self) -> usize {
+        match self {
+            SurfacePhases::Radians(surfaces) => surfaces.iter().map(Vec::len).sum(),
+            // Four base64 characters carry three bytes: a phase is two.
+            SurfacePhases::Codes(surfaces) => surfaces.iter().map(|s| s.len() / 4 * 3 / 2).sum(),
+        }
+    }
+}
+
 impl CellConfig {
-    /// The phases of every surface concatenated (the vector θ the channel model takes).
+    /// The phases of every surface concatenated (the vector θ the channel model takes), as
+    /// written (codes decoded).
     pub fn concatenated_phases(&self) -> Vec<f64> {
-        self.irs_phases_rad.concat()
+        self.phases.radians().concat()
     }
 }
 
@@ -156,10 +224,10 @@ impl RadioMap {
                 let model = &models[ap];
                 CellConfig {
                     ap,
-                    irs_phases_rad: per_surface(
+                    phases: SurfacePhases::Radians(per_surface(
                         &gain::waypoint_phases(model, [x, y, *antenna_height_m], self.key.phases),
                         &model.surface_lengths(),
-                    ),
+                    )),
                     power_w: None,
                     decoding_order: None,
                 }

@@ -9,12 +9,13 @@ use super::errors::{ApiError, parse_json};
 use super::jobs::{
     Job, JobRecord, JobState, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work,
 };
+use super::json::json_sized;
 use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
 use crate::phases::PhaseMode;
 use crate::placement::{self, Candidates, Objective, Search, What};
-use crate::planner::{self, PhasePrecision, SweepAnswer, Threshold};
+use crate::planner::{self, PhaseFormat, PhasePrecision, SweepAnswer, Threshold};
 use crate::radiomap::cost;
 use crate::radiomap::{MapKey, MapKind, MapStats, Progress, RadioMap, WorkError};
 use crate::rate::Access;
@@ -1167,9 +1168,12 @@ struct PathRequest {
     monte_carlo_draws: Option<usize>,
     #[serde(default, deserialize_with = "present")]
     seed: Option<u64>,
-    /// How finely the waypoints' phases are written (default 1e-4 rad).
+    /// How finely the waypoints' phases are written in radians (default 1e-4 rad).
     #[serde(default, deserialize_with = "present")]
     phase_precision: Option<PhasePrecision>,
+    /// Radians (default) or 16-bit codes in base64.
+    #[serde(default, deserialize_with = "present")]
+    phase_format: Option<PhaseFormat>,
 }
 
 /// The map a path or sweep query names, or the 202 answer while it is built.
@@ -1231,6 +1235,13 @@ async fn plan_path(
             "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
         ));
     }
+    let format = request.phase_format.unwrap_or_default();
+    if format == PhaseFormat::Codes && request.phase_precision.is_some() {
+        return Err(ApiError::invalid(
+            "phase_precision",
+            "applies to phase_format radians only (codes are steps of 2π/65536)",
+        ));
+    }
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
     let (map, scenario) = match found {
         Ok(found) => found,
@@ -1243,8 +1254,8 @@ async fn plan_path(
         planner::plan(&planned, start, goal, threshold, v_max)
     })
     .await??;
-    // Rounded before the Monte Carlo check, which then evaluates the phases as sent.
-    path.round_phases(request.phase_precision.unwrap_or_default());
+    // Written before the Monte Carlo check, which then evaluates the phases as sent.
+    path.write_phases(format, request.phase_precision.unwrap_or_default());
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
@@ -1270,22 +1281,13 @@ async fn plan_path(
     };
     // Sized up front: ~10 bytes per rounded phase and ~150 per waypoint's other fields, so the
     // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
-    let phases: usize = path
+    let phases = path
         .waypoints
         .first()
-        .map_or(0, |w| w.config.irs_phases_rad.iter().map(Vec::len).sum());
+        .map_or(0, |w| w.config.phases.count());
     let capacity = 512 + path.waypoints.len() * (150 + 10 * phases);
     let answer = Timed::since(started, CheckedPath { path, monte_carlo });
     Ok(json_sized(&answer, capacity))
-}
-
-/// A JSON answer serialised straight into one buffer of about `capacity` bytes.
-fn json_sized(value: &impl Serialize, capacity: usize) -> Response {
-    let mut body = Vec::with_capacity(capacity);
-    match serde_json::to_writer(&mut body, value) {
-        Ok(()) => ([(header::CONTENT_TYPE, "application/json")], body).into_response(),
-        Err(e) => ApiError::internal(e.to_string()).into_response(),
-    }
 }
 
 #[derive(Debug, Deserialize)]

@@ -3,7 +3,8 @@
 //! `openapi.yaml`.
 //!
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
-//! registry and map cache), `jobs` (map builds and placement searches), `queries` (admission
+//! registry and map cache), `jobs` (map builds and placement searches), `json` (large answers written into one buffer,
+//! rounded numbers from integers), `queries` (admission
 //! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
 //! timeouts), `store` (the data directory of `--data-dir`), `cluster` (replicas sharing Redis,
 //! `--redis-url`), `errors` (problem+json; [`Problem`]
@@ -16,6 +17,7 @@ pub(crate) mod cluster;
 pub mod config;
 pub(crate) mod errors;
 pub(crate) mod jobs;
+pub(crate) mod json;
 pub mod probe;
 pub(crate) mod queries;
 pub(crate) mod server;
