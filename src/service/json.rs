@@ -50,7 +50,7 @@ const ROUNDING_SHIFT: f64 = 6_755_399_441_055_744.0;
 /// into the end of `buffer` (one copy into the answer afterwards), or `None` when it is not
 /// k/10⁴ for an integer k, or is too large (see [`FEW_DECIMALS_BELOW`]).
 fn write_few_decimals(value: f64, buffer: &mut [u8; 32]) -> Option<&[u8]> {
-    if !(value.abs() < FEW_DECIMALS_BELOW) {
+    if value.is_nan() || value.abs() >= FEW_DECIMALS_BELOW {
         return None;
     }
     let magnitude = value.abs() * 1e4;
@@ -132,7 +132,7 @@ mod tests {
             -0.0,
             3.0,
             0.0001,
-            6.2831,
+            6.2821,
             -0.5,
             1e9 - 0.0001,
             1e9,
