@@ -18,6 +18,21 @@ fn run(args: &[&str]) -> (i32, String, String) {
 
 const SMALL: &str = "scenarios/small-test.json";
 
+/// A gain-map path across the small floor at the largest feasible threshold.
+const SMALL_GAIN_PLAN: [&str; 11] = [
+    "plan",
+    "--scenario",
+    SMALL,
+    "--kind",
+    "gain",
+    "--start",
+    "0.5,0.5",
+    "--goal",
+    "5.5,3.5",
+    "--max-threshold",
+    "--quiet",
+];
+
 #[test]
 fn plan_prints_the_path_body() {
     let (code, out, err) = run(&[
@@ -53,21 +68,7 @@ fn plan_prints_the_path_body() {
 /// eight bytes, twelve characters); a precision is for radians only (exit 2, naming it).
 #[test]
 fn plan_writes_phase_codes_on_request() {
-    let args = [
-        "plan",
-        "--scenario",
-        SMALL,
-        "--kind",
-        "gain",
-        "--start",
-        "0.5,0.5",
-        "--goal",
-        "5.5,3.5",
-        "--max-threshold",
-        "--quiet",
-        "--phase-format",
-        "codes",
-    ];
+    let args = [&SMALL_GAIN_PLAN[..], &["--phase-format", "codes"]].concat();
     let (code, out, err) = run(&args);
     assert_eq!(code, 0, "{err}");
     let body: serde_json::Value = serde_json::from_str(&out).unwrap();
@@ -110,21 +111,7 @@ fn rate_plan_carries_powers_order_and_monte_carlo() {
 #[test]
 fn png_output_is_written() {
     let file = std::env::temp_dir().join(format!("irs-cli-{}.png", std::process::id()));
-    let (code, _, err) = run(&[
-        "plan",
-        "--scenario",
-        SMALL,
-        "--kind",
-        "gain",
-        "--start",
-        "0.5,0.5",
-        "--goal",
-        "5.5,3.5",
-        "--max-threshold",
-        "--quiet",
-        "--png",
-        file.to_str().unwrap(),
-    ]);
+    let (code, _, err) = run(&[&SMALL_GAIN_PLAN[..], &["--png", file.to_str().unwrap()]].concat());
     assert_eq!(code, 0, "{err}");
     let bytes = std::fs::read(&file).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");

@@ -370,14 +370,7 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         api_body.len()
     );
     full_request["phase_precision"] = "1e-5".into();
-    let (status, body) = server.post("/v1/paths", full_request).await;
-    problem(
-        status,
-        &body,
-        StatusCode::UNPROCESSABLE_ENTITY,
-        "invalid_field",
-    );
-    assert_eq!(body["field"], "phase_precision", "{body}");
+    refused_naming(&server, full_request, "phase_precision").await;
 
     // As 16-bit codes: the same phases to π/2¹⁶, in at most a third of the full answer's bytes,
     // and no radians beside them; a precision applies to radians only.
@@ -401,14 +394,7 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         "codes {codes_bytes} B vs full {full_bytes} B"
     );
     codes_request["phase_precision"] = "1e-2".into();
-    let (status, body) = server.post("/v1/paths", codes_request).await;
-    problem(
-        status,
-        &body,
-        StatusCode::UNPROCESSABLE_ENTITY,
-        "invalid_field",
-    );
-    assert_eq!(body["field"], "phase_precision", "{body}");
+    refused_naming(&server, codes_request, "phase_precision").await;
 
     // A sweep over thresholds, defined by the map key instead of the id.
     let (status, sweep) = server
@@ -496,6 +482,18 @@ async fn rate_map_job_reports_progress_and_serves_paths_with_powers() {
         .get(&format!("/v1/maps/{}", job["map_id"].as_str().unwrap()))
         .await;
     assert!(body["certificate"]["max_gap"].as_f64().unwrap() <= 0.05);
+}
+
+/// A path request answered 422 `invalid_field`, naming `field`.
+async fn refused_naming(server: &Server, request: Value, field: &str) {
+    let (status, body) = server.post("/v1/paths", request).await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+    );
+    assert_eq!(body["field"], field, "{body}");
 }
 
 /// Every waypoint's first-surface phases of a `phase_format: codes` answer, decoded
