@@ -79,7 +79,8 @@ fn path_loss_db_at(log10_d: f64, f: f64, los: bool) -> f64 {
 }
 
 /// `out[k] = √L` = 10^(−PL/20) of links of squared length `d2[k]` (m², clamped to ≥ 1 m as
-/// [`path_loss_db`] does) and line of sight `los[k]`, f = log₁₀ f_c: a whole row of a gain map
+/// [`path_loss_db`] does, the InF-SH law of eqs. 41–42 in docs/model.md §2) and line of sight
+/// `los[k]`, f = log₁₀ f_c: a whole row of a gain map
 /// at once, vectorised (crate::vecmath). √L rather than L because the LoS amplitude is √L times
 /// a constant and L = (√L)², so one exponential serves both.
 #[multiversion::multiversion(targets(

@@ -11,6 +11,7 @@ use serde_json::ser::{CompactFormatter, Formatter};
 use std::io;
 
 use super::errors::ApiError;
+use crate::vecmath::ROUNDING_SHIFT;
 
 /// A JSON answer serialised into one buffer of about `capacity` bytes (sized by the caller so it
 /// is not regrown and copied on the way to hundreds of kilobytes).
@@ -42,10 +43,6 @@ impl Formatter for FewDecimals {
     }
 }
 
-/// 1.5·2⁵²: adding and subtracting it rounds a double below 2⁵¹ to an integer (to even on a
-/// tie, where a tie k + ½ is never k/10⁴ anyway), inline, where `round` is a libm call.
-const ROUNDING_SHIFT: f64 = 6_755_399_441_055_744.0;
-
 /// `value` as "[-]integer.fraction" with one to four fraction digits, written right to left
 /// into the end of `buffer` (one copy into the answer afterwards), or `None` when it is not
 /// k/10⁴ for an integer k, or is too large (see [`FEW_DECIMALS_BELOW`]).
@@ -53,6 +50,7 @@ fn write_few_decimals(value: f64, buffer: &mut [u8; 32]) -> Option<&[u8]> {
     if value.is_nan() || value.abs() >= FEW_DECIMALS_BELOW {
         return None;
     }
+    // Rounded to an integer (a tie k + ½ is never k/10⁴, so ties to even change nothing).
     let magnitude = value.abs() * 1e4;
     let scaled = (magnitude + ROUNDING_SHIFT) - ROUNDING_SHIFT;
     if scaled / 1e4 != value.abs() {
