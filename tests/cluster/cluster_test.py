@@ -257,9 +257,10 @@ def main():
     bodies = {json.dumps(request(r.base, "POST", "/v1/paths", path)[1]["waypoints"]) for r in replicas}
     check(len(bodies) == 1, "every replica answers the same path")
 
-    # A rate map long enough to watch (a few seconds on one core), then cancelled from a
-    # replica that is not building it.
-    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.25)))
+    # A rate map long enough to watch, then cancelled from a replica that is not building it:
+    # 161 x 161 cells, 4.2 s on two cores on 2026-12-03 (at 0.25 m the build had become faster
+    # than the cancel: 1.0 s, and the job was done before the DELETE arrived).
+    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.125)))
     status, created, _ = request(proxy.base, "POST", "/v1/scenarios", slow)
     slow_id = created["id"]
     before = [r.builds() for r in replicas]
