@@ -135,8 +135,9 @@ pub struct ChannelModel {
     ap: P3,
     /// Boxes, walls and the floor plan: what blocks a link.
     obstructions: Obstructions,
-    /// The same indexed by direction from the AP, where every direct link starts: a map's
-    /// cells test only the obstacles in their direction (geometry::SightLines).
+    /// The same indexed by direction from the AP, where every direct link starts: a link
+    /// evaluated on its own tests only the obstacles in its direction (geometry::SightLines);
+    /// a gain map's rows use `Obstructions::blocks_row` instead.
     ap_sight: SightLines,
     /// The IRSs in scenario order; their sub-surfaces are numbered one after the other.
     surfaces: Vec<IrsModel>,
