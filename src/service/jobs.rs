@@ -803,7 +803,14 @@ impl Jobs {
         let waited = queued_at.elapsed().as_secs_f64();
         tracing::info!(queued_s = waited, "job started");
         let started = Instant::now();
-        let result = tokio::task::spawn_blocking(work).await;
+        let result = tokio::task::spawn_blocking(|| {
+            // The job's own sequential parts yield to the runtime as the pools' threads do. The
+            // blocking pool runs nothing latency-bound (builds, map encoding, disk writes), so
+            // a thread that stays lowered for its next task costs nothing.
+            super::priority::lower_this_thread();
+            work()
+        })
+        .await;
         drop(permit);
         let seconds = started.elapsed().as_secs_f64();
         match result {

@@ -19,6 +19,7 @@ pub(crate) mod errors;
 pub(crate) mod jobs;
 pub(crate) mod json;
 pub mod probe;
+pub(crate) mod priority;
 pub(crate) mod queries;
 pub(crate) mod server;
 pub(crate) mod store;
@@ -592,6 +593,15 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
         .map_err(|e| runtime_error(&e))?
         .install_recorder()
         .map_err(|e| runtime_error(&format!("metrics recorder: {e}")))?;
+    // Map builds' parallel loops run on rayon's global pool: built here so that its threads
+    // start at the workers' lower priority (see `priority`).
+    if let Err(e) = rayon::ThreadPoolBuilder::new()
+        .thread_name(|k| format!("irs-build-{k}"))
+        .start_handler(|_| priority::lower_this_thread())
+        .build_global()
+    {
+        tracing::warn!(error = %e, "the build pool was already started: builds keep the default priority");
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

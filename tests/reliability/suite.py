@@ -238,6 +238,12 @@ def lost_work():
         server.stop()
 
 
+def percentile(samples, p):
+    """The p-th percentile (nearest rank) of `samples`."""
+    ranked = sorted(samples)
+    return ranked[min(len(ranked) - 1, max(0, -(-p * len(ranked) // 100) - 1))]
+
+
 def starvation():
     """Worst-case sweeps and Monte Carlo checks do not hold the async threads."""
     server = Server()
@@ -281,8 +287,15 @@ def starvation():
         for t in threads:
             t.join()
         expect(all(a == 200 for a in answers), f"heavy answers {answers}")
-        expect(max(health) < 50, f"healthz max {max(health):.1f} ms")
-        expect(max(paths) < 100, f"cached path max {max(paths):.1f} ms")
+        # A runtime thread held by heavy work would hold these for a whole sweep or check
+        # (seconds). The p99 bounds are what a free runtime gives (here ≈ 5 ms); the max bounds
+        # leave room for one hiccup of a shared CI machine (one sample of 52 ms in ≈ 550 was
+        # seen there), far below a held thread.
+        health_p99, paths_p99 = percentile(health, 99), percentile(paths, 99)
+        expect(health_p99 < 25, f"healthz p99 {health_p99:.1f} ms")
+        expect(paths_p99 < 50, f"cached path p99 {paths_p99:.1f} ms")
+        expect(max(health) < 250, f"healthz max {max(health):.1f} ms")
+        expect(max(paths) < 250, f"cached path max {max(paths):.1f} ms")
         # A client that leaves cancels its query: the worker is free for the next one at once.
         sock = socket.create_connection(("127.0.0.1", server.port))
         body = json.dumps(sweep).encode()
@@ -297,8 +310,9 @@ def starvation():
         expect(status == 200, f"sweep after a client left: {status}")
         expect(after_leave < 3, f"the abandoned sweep held the worker for {after_leave:.1f} s")
         figure("starvation", f"2 sweeps × 100 thresholds + 2 checks × 300 draws on 1001² "
-               f"(answers {sorted(answers)}): healthz max {max(health):.1f} ms over {len(health)}, "
-               f"cached path max {max(paths):.1f} ms; after a client left mid-sweep the next "
+               f"(answers {sorted(answers)}): healthz p99 {health_p99:.1f} ms, max "
+               f"{max(health):.1f} ms over {len(health)}; cached path p99 {paths_p99:.1f} ms, max "
+               f"{max(paths):.1f} ms; after a client left mid-sweep the next "
                f"sweep answered in {after_leave:.2f} s")
     finally:
         server.stop()
