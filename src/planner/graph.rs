@@ -15,6 +15,7 @@
 
 use crate::scenario::Grid;
 use serde::Serialize;
+use super::queue::BucketQueue;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::sync::Mutex;
@@ -37,7 +38,8 @@ pub struct Path {
     pub distance_m: f64,
 }
 
-/// The 8 neighbour offsets (di, dj) with their length in units of Δ.
+/// The 8 neighbour offsets (di, dj) with their length in units of Δ: four orthogonal steps,
+/// then four diagonal ones (a step's index is the direction a [`Node`] records).
 const NEIGHBOURS: [(isize, isize, f64); 8] = [
     (1, 0, 1.0),
     (-1, 0, 1.0),
@@ -58,14 +60,15 @@ pub struct CellGraph<'a> {
 }
 
 impl<'a> CellGraph<'a> {
-    /// Calls `visit(neighbour, its (i, j), step_length_in_cells)` for every neighbour of `cell`
-    /// that is free and reachable without cutting an occupied corner. The coordinates come
-    /// along so that a search's heuristic needs no division per neighbour.
+    /// Calls `visit(neighbour, its (i, j), direction)` for every neighbour of `cell` that is
+    /// free and reachable without cutting an occupied corner; `direction` indexes
+    /// [`NEIGHBOURS`]. The coordinates come along so that a search's heuristic needs no
+    /// division per neighbour.
     #[inline]
-    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, (usize, usize), f64)) {
+    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, (usize, usize), usize)) {
         let (i, j) = self.grid.cell_of(cell);
         let (nx, ny) = (self.grid.nx, self.grid.ny);
-        for &(di, dj, len) in &NEIGHBOURS {
+        for (direction, &(di, dj, _)) in NEIGHBOURS.iter().enumerate() {
             // Off the grid on either side: a step below 0 wraps to a huge index.
             let (a, b) = (i.wrapping_add_signed(di), j.wrapping_add_signed(dj));
             if a >= nx || b >= ny {
@@ -78,7 +81,7 @@ impl<'a> CellGraph<'a> {
             if di != 0 && dj != 0 && (self.occupied[a * ny + j] || self.occupied[i * ny + b]) {
                 continue;
             }
-            visit(n, (a, b), len);
+            visit(n, (a, b), direction);
         }
     }
 
@@ -98,49 +101,63 @@ impl<'a> CellGraph<'a> {
         self.check_ends(start, goal, threshold)?;
         let heuristic = self.octile_to(goal);
         with_scratch(self.values.len(), |scratch| {
-            let Scratch { nodes, heap, .. } = scratch;
-            heap.clear();
-            nodes.reach(start, 0.0, start as u32);
-            let start_h = heuristic(self.grid.cell_of(start));
-            heap.push(Reverse(start_h.to_bits()), start as u32);
-            while let Some((_, cell)) = heap.pop() {
-                let cell = cell as usize;
-                if nodes.is_settled(cell) {
-                    continue; // stale: reached again by a shorter way, and settled from there
-                }
-                nodes.settle(cell);
-                if cell == goal {
+            let Scratch { nodes, open, .. } = scratch;
+            nodes.set(start, Node::reached(0, 0, 0, nodes.generation));
+            let start_f = heuristic(self.grid.cell_of(start));
+            open.reset(start_f);
+            open.push(start_f, start as u32);
+            // The bucket in which the goal was first settled: the search ends once it is empty.
+            let mut goal_bucket = None;
+            while let Some(cell) = open.pop() {
+                if goal_bucket.is_some_and(|last| open.bucket() > last) {
                     break;
                 }
-                let g = nodes.g(cell);
-                self.for_each_neighbour(cell, |n, at, len| {
+                let cell = cell as usize;
+                let here = nodes.get(cell);
+                if here.is_settled(nodes.generation) {
+                    continue; // stale: reached again by a shorter way, and expanded from there
+                }
+                nodes.set(cell, here.settled());
+                if cell == goal {
+                    goal_bucket.get_or_insert(open.bucket());
+                    continue;
+                }
+                let (orthogonal, diagonal) = here.steps();
+                self.for_each_neighbour(cell, |n, at, direction| {
+                    let (a, b) = if direction < 4 {
+                        (orthogonal + 1, diagonal)
+                    } else {
+                        (orthogonal, diagonal + 1)
+                    };
+                    let candidate = length_in_cells(a, b);
+                    let there = nodes.get(n);
+                    if there.is_reached(nodes.generation) && candidate >= there.length() {
+                        return;
+                    }
                     if !self.is_feasible(n, threshold) {
                         return;
                     }
-                    let candidate = g + len;
-                    if candidate < nodes.g(n) {
-                        nodes.reach(n, candidate, cell as u32);
-                        let key = Reverse((candidate + heuristic(at)).to_bits());
-                        // f never decreases along a consistent heuristic's pops, but rounding
-                        // can put a key an ulp below the last one popped, which a monotone
-                        // queue refuses: it is queued at that last key instead.
-                        let key = heap.top().map_or(key, |top| key.min(top));
-                        heap.push(key, n as u32);
-                    }
+                    // A shorter way to a cell already expanded opens it again.
+                    nodes.set(n, Node::reached(a, b, direction, nodes.generation));
+                    open.push(candidate + heuristic(at), n as u32);
                 });
             }
-            heap.clear();
-            if !nodes.is_settled(goal) {
+            let end = nodes.get(goal);
+            if !end.is_settled(nodes.generation) {
                 return Err(Infeasible::Disconnected);
             }
             let mut path = vec![goal];
-            while *path.last().unwrap() != start {
-                path.push(nodes.prev(*path.last().unwrap()) as usize);
+            let ny = self.grid.ny as isize;
+            let mut cell = goal;
+            while cell != start {
+                let (di, dj, _) = NEIGHBOURS[nodes.get(cell).direction()];
+                cell = cell.wrapping_add_signed(-(di * ny + dj));
+                path.push(cell);
             }
             path.reverse();
             Ok(Path {
                 cells: path,
-                distance_m: nodes.g(goal) * self.grid.resolution_m,
+                distance_m: end.length() * self.grid.resolution_m,
             })
         })
     }
@@ -164,15 +181,22 @@ impl<'a> CellGraph<'a> {
         let ceiling = value(start).min(value(goal));
         let to_goal = self.octile_to(goal);
         with_scratch(self.values.len(), |scratch| {
-            // A node's g holds the widest width found so far, negated (unset reads +∞).
             let Scratch {
                 nodes,
                 widest_heap: heap,
                 ..
             } = scratch;
-            let best = |nodes: &Nodes, c: usize| -nodes.g(c);
+            // A node records the cell whose value is the width of the widest way found to it.
+            let width = |nodes: &Nodes, c: usize| {
+                let node = nodes.get(c);
+                if node.is_reached(nodes.generation) {
+                    value(node.bottleneck())
+                } else {
+                    f64::NEG_INFINITY
+                }
+            };
             heap.clear();
-            nodes.reach(start, -value(start), start as u32);
+            nodes.set(start, Node::narrowed_at(start, nodes.generation));
             // Among entries of equal width the one nearer the goal goes first: widths tie on
             // every cell above a narrow end, and breaking the tie by cell index made the search
             // cost 1 ms one way and 37 ms the other on the 1001² floor.
@@ -182,23 +206,26 @@ impl<'a> CellGraph<'a> {
                 start,
             ));
             while let Some((OrdF64(b), _, cell)) = heap.pop() {
-                if nodes.is_settled(cell) {
+                let here = nodes.get(cell);
+                if here.is_settled(nodes.generation) {
                     continue;
                 }
-                nodes.settle(cell);
-                if cell == goal || best(nodes, goal) >= ceiling {
+                nodes.set(cell, here.settled());
+                if cell == goal || width(nodes, goal) >= ceiling {
                     break;
                 }
+                let bottleneck = here.bottleneck();
                 self.for_each_neighbour(cell, |n, at, _| {
                     let through = b.min(value(n));
-                    if !nodes.is_settled(n) && through > best(nodes, n) {
-                        nodes.reach(n, -through, cell as u32);
+                    if !nodes.get(n).is_settled(nodes.generation) && through > width(nodes, n) {
+                        let narrowest = if value(n) < b { n } else { bottleneck };
+                        nodes.set(n, Node::narrowed_at(narrowest, nodes.generation));
                         heap.push((OrdF64(through), Reverse(OrdF64(to_goal(at))), n));
                     }
                 });
             }
             heap.clear();
-            let width = best(nodes, goal);
+            let width = width(nodes, goal);
             width.is_finite().then_some(width)
         })
     }
@@ -232,16 +259,91 @@ impl<'a> CellGraph<'a> {
     }
 }
 
-/// One cell's search state, in one place so that looking at a neighbour touches one cache
-/// line (three arrays cost three misses a neighbour on a 1001² map): g (A*: the shortest
-/// length found, in cells; the widest path: minus the widest width), the predecessor, and which
-/// search wrote it.
+/// The length of a path of `orthogonal` steps of Δ and `diagonal` steps of √2·Δ, in cells.
+/// Kept as the two counts, a path's length is exact up to this one rounding, however long the
+/// path; equal counts are equal lengths, whatever the order of the steps.
+#[inline]
+fn length_in_cells(orthogonal: u64, diagonal: u64) -> f64 {
+    orthogonal as f64 + diagonal as f64 * std::f64::consts::SQRT_2
+}
+
+/// Bits of a [`Node`]'s fields, low to high.
+const COUNT_BITS: u32 = 20;
+const DIRECTION_BITS: u32 = 3;
+const STAMP_SHIFT: u32 = 2 * COUNT_BITS + DIRECTION_BITS;
+const COUNT_MASK: u64 = (1 << COUNT_BITS) - 1;
+/// The largest generation a stamp holds (21 bits).
+const MAX_STAMP: u32 = (1 << (64 - STAMP_SHIFT)) - 1;
+// A simple path has fewer steps than the grid has cells, and a cell index fits a count.
+const _: () = assert!(crate::scenario::MAX_GRID_CELLS <= 1 << COUNT_BITS);
+
+/// One cell's search state in 8 bytes, so that a 1001² search's nodes take 8 MB (half the
+/// cache footprint of an f64 length, a u32 predecessor and a u32 stamp).
+/// - A*: the shortest way found, as its counts of orthogonal and diagonal steps (bits 0–19 and
+///   20–39; the length is [`length_in_cells`]), and the direction of its last step (bits
+///   40–42), from which the predecessor follows.
+/// - The widest path: the cell whose value is the width of the widest way found (bits 0–19).
+/// - Both: which search wrote the node (bits 43–63): its generation when reached, one more
+///   once settled; an older stamp reads as unset.
 #[derive(Debug, Clone, Copy)]
-struct Node {
-    g: f64,
-    prev: u32,
-    /// The search's generation when reached, one more once settled; older reads as unset.
-    stamp: u32,
+struct Node(u64);
+
+impl Node {
+    #[inline]
+    fn reached(orthogonal: u64, diagonal: u64, direction: usize, generation: u32) -> Node {
+        Node(
+            orthogonal
+                | diagonal << COUNT_BITS
+                | (direction as u64) << (2 * COUNT_BITS)
+                | u64::from(generation) << STAMP_SHIFT,
+        )
+    }
+
+    #[inline]
+    fn narrowed_at(bottleneck: usize, generation: u32) -> Node {
+        Node(bottleneck as u64 | u64::from(generation) << STAMP_SHIFT)
+    }
+
+    #[inline]
+    fn stamp(self) -> u32 {
+        (self.0 >> STAMP_SHIFT) as u32
+    }
+
+    #[inline]
+    fn is_reached(self, generation: u32) -> bool {
+        self.stamp() >= generation
+    }
+
+    #[inline]
+    fn is_settled(self, generation: u32) -> bool {
+        self.stamp() == generation + 1
+    }
+
+    #[inline]
+    fn settled(self) -> Node {
+        Node(self.0 + (1 << STAMP_SHIFT))
+    }
+
+    #[inline]
+    fn steps(self) -> (u64, u64) {
+        (self.0 & COUNT_MASK, self.0 >> COUNT_BITS & COUNT_MASK)
+    }
+
+    #[inline]
+    fn length(self) -> f64 {
+        let (orthogonal, diagonal) = self.steps();
+        length_in_cells(orthogonal, diagonal)
+    }
+
+    #[inline]
+    fn direction(self) -> usize {
+        (self.0 >> (2 * COUNT_BITS)) as usize & ((1 << DIRECTION_BITS) - 1)
+    }
+
+    #[inline]
+    fn bottleneck(self) -> usize {
+        (self.0 & COUNT_MASK) as usize
+    }
 }
 
 /// Every cell's [`Node`], reset for a new search by bumping the generation instead of
@@ -255,60 +357,31 @@ struct Nodes {
 impl Nodes {
     /// Makes every cell unset for a search over `cells` cells.
     fn reset(&mut self, cells: usize) {
-        let unset = Node {
-            g: f64::INFINITY,
-            prev: u32::MAX,
-            stamp: 0,
-        };
         if self.nodes.len() != cells {
-            self.nodes = vec![unset; cells];
+            self.nodes = vec![Node(0); cells];
             self.generation = 0;
         }
-        // Two stamps per search (reached, settled); after 2³¹ searches they wrap: clear once.
+        // Two stamps per search (reached, settled); after 2²⁰ searches they run out: clear
+        // once (8 MB written every million searches at most).
         self.generation = match self.generation.checked_add(2) {
-            Some(next) if next < u32::MAX => next,
+            Some(next) if next < MAX_STAMP => next,
             _ => {
-                self.nodes.iter_mut().for_each(|n| *n = unset);
+                self.nodes.iter_mut().for_each(|n| *n = Node(0));
                 2
             }
         };
     }
 
-    /// g of `cell`, +∞ where this search has not reached it.
     #[inline]
-    fn g(&self, cell: usize) -> f64 {
-        let node = self.nodes[cell];
-        if node.stamp >= self.generation {
-            node.g
-        } else {
-            f64::INFINITY
-        }
+    fn get(&self, cell: usize) -> Node {
+        self.nodes[cell]
     }
 
+    /// Records a node (a settled one may be opened again by a rounding-level improvement; it
+    /// is then simply expanded once more).
     #[inline]
-    fn prev(&self, cell: usize) -> u32 {
-        self.nodes[cell].prev
-    }
-
-    #[inline]
-    fn is_settled(&self, cell: usize) -> bool {
-        self.nodes[cell].stamp == self.generation + 1
-    }
-
-    /// Records a better way to `cell` (open again if it was settled, which a rounding-level
-    /// improvement can do; it is then simply expanded once more).
-    #[inline]
-    fn reach(&mut self, cell: usize, g: f64, prev: u32) {
-        self.nodes[cell] = Node {
-            g,
-            prev,
-            stamp: self.generation,
-        };
-    }
-
-    #[inline]
-    fn settle(&mut self, cell: usize) {
-        self.nodes[cell].stamp = self.generation + 1;
+    fn set(&mut self, cell: usize, node: Node) {
+        self.nodes[cell] = node;
     }
 }
 
@@ -317,21 +390,18 @@ impl Nodes {
 #[derive(Debug, Default)]
 struct Scratch {
     nodes: Nodes,
-    /// A*'s open list: cells keyed by f = g + h, smallest first (f ≥ 0, whose bits order as
-    /// the number does). A monotone queue: with a consistent heuristic A* pops f in order, so
-    /// a radix heap serves it with O(1) pushes; entries of equal f come out last in, first
-    /// out, a rule that does not depend on which end is the start. On the 19-wall maze of
-    /// `scripts/vs-python.sh` (every cell settled) the search took 150–180 ms with a binary heap
-    /// of (f, −h, cell), 109–117 ms with this; keyed by (f, h) pairs the radix heap was no
-    /// faster than the binary heap (its redistributions of 128-bit keys took 43 %).
-    heap: radix_heap::RadixHeapMap<Reverse<u64>, u32>,
+    /// A*'s open list (see [`BucketQueue`]). On the 19-wall maze of `scripts/vs-python.sh`
+    /// (every cell settled) the search took 150–180 ms with a binary heap of (f, −h, cell),
+    /// 95–117 ms with a radix heap keyed by f's bits (a quarter of it redistributing entries),
+    /// and 65–75 ms with this.
+    open: BucketQueue,
     /// The widest path's open list: (width, −distance to goal, cell), largest first.
     widest_heap: BinaryHeap<(OrdF64, Reverse<OrdF64>, usize)>,
 }
 
 /// Scratch sets kept for reuse: as many as searches usually run at once (the query pool's
-/// workers); beyond that a search allocates its own and drops it. At most 4 × 16 B per cell of
-/// the largest map queried stay allocated: 64 MB at the grid limit of 1001² cells.
+/// workers); beyond that a search allocates its own and drops it. At most 4 × 8 B per cell of
+/// the largest map queried stay allocated: 32 MB at the grid limit of 1001² cells.
 const POOLED_SCRATCH: usize = 4;
 static SCRATCH_POOL: Mutex<Vec<Scratch>> = Mutex::new(Vec::new());
 
@@ -401,7 +471,8 @@ mod tests {
                 if !dist[c].is_finite() {
                     continue;
                 }
-                g.for_each_neighbour(c, |n, _, len| {
+                g.for_each_neighbour(c, |n, _, d| {
+                    let len = NEIGHBOURS[d].2;
                     if g.is_feasible(n, threshold) && dist[c] + len < dist[n] - 1e-12 {
                         dist[n] = dist[c] + len;
                         changed = true;
@@ -448,7 +519,7 @@ mod tests {
                     let mut len = 0.0;
                     for w in p.cells.windows(2) {
                         let mut step = None;
-                        g.for_each_neighbour(w[0], |n, _, l| if n == w[1] { step = Some(l) });
+                        g.for_each_neighbour(w[0], |n, _, d| if n == w[1] { step = Some(NEIGHBOURS[d].2) });
                         len += step.expect("consecutive waypoints are neighbours");
                     }
                     prop_assert!(p.cells.iter().all(|&c| g.is_feasible(c, threshold)));

@@ -2,6 +2,7 @@
 //! sweep queries and the answers they return. The searches themselves live in [`graph`].
 
 pub mod graph;
+mod queue;
 
 pub use graph::{CellGraph, Infeasible, Path};
 
