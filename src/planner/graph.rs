@@ -13,9 +13,9 @@
 //! any path exists (a bottleneck path: one Dijkstra-like pass maximising the minimum value along
 //! the path).
 
+use super::queue::BucketQueue;
 use crate::scenario::Grid;
 use serde::Serialize;
-use super::queue::BucketQueue;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::sync::Mutex;

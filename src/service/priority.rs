@@ -51,7 +51,11 @@ mod tests {
         .join()
         .unwrap();
         assert_eq!(worker, WORKER_NICE.max(before));
-        assert_eq!(nice_of_this_thread(), before, "the caller's own priority changed");
+        assert_eq!(
+            nice_of_this_thread(),
+            before,
+            "the caller's own priority changed"
+        );
     }
 
     #[test]
