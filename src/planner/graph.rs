@@ -377,8 +377,8 @@ impl Nodes {
         self.nodes[cell]
     }
 
-    /// Records a node (a settled one may be opened again by a rounding-level improvement; it
-    /// is then simply expanded once more).
+    /// Records a node. A* may overwrite a settled one with a shorter way (the bucket queue
+    /// does not order a bucket by f), which opens it again: it is then expanded once more.
     #[inline]
     fn set(&mut self, cell: usize, node: Node) {
         self.nodes[cell] = node;
