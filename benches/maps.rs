@@ -77,6 +77,18 @@ fn large_grid(c: &mut Criterion) {
     group.bench_function("widest_path_1001x1001_reversed", |b| {
         b.iter(|| graph.widest_path_threshold(goal, start))
     });
+    // The widest-path index the service keeps per map: its build, and a query on it.
+    group.bench_function("bottleneck_index_build_1001x1001", |b| {
+        b.iter(|| planner::bottlenecks(black_box(&map)))
+    });
+    let index = planner::bottlenecks(&map);
+    assert_eq!(
+        index.widest_path_threshold(&map.values, start, goal),
+        Some(widest)
+    );
+    group.bench_function("widest_path_1001x1001_indexed", |b| {
+        b.iter(|| index.widest_path_threshold(&map.values, black_box(start), goal))
+    });
     let centre = |cell: usize| {
         let (i, j) = map.grid.cell_of(cell);
         map.grid.centre(i, j)

@@ -65,7 +65,11 @@ impl<'a> CellGraph<'a> {
     /// [`NEIGHBOURS`]. The coordinates come along so that a search's heuristic needs no
     /// division per neighbour.
     #[inline]
-    fn for_each_neighbour(&self, cell: usize, mut visit: impl FnMut(usize, (usize, usize), usize)) {
+    pub(super) fn for_each_neighbour(
+        &self,
+        cell: usize,
+        mut visit: impl FnMut(usize, (usize, usize), usize),
+    ) {
         let (i, j) = self.grid.cell_of(cell);
         let (nx, ny) = (self.grid.nx, self.grid.ny);
         for (direction, &(di, dj, _)) in NEIGHBOURS.iter().enumerate() {
@@ -550,6 +554,23 @@ mod tests {
                 Some(candidates[lo])
             };
             prop_assert_eq!(widest, bisected);
+        }
+
+        /// The index answers every pair as the search does (ties, occupied corners, NaN cells,
+        /// disconnected parts and start = goal included).
+        #[test]
+        fn bottleneck_index_equals_widest_search((nx, ny, mut values, occupied, _s, _t) in arb_map(), ties in any::<bool>()) {
+            for (v, o) in values.iter_mut().zip(&occupied) {
+                if *o { *v = f64::NAN; } else if ties { *v = v.floor(); }
+            }
+            let gr = grid(nx, ny);
+            let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
+            let index = super::super::Bottlenecks::new(&g);
+            for s in 0..values.len() {
+                for t in 0..values.len() {
+                    prop_assert_eq!(index.widest_path_threshold(&values, s, t), g.widest_path_threshold(s, t), "{} -> {}", s, t);
+                }
+            }
         }
     }
 

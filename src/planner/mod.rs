@@ -1,9 +1,11 @@
 //! Communication-aware paths over a radio map (docs/model.md §6, paper Section II-D): path and
 //! sweep queries and the answers they return. The searches themselves live in [`graph`].
 
+mod bottleneck;
 pub mod graph;
 mod queue;
 
+pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
 
 use crate::input::{FieldError, parse_finite};
@@ -160,7 +162,13 @@ fn graph(map: &RadioMap) -> CellGraph<'_> {
     }
 }
 
-/// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre).
+/// Builds a map's [`Bottlenecks`] index, for [`plan_indexed`] and [`sweep`].
+pub fn bottlenecks(map: &RadioMap) -> Bottlenecks {
+    Bottlenecks::new(&graph(map))
+}
+
+/// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre),
+/// finding the widest-path threshold by a search: the cheaper way for one query on a map.
 pub fn plan(
     map: &RadioMap,
     start: [f64; 2],
@@ -168,10 +176,38 @@ pub fn plan(
     threshold: Threshold,
     v_max_mps: f64,
 ) -> Result<PathAnswer, FieldError> {
+    plan_with(map, start, goal, threshold, v_max_mps, |graph, s, g| {
+        graph.widest_path_threshold(s, g)
+    })
+}
+
+/// [`plan`] with the widest-path threshold read from the map's [`Bottlenecks`] index: the
+/// cheaper way for a map that answers many queries (the service keeps the index with the map).
+pub fn plan_indexed(
+    map: &RadioMap,
+    index: &Bottlenecks,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    v_max_mps: f64,
+) -> Result<PathAnswer, FieldError> {
+    plan_with(map, start, goal, threshold, v_max_mps, |_, s, g| {
+        index.widest_path_threshold(&map.values, s, g)
+    })
+}
+
+fn plan_with(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    v_max_mps: f64,
+    widest_path_threshold: impl FnOnce(&CellGraph, usize, usize) -> Option<f64>,
+) -> Result<PathAnswer, FieldError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
     let graph = graph(map);
-    let widest = graph.widest_path_threshold(s, g);
+    let widest = widest_path_threshold(&graph, s, g);
     let applied = match threshold {
         Threshold::Value(v) => Some(v),
         Threshold::Max => widest,
@@ -243,7 +279,7 @@ pub fn plan(
 /// reflected term's amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad. A rate
 /// map's phases are already stored to 2π/2¹⁶ (`phases::encode_phase`), so for them `1e-6` and
 /// `full` write the stored phases.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 pub enum PhasePrecision {
     /// Rounded to 2 decimals (error ≤ 0.005 rad).
     #[serde(rename = "1e-2")]
@@ -303,7 +339,7 @@ impl FromStr for PhasePrecision {
 /// [`SurfacePhases::Codes`]): within π/2¹⁶ ≈ 4.8·10⁻⁵ rad, as fine as the default 10⁻⁴ rad,
 /// in 2.7 characters a phase instead of 6–7, and directly the levels a b-bit surface
 /// controller takes (c >> (16 − b)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PhaseFormat {
     #[default]
@@ -338,10 +374,13 @@ impl PathAnswer {
     }
 }
 
-/// Distance versus threshold for a list of thresholds, in one request. `progress` counts the
-/// thresholds done; cancelling it stops the sweep before the next threshold.
+/// Distance versus threshold for a list of thresholds, in one request, on a map whose
+/// [`Bottlenecks`] index is at hand (a sweep is a query of the service, which keeps it).
+/// `progress` counts the thresholds done; cancelling it stops the sweep before the next
+/// threshold.
 pub fn sweep(
     map: &RadioMap,
+    index: &Bottlenecks,
     start: [f64; 2],
     goal: [f64; 2],
     thresholds: &[f64],
@@ -372,7 +411,7 @@ pub fn sweep(
     Ok(SweepAnswer {
         map_id: map.key.id(),
         unit: map.key.unit(),
-        max_feasible_threshold: graph.widest_path_threshold(s, g),
+        max_feasible_threshold: index.widest_path_threshold(&map.values, s, g),
         start,
         goal,
         points,

@@ -5,6 +5,7 @@
 use super::auth::{Caller, Owner};
 use super::errors::ApiError;
 use super::store::{DataDir, Kind};
+use crate::planner::{self, Bottlenecks};
 use crate::radiomap::RadioMap;
 use crate::scenario::{Scenario, hash_hex};
 use serde::{Deserialize, Serialize};
@@ -288,6 +289,12 @@ impl ScenarioRegistry {
 #[derive(Clone)]
 pub struct MapCache {
     maps: moka::future::Cache<String, Arc<RadioMap>>,
+    /// Each queried map's widest-path index ([`Bottlenecks`], 8 bytes a cell), built by its
+    /// first path or sweep query. Its own budget, a quarter of the maps', holds the indexes of
+    /// the maps being queried (an index is at most as big as its map); an evicted one is rebuilt
+    /// on demand (≈ 0.1 s for 1001² cells). Map ids hash the map's inputs, so an index can never
+    /// outlive the map it describes.
+    indexes: moka::sync::Cache<String, Arc<Bottlenecks>>,
     disk: Option<MapDisk>,
 }
 
@@ -311,7 +318,18 @@ impl MapCache {
                 (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
             })
             .build();
-        MapCache { maps, disk }
+        let indexes = moka::sync::Cache::builder()
+            .eviction_policy(moka::policy::EvictionPolicy::lru())
+            .max_capacity((budget_bytes / 4 / 1024).max(1))
+            .weigher(|_id: &String, index: &Arc<Bottlenecks>| {
+                (index.bytes() / 1024).clamp(1, u32::MAX as usize) as u32
+            })
+            .build();
+        MapCache {
+            maps,
+            indexes,
+            disk,
+        }
     }
 
     /// Looks a map up in memory, then on disk, counting hits (memory or disk) and misses.
@@ -356,6 +374,13 @@ impl MapCache {
         self.record_size();
     }
 
+    /// The widest-path index of a cached map, built on first use by the calling thread (a query
+    /// worker; concurrent first queries wait for one build).
+    pub fn bottlenecks(&self, map_id: &str, map: &RadioMap) -> Arc<Bottlenecks> {
+        self.indexes
+            .get_with_by_ref(map_id, || Arc::new(planner::bottlenecks(map)))
+    }
+
     /// Fills memory from the disk, most recently written first, up to `budget_bytes`: a
     /// restarted server answers its listing and its first queries from memory.
     pub async fn warm(&self, budget_bytes: u64) {
@@ -392,6 +417,7 @@ impl MapCache {
     /// Drops a map from memory and disk; true if it was held.
     pub async fn remove(&self, map_id: &str) -> bool {
         let mut removed = self.maps.remove(map_id).await.is_some();
+        self.indexes.invalidate(map_id);
         if let Some(disk) = &self.disk {
             removed |= disk.dir.remove_map(map_id);
         }
@@ -404,6 +430,7 @@ impl MapCache {
         for (map_id, map) in self.entries() {
             if map.key.scenario_id == scenario_id {
                 self.maps.remove(&map_id).await;
+                self.indexes.invalidate(&map_id);
             }
         }
         if let Some(disk) = &self.disk {
