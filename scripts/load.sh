@@ -4,8 +4,9 @@
 #   scripts/load.sh [DURATION_S=20] [CONNECTIONS=32] [THREADS=2]
 # Environment: IRS_BIN, a server binary to test instead of this checkout's release build (to
 # compare two builds in one run); PHASE_PRECISION and PHASE_FORMAT, the queries' phase_precision
-# and phase_format (the server's defaults when unset). The answer's size is printed before the
-# figures.
+# and phase_format (the server's defaults when unset); DISTINCT=1 makes every query a new one
+# (thresholds −62 − k·10⁻⁹ dB, the same path), so none is answered from the answer cache. The
+# answer's size is printed before the figures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
@@ -30,6 +31,20 @@ cat >"$lua" <<LUA
 wrk.method = "POST"
 wrk.body = '$body'
 wrk.headers["Content-Type"] = "application/json"
+LUA
+if [ "${DISTINCT:-0}" = 1 ]; then
+  # Each wrk thread numbers its queries from its own offset, so no two are alike.
+  cat >>"$lua" <<LUA
+local count, threads = 0, 0
+setup = function(thread) threads = threads + 1; thread:set("offset", threads * 1e7) end
+request = function()
+  count = count + 1
+  local threshold = string.format("%.9f", -62 - (offset + count) * 1e-9)
+  return wrk.format(nil, nil, nil, (wrk.body:gsub('"threshold":%-62', '"threshold":' .. threshold)))
+end
+LUA
+fi
+cat >>"$lua" <<LUA
 done = function(summary, latency, requests)
   io.write(string.format("requests/s %.0f  p50 %.2f ms  p99 %.2f ms  max %.2f ms  errors %d\n",
     summary.requests / (summary.duration / 1e6), latency:percentile(50) / 1000,

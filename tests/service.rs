@@ -961,6 +961,58 @@ async fn scenarios_and_maps_can_be_deleted_and_nulls_are_rejected() {
     assert_eq!(b["field"], "seed");
 }
 
+/// A repeated path query is answered from the answer cache, byte for byte as the first time
+/// but for `took_ms`; any other field makes another answer; a deleted map's kept answers are
+/// never served; `--answer-cache-mb 0` keeps nothing.
+#[tokio::test]
+async fn repeated_path_queries_are_answered_from_the_answer_cache() {
+    let server = start(&[]);
+    let doc = scenario("small-test.json", |v| v["name"] = "answers".into());
+    let (_, created) = server.post("/v1/scenarios", doc).await;
+    let id = created["id"].as_str().unwrap().to_string();
+    let (_, map) = server
+        .post("/v1/maps", json!({"scenario_id": id, "kind": "gain"}))
+        .await;
+    let map_id = map["map_id"].as_str().unwrap().to_string();
+    let query =
+        json!({"map_id": map_id, "start": [0.5, 0.5], "goal": [5.5, 3.5], "threshold": "max"});
+    let untimed = |mut answer: Value| {
+        assert!(answer["took_ms"].as_f64().unwrap() >= 0.0, "{answer}");
+        answer.as_object_mut().unwrap().remove("took_ms");
+        answer
+    };
+    let hits = "irs_answer_cache_requests_total{outcome=\"hit\"}";
+    let (s1, first) = server.post("/v1/paths", query.clone()).await;
+    assert_eq!(server.metric(hits).await, 0.0);
+    let (s2, second) = server.post("/v1/paths", query.clone()).await;
+    assert_eq!((s1, s2), (StatusCode::OK, StatusCode::OK), "{first}");
+    assert_eq!(server.metric(hits).await, 1.0);
+    assert!(first["feasible"].as_bool().unwrap());
+    assert_eq!(untimed(first.clone()), untimed(second));
+    // Another precision, another answer (and not a hit).
+    let mut full = query.clone();
+    full["phase_precision"] = "full".into();
+    let (_, other) = server.post("/v1/paths", full).await;
+    assert_ne!(untimed(other), untimed(first));
+    assert_eq!(server.metric(hits).await, 1.0);
+    // The map goes: its kept answer is not served.
+    let (s, _) = server
+        .send("DELETE", &format!("/v1/maps/{map_id}"), None)
+        .await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    let (s, b) = server.post("/v1/paths", query).await;
+    problem(s, &b, StatusCode::NOT_FOUND, "not_found");
+
+    let keeping_none = start(&["--answer-cache-mb", "0"]);
+    let small = keeping_none.scenario_id("small-test").await;
+    let query = json!({"map": {"scenario_id": small, "kind": "gain"}, "start": [0.5, 0.5], "goal": [5.5, 3.5], "threshold": 1});
+    for _ in 0..3 {
+        let (s, b) = keeping_none.post("/v1/paths", query.clone()).await;
+        assert_eq!(s, StatusCode::OK, "{b}");
+    }
+    assert_eq!(keeping_none.metric(hits).await, 0.0);
+}
+
 /// Big answers are compressed when the client accepts it; PNGs are not (already compressed).
 #[tokio::test]
 async fn answers_are_compressed_when_accepted() {

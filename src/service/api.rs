@@ -2,6 +2,7 @@
 //! between JSON and the engine; all physics lives in the library modules.
 
 use super::AppState;
+use super::answers::{OpenAnswer, PathQuery};
 use super::auth::Caller;
 use super::cache::ScenarioSummary;
 use super::cluster::Cluster;
@@ -9,7 +10,7 @@ use super::errors::{ApiError, parse_json};
 use super::jobs::{
     Job, JobRecord, JobState, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work,
 };
-use super::json::json_sized;
+use super::json::serialize_sized;
 use crate::export::{self, MaskKind};
 use crate::input::{FieldError, parse_finite, parse_point, present};
 use crate::montecarlo::{self, CheckedPath};
@@ -1247,15 +1248,32 @@ async fn plan_path(
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
+    let precision = request.phase_precision.unwrap_or_default();
+    let map_id = map.key.id();
+    // A plain query asked before is answered from the answer cache (service::answers).
+    let query = request.monte_carlo_draws.is_none().then(|| {
+        PathQuery::new(
+            map_id.clone(),
+            start,
+            goal,
+            request.threshold,
+            format,
+            precision,
+        )
+    });
+    if let Some(kept) = query.as_ref().and_then(|q| state.answers().get(q)) {
+        return Ok(kept.respond(started));
+    }
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
-    let planned = map.clone();
+    let (planned, cache) = (map.clone(), state.cache().clone());
     let mut path = heavy(&state, "path", cells, move |_| {
-        planner::plan(&planned, start, goal, threshold, v_max)
+        let index = cache.bottlenecks(&map_id, &planned);
+        planner::plan_indexed(&planned, &index, start, goal, threshold, v_max)
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
-    path.write_phases(format, request.phase_precision.unwrap_or_default());
+    path.write_phases(format, precision);
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
@@ -1286,8 +1304,14 @@ async fn plan_path(
         .first()
         .map_or(0, |w| w.config.phases.count());
     let capacity = 512 + path.waypoints.len() * (150 + 10 * phases);
-    let answer = Timed::since(started, CheckedPath { path, monte_carlo });
-    Ok(json_sized(&answer, capacity))
+    let answer = OpenAnswer::new(serialize_sized(
+        &CheckedPath { path, monte_carlo },
+        capacity,
+    )?)?;
+    if let Some(query) = query {
+        state.answers().insert(query, answer.clone());
+    }
+    Ok(answer.respond(started))
 }
 
 #[derive(Debug, Deserialize)]
@@ -1332,8 +1356,10 @@ async fn sweep(
     let (cells, v_max, thresholds) = (map.grid.cells(), scenario.mru.v_max_mps, request.thresholds);
     // A sweep is one search per threshold: heavy once thresholds × cells is, not cells alone.
     let work = cells.saturating_mul(thresholds.len());
+    let cache = state.cache().clone();
     let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
-        planner::sweep(&map, start, goal, &thresholds, v_max, progress)
+        let index = cache.bottlenecks(&map.key.id(), &map);
+        planner::sweep(&map, &index, start, goal, &thresholds, v_max, progress)
     })
     .await?
     .map_err(|e| match e {

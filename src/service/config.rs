@@ -21,6 +21,10 @@ pub struct ServeArgs {
     /// Map cache budget in MiB (maps are weighed by their size in memory).
     #[arg(long, env = "IRS_CACHE_MB", default_value_t = 512)]
     pub cache_mb: u64,
+    /// Budget in MiB of the path answers kept for repeated queries (a 41-waypoint answer of
+    /// the paper floor is 21 kB); 0 keeps none.
+    #[arg(long, env = "IRS_ANSWER_CACHE_MB", default_value_t = 32)]
+    pub answer_cache_mb: u64,
     /// Keep API scenarios, built maps and finished job records in this directory, so they
     /// survive a restart (created if missing). Without it everything lives in memory only.
     #[arg(long, env = "IRS_DATA_DIR")]

@@ -9,17 +9,38 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use serde_json::ser::{CompactFormatter, Formatter};
 use std::io;
+use std::time::Instant;
 
 use super::errors::ApiError;
 use crate::vecmath::ROUNDING_SHIFT;
 
-/// A JSON answer serialised into one buffer of about `capacity` bytes (sized by the caller so it
-/// is not regrown and copied on the way to hundreds of kilobytes).
-pub(super) fn json_sized(value: &impl Serialize, capacity: usize) -> Response {
+/// `value` serialised into one buffer of about `capacity` bytes (sized by the caller so it is not
+/// regrown and copied on the way to hundreds of kilobytes).
+pub(super) fn serialize_sized(
+    value: &impl Serialize,
+    capacity: usize,
+) -> Result<Vec<u8>, ApiError> {
     let mut body = Vec::with_capacity(capacity);
     let mut serializer = serde_json::Serializer::with_formatter(&mut body, FewDecimals);
-    match value.serialize(&mut serializer) {
-        Ok(()) => ([(header::CONTENT_TYPE, "application/json")], body).into_response(),
+    value
+        .serialize(&mut serializer)
+        .map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(body)
+}
+
+/// A JSON answer from `open`, an object's text without its closing brace, closed with
+/// `took_ms` (the milliseconds since `started`, to the microsecond) as its last field.
+pub(super) fn with_took_ms(open: &[u8], started: Instant) -> Response {
+    let took_ms = started.elapsed().as_micros() as f64 / 1e3;
+    let mut body = Vec::with_capacity(open.len() + 32);
+    body.extend_from_slice(open);
+    body.extend_from_slice(b",\"took_ms\":");
+    let mut serializer = serde_json::Serializer::with_formatter(&mut body, FewDecimals);
+    match took_ms.serialize(&mut serializer) {
+        Ok(()) => {
+            body.push(b'}');
+            ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+        }
         Err(e) => ApiError::internal(e.to_string()).into_response(),
     }
 }

@@ -3,13 +3,15 @@
 //! `openapi.yaml`.
 //!
 //! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
-//! registry and map cache), `jobs` (map builds and placement searches), `json` (large answers written into one buffer,
-//! rounded numbers from integers), `queries` (admission
+//! registry, map cache and the maps' widest-path indexes), `answers` (path answers kept for
+//! repeated queries), `jobs` (map builds and placement searches), `json` (large answers written
+//! into one buffer, rounded numbers from integers), `queries` (admission
 //! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
 //! timeouts), `store` (the data directory of `--data-dir`), `cluster` (replicas sharing Redis,
 //! `--redis-url`), `errors` (problem+json; [`Problem`]
 //! is the body of every error answer), `viewer` (the built-in map viewer at `/`).
 
+pub(crate) mod answers;
 pub mod api;
 pub(crate) mod auth;
 pub(crate) mod cache;
@@ -28,6 +30,7 @@ pub(crate) mod viewer;
 pub use errors::Problem;
 
 use crate::scenario::{BUILTIN, Scenario};
+use answers::AnswerCache;
 use auth::{Caller, Tokens};
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::http::{HeaderValue, Method, header};
@@ -81,6 +84,7 @@ struct Inner {
     limits: Limits,
     registry: Arc<ScenarioRegistry>,
     cache: MapCache,
+    answers: AnswerCache,
     jobs: Arc<Jobs>,
     queries: QueryPool,
     tokens: Tokens,
@@ -152,6 +156,7 @@ impl AppState {
                 },
                 registry,
                 cache,
+                answers: AnswerCache::new(args.answer_cache_mb.saturating_mul(1024 * 1024)),
                 jobs: Arc::new(Jobs::new(
                     args.workers(),
                     args.queue,
@@ -179,6 +184,9 @@ impl AppState {
     }
     pub(crate) fn cache(&self) -> &MapCache {
         &self.inner.cache
+    }
+    pub(crate) fn answers(&self) -> &AnswerCache {
+        &self.inner.answers
     }
     pub(crate) fn jobs(&self) -> &Arc<Jobs> {
         &self.inner.jobs
