@@ -339,7 +339,7 @@ impl ChannelModel {
     /// e^{−j2π d/λ}, the LoS phase of a path of length d.
     #[inline]
     fn los_phase(&self, d: f64) -> C64 {
-        let phi = -TAU * (d / self.wavelength_m).fract();
+        let phi = -TAU * fraction_of_cycle(d / self.wavelength_m);
         let (s, c) = phi.sin_cos();
         C64::new(c, s)
     }
@@ -547,7 +547,7 @@ impl ChannelModel {
     /// ∠h̃ at `q` as eq. 11 uses it: 0 where the direct link is NLoS (h̃ = 0).
     fn direct_angle(&self, q: &P3) -> f64 {
         if self.link_seen(&self.ap_sight, q).los {
-            -TAU * ((q - self.ap).norm() / self.wavelength_m).fract()
+            -TAU * fraction_of_cycle((q - self.ap).norm() / self.wavelength_m)
         } else {
             0.0
         }
@@ -580,7 +580,7 @@ impl ChannelModel {
     }
 
     fn surface_phases(&self, irs: &IrsModel, q: &P3, h_angle: f64, out: &mut [f64]) {
-        let angle_of_distance = |d: f64| -TAU * (d / self.wavelength_m).fract();
+        let angle_of_distance = |d: f64| -TAU * fraction_of_cycle(d / self.wavelength_m);
         let cascade_los = self
             .irs_user_link(irs, q)
             .is_some_and(|l| l.los && irs.ap_link.los);
@@ -598,7 +598,7 @@ impl ChannelModel {
                     .sum();
                 if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
             };
-            *theta = (h_angle - w_angle).rem_euclid(TAU);
+            *theta = wrap_angle(h_angle - w_angle);
         }
     }
 
@@ -724,9 +724,74 @@ pub fn expected_gain(direct: &DirectAndScattered, w: &[C64], theta: &[f64]) -> f
     sum.norm_sqr() + direct.tau
 }
 
+/// The fractional part of x ≥ 0, a distance in wavelengths: the same bits as `x.fract()`,
+/// which is a libm call (`trunc`) on the baseline target, where this is a conversion to an
+/// integer and back (exact below 2⁶³ wavelengths; beyond, x has no fraction left).
+fn fraction_of_cycle(x: f64) -> f64 {
+    debug_assert!(x >= 0.0);
+    if x < 9.2e18 {
+        x - (x as u64) as f64
+    } else {
+        0.0
+    }
+}
+
+/// a modulo 2π in [0, 2π), the same bits as `a.rem_euclid(TAU)` for |a| < 4π, the range of a
+/// difference of two angles in (−2π, π] (eq. 11), without its libm `fmod`: for TAU ≤ |a| <
+/// 2·TAU, `a ∓ TAU` is exact (Sterbenz), as fmod's result is; outside that range, fmod itself.
+/// Unlike `rem_euclid`, a remainder so small and negative that adding 2π rounds to 2π gives 0,
+/// so the phase stays in [0, 2π).
+fn wrap_angle(a: f64) -> f64 {
+    let remainder = if a.abs() < TAU {
+        a
+    } else if a.abs() < 2.0 * TAU {
+        a - TAU.copysign(a)
+    } else {
+        a % TAU
+    };
+    if remainder >= 0.0 {
+        remainder
+    } else if remainder + TAU < TAU {
+        remainder + TAU
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The inline fraction and wrap give the bits of `fract` and `rem_euclid` they replace.
+    #[test]
+    fn inline_fraction_and_wrap_match_libm() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        for _ in 0..200_000 {
+            let x: f64 = rng.random_range(0.0..1e7);
+            assert_eq!(fraction_of_cycle(x).to_bits(), x.fract().to_bits(), "{x}");
+            let a: f64 = rng.random_range(-2.0 * TAU..2.0 * TAU);
+            assert_eq!(wrap_angle(a).to_bits(), a.rem_euclid(TAU).to_bits(), "{a}");
+        }
+        for a in [
+            -TAU,
+            -TAU / 2.0,
+            0.0,
+            TAU,
+            2.0 * TAU - 1e-15,
+            100.0,
+            -100.0,
+            1e300,
+        ] {
+            let w = wrap_angle(a);
+            assert!((0.0..TAU).contains(&w) || w == a.rem_euclid(TAU), "{a}");
+            if a != -TAU {
+                assert_eq!(w.to_bits(), a.rem_euclid(TAU).to_bits(), "{a}");
+            }
+        }
+        assert_eq!(wrap_angle(-1e-17), 0.0);
+        assert_eq!(fraction_of_cycle(1e19), 0.0);
+        assert_eq!(fraction_of_cycle(2.5), 0.5);
+    }
     use crate::numerics::MeanEstimate;
     use rand::{RngExt, SeedableRng};
 
