@@ -493,7 +493,7 @@ pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
         written.push(path.display().to_string());
     }
     print_json(&serde_json::json!({
-        "map_id": map.key.id(),
+        "map_id": map.id,
         "threshold": args.threshold,
         "files": written,
     }))

@@ -9,7 +9,7 @@ pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
 
 use crate::input::{FieldError, parse_finite};
-use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, SurfacePhases, WorkError};
+use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, WorkError};
 use crate::scenario::Grid;
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
@@ -223,7 +223,7 @@ fn plan_with(
         }),
     };
     let mut answer = PathAnswer {
-        map_id: map.key.id(),
+        map_id: map.id.clone(),
         unit: map.key.unit(),
         threshold: applied,
         feasible: result.is_ok(),
@@ -278,7 +278,8 @@ fn plan_with(
 /// have steps of 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a
 /// reflected term's amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad. A rate
 /// map's phases are already stored to 2π/2¹⁶ (`phases::encode_phase`), so for them `1e-6` and
-/// `full` write the stored phases.
+/// `full` write the stored phases. Rounded phases are written by
+/// [`SurfacePhases::to_decimals`], straight from θ to digits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 pub enum PhasePrecision {
     /// Rounded to 2 decimals (error ≤ 0.005 rad).
@@ -301,28 +302,13 @@ pub enum PhasePrecision {
 
 impl PhasePrecision {
     /// Decimals kept, `None` for full precision.
-    fn decimals(self) -> Option<i32> {
+    fn decimals(self) -> Option<u32> {
         match self {
             PhasePrecision::Centi => Some(2),
             PhasePrecision::Milli => Some(3),
             PhasePrecision::TenthMilli => Some(4),
             PhasePrecision::Micro => Some(6),
             PhasePrecision::Full => None,
-        }
-    }
-
-    /// θ rounded to this precision: the double nearest the decimal, which JSON writes as that
-    /// decimal ("4.7124"). A phase rounding up to 2π is written as 0, staying in [0, 2π).
-    pub fn round(self, theta: f64) -> f64 {
-        let Some(decimals) = self.decimals() else {
-            return theta;
-        };
-        let scale = 10f64.powi(decimals);
-        let rounded = (theta * scale).round() / scale;
-        if rounded >= std::f64::consts::TAU {
-            0.0
-        } else {
-            rounded
         }
     }
 }
@@ -359,16 +345,10 @@ impl PathAnswer {
     pub fn write_phases(&mut self, format: PhaseFormat, precision: PhasePrecision) {
         for waypoint in &mut self.waypoints {
             let phases = &mut waypoint.config.phases;
-            match format {
-                PhaseFormat::Codes => *phases = phases.to_codes(),
-                PhaseFormat::Radians if precision == PhasePrecision::Full => {}
-                PhaseFormat::Radians => {
-                    if let SurfacePhases::Radians(surfaces) = phases {
-                        for surface in surfaces {
-                            surface.iter_mut().for_each(|t| *t = precision.round(*t));
-                        }
-                    }
-                }
+            match (format, precision.decimals()) {
+                (PhaseFormat::Codes, _) => *phases = phases.to_codes(),
+                (PhaseFormat::Radians, None) => {}
+                (PhaseFormat::Radians, Some(decimals)) => *phases = phases.to_decimals(decimals),
             }
         }
     }
@@ -409,7 +389,7 @@ pub fn sweep(
         })
         .collect::<Result<_, Cancelled>>()?;
     Ok(SweepAnswer {
-        map_id: map.key.id(),
+        map_id: map.id.clone(),
         unit: map.key.unit(),
         max_feasible_threshold: index.widest_path_threshold(&map.values, s, g),
         start,
@@ -421,35 +401,65 @@ pub fn sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::radiomap::SurfacePhases;
 
-    /// Rounded phases stay in [0, 2π), are within half a step of the original, and print as
-    /// the short decimal; `full` keeps every bit.
+    /// Each precision writes its number of decimals (the writer itself is tested in
+    /// radiomap::phase_text); `full` keeps every bit; codes are codes.
     #[test]
-    fn phase_precision_rounds_within_half_a_step() {
-        use std::f64::consts::TAU;
-        let p = PhasePrecision::default();
-        assert_eq!(p, PhasePrecision::TenthMilli);
-        assert_eq!(
-            serde_json::to_string(&p.round(4.71238898038469)).unwrap(),
-            "4.7124"
-        );
-        assert_eq!(p.round(TAU - 1e-6), 0.0);
-        for k in 0..10_000 {
-            let theta = TAU * k as f64 / 10_000.0 + 1e-7;
-            for (precision, half_step) in [
-                (PhasePrecision::Centi, 5e-3),
-                (PhasePrecision::Milli, 5e-4),
-                (PhasePrecision::TenthMilli, 5e-5),
-                (PhasePrecision::Micro, 5e-7),
-            ] {
-                let r = precision.round(theta);
-                assert!((0.0..TAU).contains(&r));
-                let error = (r - theta).abs().min(TAU - (r - theta).abs());
-                assert!(error <= half_step * (1.0 + 1e-9), "{precision:?} {theta}");
-                assert!(serde_json::to_string(&r).unwrap().len() <= 9);
-            }
-            assert_eq!(PhasePrecision::Full.round(theta), theta);
+    fn write_phases_applies_the_precision_asked_for() {
+        let theta = 4.71238898038469;
+        let answer = |format, precision| {
+            let end = Endpoint {
+                requested: [0.0, 0.0],
+                x: 0.0,
+                y: 0.0,
+                i: 0,
+                j: 0,
+                snapped: false,
+            };
+            let mut path = PathAnswer {
+                map_id: String::new(),
+                unit: "dB",
+                threshold: None,
+                feasible: true,
+                reason: None,
+                distance_m: Some(0.0),
+                travel_time_s: Some(0.0),
+                max_feasible_threshold: None,
+                start: end.clone(),
+                goal: end,
+                waypoints: vec![Waypoint {
+                    x: 0.0,
+                    y: 0.0,
+                    i: 0,
+                    j: 0,
+                    value: 0.0,
+                    config: CellConfig {
+                        ap: 0,
+                        phases: SurfacePhases::Radians(vec![vec![theta, 0.5]]),
+                        power_w: None,
+                        decoding_order: None,
+                    },
+                }],
+                handovers: Vec::new(),
+            };
+            path.write_phases(format, precision);
+            serde_json::to_value(&path.waypoints[0].config).unwrap()
+        };
+        assert_eq!(PhasePrecision::default(), PhasePrecision::TenthMilli);
+        for (precision, written) in [
+            ("1e-2", vec![4.71, 0.5]),
+            ("1e-3", vec![4.712, 0.5]),
+            ("1e-4", vec![4.7124, 0.5]),
+            ("1e-6", vec![4.712389, 0.5]),
+            ("full", vec![theta, 0.5]),
+        ] {
+            let precision: PhasePrecision = precision.parse().unwrap();
+            let config = answer(PhaseFormat::Radians, precision);
+            assert_eq!(config["irs_phases_rad"], serde_json::json!([written]));
         }
+        let codes = answer(PhaseFormat::Codes, PhasePrecision::default());
+        assert!(codes["irs_phase_codes"][0].is_string());
         assert_eq!("1e-6".parse::<PhasePrecision>(), Ok(PhasePrecision::Micro));
         assert!("1e-5".parse::<PhasePrecision>().is_err());
     }

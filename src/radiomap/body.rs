@@ -110,7 +110,7 @@ impl RadioMap {
             }
         };
         MapBody {
-            map_id: self.key.id(),
+            map_id: self.id.clone(),
             key: self.key.clone(),
             unit: self.key.unit(),
             grid: self.grid,

@@ -206,6 +206,7 @@ pub fn decode(bytes: &[u8], scenario: &Scenario) -> Result<RadioMap, DecodeError
         }
     };
     Ok(RadioMap {
+        id: key.id(),
         key,
         grid,
         values: stored.values,

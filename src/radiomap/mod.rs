@@ -6,6 +6,7 @@
 //! * [`rate_cells`]: the communication rate map U (eqs. 26 and 37), in bit/s/Hz, solved per cell
 //!   by [`crate::solver`].
 //! * [`body`]: statistics, coverage and the JSON body of a built map.
+//! * [`phase_text`]: a waypoint's IRS phases as radians, rounded decimals or 16-bit codes.
 //!
 //! Occupied cells hold NaN (JSON null, the paper's −∞).
 
@@ -14,16 +15,16 @@ pub mod cost;
 pub mod encoding;
 pub mod gain;
 pub mod key;
+pub mod phase_text;
 pub mod rate_cells;
 
 pub use body::{CertificateSummary, MapBody, MapStats};
 pub use key::{MapKey, MapKind};
+pub use phase_text::SurfacePhases;
 pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
 use crate::scenario::{Grid, Scenario};
-use base64::Engine;
-use base64::engine::general_purpose::STANDARD as BASE64;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Arc;
@@ -110,6 +111,9 @@ pub struct CellConfig {
 #[derive(Debug, Clone)]
 pub struct RadioMap {
     pub key: MapKey,
+    /// The map id, `key.id()` (a hash of the key's canonical JSON), computed once: every path
+    /// answer names it, and hashing the key was 3 % of a repeated path query's time.
+    pub id: String,
     pub grid: Grid,
     /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
     /// (and, on rate maps, where no configuration meets every SRU's rate).
@@ -135,70 +139,6 @@ pub(crate) fn per_surface(flat: &[f64], lengths: &[usize]) -> Vec<Vec<f64>> {
             own.to_vec()
         })
         .collect()
-}
-
-/// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
-/// each; none for phases `none`), in radians or as the compact codes a path answer may be
-/// asked for (planner::PhaseFormat).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub enum SurfacePhases {
-    /// θ in [0, 2π).
-    #[serde(rename = "irs_phases_rad")]
-    Radians(Vec<Vec<f64>>),
-    /// Each surface's phases as 16-bit codes c, θ = 2π·c/2¹⁶ ([`crate::phases::encode_phase`],
-    /// within π/2¹⁶ of the phase), little-endian, two bytes a phase, in base64 (RFC 4648 with
-    /// padding): 2.7 characters a phase against 6–7 for a decimal at 10⁻⁴ rad.
-    #[serde(rename = "irs_phase_codes")]
-    Codes(Vec<String>),
-}
-
-impl SurfacePhases {
-    /// The same phases as codes (exact for phases already on the 2π/2¹⁶ grid: rate maps, `bits`).
-    pub fn to_codes(&self) -> SurfacePhases {
-        match self {
-            SurfacePhases::Radians(surfaces) => SurfacePhases::Codes(
-                surfaces
-                    .iter()
-                    .map(|phases| {
-                        let bytes: Vec<u8> = phases
-                            .iter()
-                            .flat_map(|&theta| crate::phases::encode_phase(theta).to_le_bytes())
-                            .collect();
-                        BASE64.encode(bytes)
-                    })
-                    .collect(),
-            ),
-            codes => codes.clone(),
-        }
-    }
-
-    /// Every surface's phases in radians (codes decoded).
-    pub fn radians(&self) -> Vec<Vec<f64>> {
-        match self {
-            SurfacePhases::Radians(surfaces) => surfaces.clone(),
-            SurfacePhases::Codes(surfaces) => surfaces
-                .iter()
-                .map(|text| {
-                    let bytes = BASE64.decode(text).expect("codes this module wrote");
-                    bytes
-                        .chunks_exact(2)
-                        .map(|pair| {
-                            crate::phases::decode_phase(u16::from_le_bytes([pair[0], pair[1]]))
-                        })
-                        .collect()
-                })
-                .collect(),
-        }
-    }
-
-    /// How many phases there are over every surface.
-    pub fn count(&self) -> usize {
-        match self {
-            SurfacePhases::Radians(surfaces) => surfaces.iter().map(Vec::len).sum(),
-            // Four base64 characters carry three bytes: a phase is two.
-            SurfacePhases::Codes(surfaces) => surfaces.iter().map(|s| s.len() / 4 * 3 / 2).sum(),
-        }
-    }
 }
 
 impl CellConfig {
@@ -304,6 +244,7 @@ pub fn build(
     };
     Ok(RadioMap {
         key: key.clone(),
+        id: key.id(),
         grid,
         values,
         occupied,

@@ -385,7 +385,7 @@ struct MapSummary {
 }
 
 fn summary(map: &RadioMap) -> MapSummary {
-    let map_id = map.key.id();
+    let map_id = map.id.clone();
     MapSummary {
         href: format!("/v1/maps/{map_id}"),
         map_id,
@@ -1249,7 +1249,7 @@ async fn plan_path(
         Err(accepted) => return Ok(accepted),
     };
     let precision = request.phase_precision.unwrap_or_default();
-    let map_id = map.key.id();
+    let map_id = map.id.clone();
     // A plain query asked before is answered from the answer cache (service::answers).
     let query = request.monte_carlo_draws.is_none().then(|| {
         PathQuery::new(
@@ -1297,13 +1297,14 @@ async fn plan_path(
         }
         _ => None,
     };
-    // Sized up front: ~10 bytes per rounded phase and ~150 per waypoint's other fields, so the
+    // Sized up front: the phases' text and ~150 bytes per waypoint's other fields, so the
     // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
-    let phases = path
-        .waypoints
-        .first()
-        .map_or(0, |w| w.config.phases.count());
-    let capacity = 512 + path.waypoints.len() * (150 + 10 * phases);
+    let capacity = 512
+        + path
+            .waypoints
+            .iter()
+            .map(|w| 150 + w.config.phases.json_len_hint())
+            .sum::<usize>();
     let answer = OpenAnswer::new(serialize_sized(
         &CheckedPath { path, monte_carlo },
         capacity,
@@ -1358,7 +1359,7 @@ async fn sweep(
     let work = cells.saturating_mul(thresholds.len());
     let cache = state.cache().clone();
     let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
-        let index = cache.bottlenecks(&map.key.id(), &map);
+        let index = cache.bottlenecks(&map.id, &map);
         planner::sweep(&map, &index, start, goal, &thresholds, v_max, progress)
     })
     .await?

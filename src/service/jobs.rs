@@ -706,7 +706,7 @@ impl Jobs {
             let mut registered = 0;
             for (scenario, map) in placement.scenarios.into_iter().zip(maps) {
                 if register(scenario) {
-                    cache.insert(map.key.id(), Arc::new(map)).await;
+                    cache.insert(map.id.clone(), Arc::new(map)).await;
                     registered += 1;
                 }
             }

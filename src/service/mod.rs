@@ -296,7 +296,7 @@ impl AppState {
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?
         .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
-        if map.key.id() != map_id {
+        if map.id != map_id {
             return Err(ApiError::internal(format!(
                 "shared map {map_id} holds another map"
             )));

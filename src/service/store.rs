@@ -326,7 +326,7 @@ impl DataDir {
         let scenario = scenario_of(&scenario_id)?;
         let payload = self.read(Kind::Map, map_id)?;
         match encoding::decode(&payload, &scenario) {
-            Ok(map) if map.key.id() == map_id => Some(map),
+            Ok(map) if map.id == map_id => Some(map),
             Ok(_) => {
                 tracing::warn!(map_id, "map file holds another map; ignored");
                 None
@@ -447,19 +447,19 @@ mod tests {
         let one = encoding::encode(&gain).len() as u64 + HEADER_BYTES as u64;
         // Room for one map and a half: the second write drops the first.
         let store = DataDir::open(&dir, one * 3 / 2).unwrap();
-        store.save_map(&gain.key.id(), &gain);
+        store.save_map(&gain.id, &gain);
         std::thread::sleep(std::time::Duration::from_millis(20));
-        store.save_map(&bits.key.id(), &bits);
-        assert_eq!(store.map_ids(), vec![bits.key.id()]);
+        store.save_map(&bits.id, &bits);
+        assert_eq!(store.map_ids(), vec![bits.id.clone()]);
         let lookup = |sid: &str| (sid == id).then(|| scenario.clone());
-        let back = store.load_map(&bits.key.id(), lookup).expect("stored");
+        let back = store.load_map(&bits.id, lookup).expect("stored");
         assert_eq!(back.values.len(), bits.values.len());
-        assert!(store.load_map(&gain.key.id(), lookup).is_none());
+        assert!(store.load_map(&gain.id, lookup).is_none());
         // Reopened, the directory knows its maps again.
         let store = DataDir::open(&dir, one * 3 / 2).unwrap();
-        assert_eq!(store.map_ids(), vec![bits.key.id()]);
+        assert_eq!(store.map_ids(), vec![bits.id.clone()]);
         assert!(
-            store.load_map(&bits.key.id(), |_| None).is_none(),
+            store.load_map(&bits.id, |_| None).is_none(),
             "needs its scenario"
         );
         let _ = fs::remove_dir_all(&dir);
