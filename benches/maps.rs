@@ -1,7 +1,8 @@
 //! Speed targets (README "Performance"): gain maps of the paper scenario in both groupings,
 //! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, the per-cell
 //! cost of the `fast` solver and of the certificate, and the warehouse floor plan (decode +
-//! gain map at 0.25 m and 0.1 m, a path query on it) and a factory hall with 40 machines.
+//! gain map at 0.25 m and 0.1 m, a path query on it), a factory hall with 40 machines, and a
+//! path answer on the paper map as the service writes it.
 //!
 //! `cargo bench` runs everything; `cargo bench -- gain` a subset. Single-core figures come from
 //! `RAYON_NUM_THREADS=1 cargo bench`.
@@ -9,7 +10,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use irs_planner::channel::ChannelModel;
 use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, CellGraph, Threshold};
+use irs_planner::planner::{self, CellGraph, PhaseFormat, PhasePrecision, Threshold};
 use irs_planner::radiomap::{self, MapKey, Progress};
 use irs_planner::rate::{Access, RateModel};
 use irs_planner::scenario::Scenario;
@@ -273,7 +274,68 @@ fn placement(c: &mut Criterion) {
     group.finish();
 }
 
+/// A path query's answer on the paper map (−10,0 → 10,0 at −62 dB: 41 waypoints × 60
+/// phases), as the service makes it on a miss of its answer cache: the indexed search, the
+/// waypoints' eq. 11 phases, the phases written at a precision, the JSON body.
+fn path_answer(c: &mut Criterion) {
+    let s = paper("paper-single-user", |_| {});
+    let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
+    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    let index = planner::bottlenecks(&map);
+    let plan = || {
+        let threshold = Threshold::Value(-62.0);
+        planner::plan_indexed(&map, &index, [-10.0, 0.0], [10.0, 0.0], threshold, 1.0).unwrap()
+    };
+    let path = plan();
+    assert_eq!(path.waypoints.len(), 41);
+    let mut group = c.benchmark_group("path_answer");
+    group.bench_function("plan_41x41", |b| b.iter(plan));
+    for (name, format, precision) in [
+        (
+            "write_phases_1e-4",
+            PhaseFormat::Radians,
+            PhasePrecision::TenthMilli,
+        ),
+        (
+            "write_phases_codes",
+            PhaseFormat::Codes,
+            PhasePrecision::TenthMilli,
+        ),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter_batched(
+                || path.clone(),
+                |mut path| {
+                    path.write_phases(format, precision);
+                    path
+                },
+                criterion::BatchSize::SmallInput,
+            )
+        });
+    }
+    for (name, precision) in [
+        ("body_1e-4", PhasePrecision::TenthMilli),
+        ("body_full", PhasePrecision::Full),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let mut path = plan();
+                path.write_phases(PhaseFormat::Radians, precision);
+                serde_json::to_vec(&path).unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
 criterion_group!(
-    benches, gain_maps, large_grid, rate_maps, floors, factory, placement
+    benches,
+    gain_maps,
+    large_grid,
+    rate_maps,
+    floors,
+    factory,
+    placement,
+    path_answer
 );
 criterion_main!(benches);
