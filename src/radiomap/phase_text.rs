@@ -54,11 +54,10 @@ pub const MAX_PHASE_DECIMALS: u32 = 9;
 impl SurfacePhases {
     /// The same phases as codes (exact for phases already on the 2π/2¹⁶ grid: rate maps, `bits`).
     pub fn to_codes(&self) -> SurfacePhases {
-        let SurfacePhases::Radians(surfaces) = self else {
-            return match self {
-                SurfacePhases::Codes(_) => self.clone(),
-                _ => SurfacePhases::Radians(self.radians()).to_codes(),
-            };
+        let surfaces = match self {
+            SurfacePhases::Codes(_) => return self.clone(),
+            SurfacePhases::Decimals(_) => &self.radians(),
+            SurfacePhases::Radians(surfaces) => surfaces,
         };
         SurfacePhases::Codes(
             surfaces
@@ -75,11 +74,11 @@ impl SurfacePhases {
     }
 
     /// Radians written as JSON text, each θ ∈ [0, 2π) rounded to the nearest multiple of
-    /// 10^−`decimals` (ties to even; error ≤ ½·10^−`decimals` rad) and written as that decimal without
-    /// trailing zeros ("4.7124", "3.5", "0.0"): the shortest text that reads back to the nearest
-    /// double, what serde_json writes for that double too (except below 10⁻⁵, which it writes
-    /// in exponent form and this in plain decimals). A phase rounding up to 2π is written as 0,
-    /// staying in [0, 2π). Other forms are returned as they are.
+    /// 10^−`decimals` (ties to even; error ≤ ½·10^−`decimals` rad) and written as that decimal
+    /// without trailing zeros ("4.7124", "3.5", "0.0"): the shortest text that reads back to
+    /// the nearest double, what serde_json writes for that double too (except below 10⁻⁵,
+    /// which it writes in exponent form and this in plain decimals). A phase rounding up to 2π
+    /// is written as 0, staying in [0, 2π). Other forms are returned as they are.
     ///
     /// # Panics
     /// If `decimals` is 0 or above [`MAX_PHASE_DECIMALS`] (a caller's constant, not input).
