@@ -8,13 +8,13 @@
 //! `RAYON_NUM_THREADS=1 cargo bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use irs_planner::channel::ChannelModel;
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, CellGraph, PhaseFormat, PhasePrecision, Threshold};
-use irs_planner::radiomap::{self, MapKey, Progress};
-use irs_planner::rate::{Access, RateModel};
-use irs_planner::scenario::Scenario;
-use irs_planner::solver::{self, certificate, fast};
+use irs_model::channel::ChannelModel;
+use irs_model::phases::PhaseMode;
+use irs_model::planner::{self, CellGraph, PhaseFormat, PhasePrecision, Threshold};
+use irs_model::radiomap::{self, MapKey, Progress};
+use irs_model::rate::{Access, RateModel};
+use irs_model::scenario::Scenario;
+use irs_model::solver::{self, certificate, fast};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -150,7 +150,7 @@ fn warehouse_document(resolution_m: f64) -> serde_json::Value {
     let mut document: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     document["grid"]["resolution_m"] = resolution_m.into();
-    irs_planner::floorplan::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
+    irs_model::floorplan::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
         std::fs::read(p)
     })
     .unwrap();
@@ -242,7 +242,7 @@ fn factory(c: &mut Criterion) {
 /// Every 0.5 m of the paper floor's four walls (164 IRS poses, 123 valid), ranked by the largest
 /// threshold q_I → q_F.
 fn placement(c: &mut Criterion) {
-    use irs_planner::placement::{self, Candidates, Objective, Search, Segment, What};
+    use irs_model::placement::{self, Candidates, Objective, Search, Segment, What};
     let base = Scenario::builtin("paper-single-user").unwrap();
     let corners = [[-10.0, -10.0], [10.0, -10.0], [10.0, 10.0], [-10.0, 10.0]];
     let search = Search {

@@ -13,10 +13,10 @@
 //!
 //! Each prints one JSON line: the median and minimum of the timed runs, and the results to compare.
 
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::CellGraph;
-use irs_planner::radiomap::{self, MapKey, Progress, RadioMap};
-use irs_planner::scenario::Scenario;
+use irs_model::phases::PhaseMode;
+use irs_model::planner::CellGraph;
+use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::scenario::Scenario;
 use std::path::Path;
 use std::time::Instant;
 

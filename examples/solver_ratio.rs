@@ -3,10 +3,10 @@
 //!
 //! `cargo run --release --features sdp --example solver_ratio [N_X N_Z]` (default 5 × 2, N = 10).
 
-use irs_planner::channel::ChannelModel;
-use irs_planner::rate::{Access, RateModel};
-use irs_planner::scenario::Scenario;
-use irs_planner::solver::{self, certificate, fast, objective, sdr_sca};
+use irs_model::channel::ChannelModel;
+use irs_model::rate::{Access, RateModel};
+use irs_model::scenario::Scenario;
+use irs_model::solver::{self, certificate, fast, objective, sdr_sca};
 use std::time::Instant;
 
 fn main() {
@@ -35,7 +35,7 @@ fn main() {
         let model = RateModel::for_scenario(&s, access);
         for cell in [[-10.0, 0.0], [3.0, -6.0], [6.0, 8.0]] {
             let problem = solver::cell_problem(&channel, [cell[0], cell[1], 1.0], &srus, true);
-            let rate = |v: &[irs_planner::channel::C64]| {
+            let rate = |v: &[irs_model::channel::C64]| {
                 let mut l = vec![0.0; problem.users()];
                 problem.lambdas(v, &mut l);
                 objective(&model, &l)

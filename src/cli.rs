@@ -5,20 +5,20 @@
 //! field; an infeasible path is an answer (exit 0), not an error; a failure that is not the
 //! input's (the server cannot bind, a file cannot be written) exits with code 1.
 
-use crate::export::{self, MaskKind};
-use crate::input::{parse_finite, parse_point};
-use crate::montecarlo::{self, CheckedPath, MAX_DRAWS};
-use crate::phases::PhaseMode;
-use crate::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
-use crate::planner::{self, PhaseFormat, PhasePrecision, Threshold};
-use crate::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
-use crate::rate::Access;
-use crate::render::{self, RenderOptions};
-use crate::scenario::Scenario;
-use crate::service::config::ServeArgs;
-use crate::solver::SolverKind;
-use crate::timing::Timed;
 use clap::{Args, Parser, Subcommand};
+use irs_answers::export::{self, MaskKind};
+use irs_answers::render::{self, RenderOptions};
+use irs_model::input::{parse_finite, parse_point};
+use irs_model::montecarlo::{self, CheckedPath, MAX_DRAWS};
+use irs_model::phases::PhaseMode;
+use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
+use irs_model::planner::{self, PhaseFormat, PhasePrecision, Threshold};
+use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
+use irs_model::rate::Access;
+use irs_model::scenario::Scenario;
+use irs_model::solver::SolverKind;
+use irs_model::timing::Timed;
+use irs_service::config::ServeArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -85,8 +85,8 @@ pub fn run_healthcheck(args: &HealthcheckArgs) -> Result<(), Failure> {
             args.timeout_s
         )));
     }
-    let url = crate::service::probe::local_url(args.bind, &args.path);
-    match crate::service::probe::probe(&url, std::time::Duration::from_secs_f64(args.timeout_s)) {
+    let url = irs_service::probe::local_url(args.bind, &args.path);
+    match irs_service::probe::probe(&url, std::time::Duration::from_secs_f64(args.timeout_s)) {
         Ok(status) if (200..300).contains(&status) => {
             println!("{url}: {status}");
             Ok(())
@@ -101,7 +101,7 @@ pub struct PlaceArgs {
     #[command(flatten)]
     pub source: ScenarioSource,
     /// What moves: irs or ap.
-    #[arg(long, default_value = "irs", value_parser = crate::input::parse_name::<What>)]
+    #[arg(long, default_value = "irs", value_parser = irs_model::input::parse_name::<What>)]
     pub what: What,
     /// Which IRS (or AP) of the scenario moves, in scenario order.
     #[arg(long, default_value_t = 0)]
@@ -119,7 +119,7 @@ pub struct PlaceArgs {
     #[arg(long = "pose", value_name = "CENTER:NORMAL", allow_hyphen_values = true, value_parser = parse_pose)]
     pub poses: Vec<Pose>,
     /// An explicit AP position "x,y,z" (repeatable).
-    #[arg(long = "position", value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = crate::input::parse_point3)]
+    #[arg(long = "position", value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = irs_model::input::parse_point3)]
     pub positions: Vec<[f64; 3]>,
     /// The objective: coverage (needs --threshold), max_threshold (needs --start, --goal) or
     /// distance (needs all three).
@@ -160,8 +160,8 @@ fn parse_pose(text: &str) -> Result<Pose, String> {
         .split_once(':')
         .ok_or_else(|| format!("expected \"x,y,z:nx,ny,nz\", got {text:?}"))?;
     Ok(Pose {
-        center: crate::input::parse_point3(center)?,
-        normal: crate::input::parse_point3(normal)?,
+        center: irs_model::input::parse_point3(center)?,
+        normal: irs_model::input::parse_point3(normal)?,
     })
 }
 
@@ -302,7 +302,7 @@ pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
     let fail =
         |e: &dyn std::fmt::Display| Failure::input(format!("--scenario {}: {e}", path.display()));
     let text = std::fs::read_to_string(path).map_err(|e| fail(&e))?;
-    let mut document = crate::scenario::document(&text).map_err(|e| fail(&e))?;
+    let mut document = irs_model::scenario::document(&text).map_err(|e| fail(&e))?;
     if let Some(map_yaml) = &source.floor_plan {
         let absolute = std::path::absolute(map_yaml)
             .map_err(|e| Failure::input(format!("--floor-plan {}: {e}", map_yaml.display())))?;

@@ -1,9 +1,11 @@
-//! The `irs-planner` binary: see [`irs_planner::cli`]. Without a command it serves with the
+//! The `irs-planner` binary: see [`crate::cli`]. Without a command it serves with the
 //! defaults (flags and `IRS_*` environment variables still apply through `serve`).
 
 use clap::Parser;
-use irs_planner::cli::{self, Cli, Command};
-use irs_planner::service::{self, config::ServeArgs};
+mod cli;
+
+use cli::{Cli, Command};
+use irs_service::config::ServeArgs;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -25,8 +27,8 @@ fn main() -> ExitCode {
 }
 
 fn serve(args: ServeArgs) -> Result<(), cli::Failure> {
-    service::run(args).map_err(|e| match e {
-        service::ServeError::Config(message) => cli::Failure::input(message),
-        service::ServeError::Runtime(message) => cli::Failure::runtime(message),
+    irs_service::run(args).map_err(|e| match e {
+        irs_service::ServeError::Config(message) => cli::Failure::input(message),
+        irs_service::ServeError::Runtime(message) => cli::Failure::runtime(message),
     })
 }

@@ -2,11 +2,11 @@
 //! "Floor plans"): the paper floor drawn as a 0.05 m raster and as walls, cell by cell.
 
 use base64::Engine;
-use irs_planner::floorplan::{self, MapMode};
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, MapKey, Progress, RadioMap};
-use irs_planner::scenario::Scenario;
+use irs_model::floorplan::{self, MapMode};
+use irs_model::phases::PhaseMode;
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::scenario::Scenario;
 
 fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
     let key = MapKey::gain(&s.content_hash(), s, phases).unwrap();
@@ -129,7 +129,7 @@ fn a_diagonal_wall_shadows_the_cells_behind_it() {
     })
     .unwrap()
     .unwrap();
-    let model = irs_planner::channel::ChannelModel::new(&s);
+    let model = irs_model::channel::ChannelModel::new(&s);
     let ap = s.ap().position;
     // The AP at (0, 10, 2): (−3, −3) sees it past the wall's end; (−1, −1) is behind it.
     assert!(model.is_blocked(ap, [-1.0, -1.0, 1.0]));

@@ -1,11 +1,11 @@
 //! Placement search (docs/model.md §7): the ranking equals an exhaustive loop that builds every
 //! candidate's map with the ordinary map builder and scores it with the ordinary planner.
 
-use irs_planner::phases::PhaseMode;
-use irs_planner::placement::{self, Candidates, Objective, Search, Segment, What};
-use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, MapKey, Progress};
-use irs_planner::scenario::Scenario;
+use irs_model::phases::PhaseMode;
+use irs_model::placement::{self, Candidates, Objective, Search, Segment, What};
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::{self, MapKey, Progress};
+use irs_model::scenario::Scenario;
 
 const Q_I: [f64; 2] = [-10.0, 0.0];
 const Q_F: [f64; 2] = [10.0, 0.0];

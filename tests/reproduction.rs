@@ -1,13 +1,13 @@
 //! The paper's Section IV figures (docs/model.md §9) as regression tests, with stated tolerances.
 //! Maps are built once per configuration and shared between tests.
 
-use irs_planner::channel::{C64, ChannelModel};
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
-use irs_planner::rate::{Access, RateModel};
-use irs_planner::scenario::Scenario;
-use irs_planner::solver::{self, SolverKind, objective};
+use irs_model::channel::{C64, ChannelModel};
+use irs_model::phases::PhaseMode;
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use irs_model::rate::{Access, RateModel};
+use irs_model::scenario::Scenario;
+use irs_model::solver::{self, SolverKind, objective};
 use std::sync::OnceLock;
 
 const Q_I: [f64; 2] = [-10.0, 0.0];

@@ -220,7 +220,7 @@ fn documented_routes() -> Vec<(String, String)> {
 #[test]
 fn openapi_query_patterns_are_the_servers_number_grammar() {
     let text = std::fs::read_to_string(format!("{}/openapi.yaml", root())).unwrap();
-    let number = irs_planner::input::NUMBER_PATTERN;
+    let number = irs_model::input::NUMBER_PATTERN;
     let expected = [
         format!("'^{number}$'"),
         format!("'^(max|{number})$'"),
@@ -241,7 +241,7 @@ fn openapi_query_patterns_are_the_servers_number_grammar() {
 
 #[tokio::test]
 async fn openapi_paths_are_exactly_the_served_routes() {
-    let mut served: Vec<(String, String)> = irs_planner::service::api::route_table()
+    let mut served: Vec<(String, String)> = irs_service::api::route_table()
         .into_iter()
         .flat_map(|(path, methods, _)| {
             methods

@@ -2,15 +2,15 @@
 //! Monte Carlo check against the Jensen bound, and (feature `sdp`) the certificate and `fast`
 //! against Clarabel's SDR and the paper's SDR+SCA.
 
-use irs_planner::channel::{C64, ChannelModel};
-use irs_planner::montecarlo;
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, MapKey, MapKind, Progress};
-use irs_planner::rate::{Access, RateModel};
-use irs_planner::scenario::Scenario;
-use irs_planner::solver::SolverKind;
-use irs_planner::solver::{self, CellProblem, certificate, fast, objective};
+use irs_model::channel::{C64, ChannelModel};
+use irs_model::montecarlo;
+use irs_model::phases::PhaseMode;
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::{self, MapKey, MapKind, Progress};
+use irs_model::rate::{Access, RateModel};
+use irs_model::scenario::Scenario;
+use irs_model::solver::SolverKind;
+use irs_model::solver::{self, CellProblem, certificate, fast, objective};
 use rand::{RngExt, SeedableRng};
 use std::f64::consts::TAU;
 
@@ -181,7 +181,7 @@ fn monte_carlo_means_respect_the_jensen_bound() {
 #[cfg(feature = "sdp")]
 mod sdp {
     use super::*;
-    use irs_planner::solver::sdr_sca;
+    use irs_model::solver::sdr_sca;
 
     /// The solver-free support bound equals Clarabel's SDP optimum within 1e-4 relative.
     #[test]

@@ -1,10 +1,10 @@
 //! Several IRSs and several APs on one floor (docs/model.md §2–3): the generalisations reduce to
 //! the single-surface model where they must, and add up as they must.
 
-use irs_planner::channel::ChannelModel;
-use irs_planner::phases::PhaseMode;
-use irs_planner::radiomap::{self, MapKey, Progress, RadioMap};
-use irs_planner::scenario::Scenario;
+use irs_model::channel::ChannelModel;
+use irs_model::phases::PhaseMode;
+use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::scenario::Scenario;
 
 fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
     let key = MapKey::gain(&s.content_hash(), s, phases).unwrap();
@@ -105,11 +105,11 @@ fn two_aps_serve_each_cell_from_the_better_one() {
                 "{phases:?} cell {k}"
             );
         }
-        let path = irs_planner::planner::plan(
+        let path = irs_model::planner::plan(
             &map,
             [-10.0, 0.0],
             [10.0, 0.0],
-            irs_planner::planner::Threshold::Max,
+            irs_model::planner::Threshold::Max,
             1.0,
         )
         .unwrap();
@@ -174,7 +174,7 @@ fn ap_lists_canonicalise_and_rate_maps_take_one_ap() {
         "x",
         &two,
         PhaseMode::Continuous,
-        irs_planner::rate::Access::Noma,
+        irs_model::rate::Access::Noma,
     )
     .unwrap_err();
     assert_eq!(e.field, "aps");
@@ -192,13 +192,13 @@ fn ap_lists_canonicalise_and_rate_maps_take_one_ap() {
         "an IRS facing no AP is refused"
     );
     let models: Vec<ChannelModel> = (0..2).map(|k| ChannelModel::for_ap(&both, k)).collect();
-    let mut w = vec![irs_planner::channel::C64::new(0.0, 0.0); models[1].subsurfaces()];
+    let mut w = vec![irs_model::channel::C64::new(0.0, 0.0); models[1].subsurfaces()];
     let q = [-5.0, -8.5, 1.0];
     let with = models[1].evaluate(q, true, &mut w);
     assert!(w.iter().all(|x| x.norm() == 0.0));
     assert_eq!(with, models[1].evaluate(q, false, &mut w));
     // The AP in front of it still gets the surface.
-    let mut w0 = vec![irs_planner::channel::C64::new(0.0, 0.0); models[0].subsurfaces()];
+    let mut w0 = vec![irs_model::channel::C64::new(0.0, 0.0); models[0].subsurfaces()];
     models[0].evaluate(q, true, &mut w0);
     assert!(w0.iter().all(|x| x.norm() > 0.0));
 }
@@ -217,7 +217,7 @@ fn rate_maps_solve_and_certify_the_concatenated_vector() {
         &two.content_hash(),
         &two,
         PhaseMode::Continuous,
-        irs_planner::rate::Access::Noma,
+        irs_model::rate::Access::Noma,
     )
     .unwrap();
     let map = radiomap::build(&two, &key, &Progress::default()).unwrap();

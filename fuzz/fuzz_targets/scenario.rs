@@ -6,10 +6,10 @@
 
 #![no_main]
 
-use irs_planner::phases::PhaseMode;
-use irs_planner::planner::{self, Threshold};
-use irs_planner::radiomap::{self, MapKey, MapKind, Progress, cost};
-use irs_planner::scenario::Scenario;
+use irs_model::phases::PhaseMode;
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::{self, MapKey, MapKind, Progress, cost};
+use irs_model::scenario::Scenario;
 use libfuzzer_sys::fuzz_target;
 
 /// Largest estimated build (seconds of one core) the target runs, so each input stays fast.

@@ -20,6 +20,7 @@ Everything binds 127.0.0.1 and stops by itself (about a minute on two cores).
 
 import json
 import os
+import pathlib
 import shutil
 import signal
 import socket
@@ -28,52 +29,15 @@ import sys
 import tempfile
 import threading
 import time
-import urllib.error
-import urllib.request
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
+import irs_testkit as kit  # noqa: E402
+from irs_testkit import free_port, request, scenario, wait_job, wait_until  # noqa: E402
+
 BINARY = None  # set by main
 WORK = tempfile.mkdtemp(prefix="irs-cluster-")
-PROCESSES = []
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def check(condition, message):
-    if not condition:
-        raise SystemExit(f"FAIL: {message}")
-    print(f"ok: {message}", flush=True)
-
-
-def request(base, method, path, body=None, timeout=60):
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(base + path, data, {"content-type": "application/json"}, method=method)
-    try:
-        with urllib.request.urlopen(req, timeout=timeout) as resp:
-            return resp.status, json.loads(resp.read() or b"null"), {k.lower(): v for k, v in resp.headers.items()}
-    except urllib.error.HTTPError as e:
-        text = e.read()
-        try:
-            body = json.loads(text)
-        except ValueError:
-            body = text.decode(errors="replace")
-        return e.code, body, {k.lower(): v for k, v in e.headers.items()}
-
-
-def wait_until(what, predicate, seconds):
-    deadline = time.time() + seconds
-    while time.time() < deadline:
-        try:
-            if predicate():
-                return True
-        except OSError:
-            pass
-        time.sleep(0.1)
-    raise SystemExit(f"FAIL: {what} within {seconds} s")
+CHECKS = kit.Checks(stop_on_failure=True)
+check = CHECKS.check
 
 
 class Redis:
@@ -84,11 +48,10 @@ class Redis:
         self.start()
 
     def start(self):
-        self.proc = subprocess.Popen(
+        self.proc = kit.spawn(
             ["redis-server", "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir,
              "--appendonly", "yes", "--save", "", "--protected-mode", "no"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        PROCESSES.append(self.proc)
         wait_until("redis-server listening", self.answers, 10)
 
     def answers(self):
@@ -101,39 +64,25 @@ class Redis:
         self.proc.wait(10)
 
 
-class Replica:
+class Replica(kit.Server):
     def __init__(self, redis_port, name):
         self.name = name
-        self.log = open(os.path.join(WORK, f"{name}.log"), "w")
         empty = os.path.join(WORK, "no-scenarios")
         os.makedirs(empty, exist_ok=True)
-        self.proc = subprocess.Popen(
-            [BINARY, "serve", "--bind", "127.0.0.1:0", "--scenarios", empty,
-             "--redis-url", f"redis://127.0.0.1:{redis_port}/", "--workers", "1"],
-            stdout=subprocess.PIPE, stderr=self.log, text=True,
-            env={**os.environ, "RUST_LOG": "info"})
-        PROCESSES.append(self.proc)
-        line = self.proc.stdout.readline()
-        assert line.startswith("listening on "), f"{name} did not start: {line!r}"
-        self.base = line.split()[-1]
-        self.port = int(self.base.rsplit(":", 1)[1])
+        super().__init__(BINARY, "--scenarios", empty, "--redis-url", f"redis://127.0.0.1:{redis_port}/",
+                         "--workers", "1", log_path=os.path.join(WORK, f"{name}.log"),
+                         env={**os.environ, "RUST_LOG": "info"})
 
     def builds(self):
         return builds(self.base)
 
     def ready(self):
-        return ready(self.base)
+        return kit.ready(self.base)
 
 
 def builds(base):
     """The map builds a replica ran (irs_map_builds_total over its labels)."""
-    text = urllib.request.urlopen(base + "/metrics", timeout=10).read().decode()
-    return sum(float(l.rsplit(" ", 1)[1]) for l in text.splitlines()
-               if l.startswith("irs_map_builds_total"))
-
-
-def ready(base):
-    return request(base, "GET", "/readyz", timeout=5)[0] == 200
+    return kit.metric(base, "irs_map_builds_total")
 
 
 class HAProxy:
@@ -163,30 +112,9 @@ backend replicas
     http-check expect status 200
 {servers}
 """)
-        self.proc = subprocess.Popen(["haproxy", "-f", config, "-db"],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        PROCESSES.append(self.proc)
+        self.proc = kit.spawn(["haproxy", "-f", config, "-db"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self.base = f"http://127.0.0.1:{self.port}"
-
-
-def scenario(name, edit=None):
-    with open(os.path.join(ROOT, "scenarios", f"{name}.json")) as f:
-        doc = json.load(f)
-    if edit:
-        edit(doc)
-    return doc
-
-
-def wait_job(base, job_id, seconds=120):
-    result = {}
-
-    def done():
-        status, job, _ = request(base, "GET", f"/v1/jobs/{job_id}")
-        result["job"] = job
-        return status == 200 and job["state"] in ("done", "failed", "cancelled")
-
-    wait_until(f"job {job_id} finished", done, seconds)
-    return result["job"]
 
 
 def wrk(url, body, seconds=5, connections=16):
@@ -233,7 +161,7 @@ def main():
     replicas = [Replica(redis.port, f"replica{i}") for i in range(3)]
     proxy = HAProxy(replicas)
     wait_until("every replica ready", lambda: all(r.ready() for r in replicas), 15)
-    wait_until("HAProxy forwarding", lambda: request(proxy.base, "GET", "/readyz", timeout=5)[0] == 200, 15)
+    wait_until("HAProxy forwarding", lambda: kit.ready(proxy.base), 15)
 
     # A floor fine enough that its gain map is a job (1001² cells, above --sync-cells) and
     # takes long enough for 100 requests to overlap it.
@@ -340,10 +268,9 @@ def main():
     # Throughput: HAProxy in front of the two survivors against one of them directly, on
     # the paper's map (41², about a millisecond a query: HAProxy's own cost shows) and on the
     # 1001² one (a search of a million cells a query: two replicas share the load).
-    wait_until("HAProxy has the replicas back", lambda: request(proxy.base, "GET", "/readyz", timeout=5)[0] == 200, 15)
+    wait_until("HAProxy has the replicas back", lambda: kit.ready(proxy.base), 15)
     time.sleep(1.5)  # both survivors back in rotation (rise 2 at 500 ms)
-    listed = request(proxy.base, "GET", "/v1/scenarios")[1]["scenarios"]
-    paper = next(s["id"] for s in listed if s["name"] == "paper-single-user")
+    paper = kit.scenario_id(proxy.base, "paper-single-user")
     status, built, _ = request(proxy.base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
     small_path = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
     for r in survivors:
@@ -358,18 +285,17 @@ def main():
 
 
 if __name__ == "__main__":
+    code = 1
     try:
-        main()
-    except BaseException:
-        # What the replicas logged, to see why.
-        for name in sorted(os.listdir(WORK)):
-            if name.endswith(".log"):
-                with open(os.path.join(WORK, name)) as f:
-                    lines = f.readlines()
-                print(f"--- {name} (last 15 lines)\n" + "".join(lines[-15:]), file=sys.stderr)
-        raise
+        code = CHECKS.run(main)
     finally:
-        for p in PROCESSES:
-            if p.poll() is None:
-                p.kill()
+        if code:
+            # What the replicas logged, to see why.
+            for name in sorted(os.listdir(WORK)):
+                if name.endswith(".log"):
+                    with open(os.path.join(WORK, name)) as f:
+                        lines = f.readlines()
+                    print(f"--- {name} (last 15 lines)\n" + "".join(lines[-15:]), file=sys.stderr)
+        kit.stop_all()
         shutil.rmtree(WORK, ignore_errors=True)
+    sys.exit(code)

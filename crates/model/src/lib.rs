@@ -6,10 +6,10 @@
 //! From a scenario to a path in a few lines:
 //!
 //! ```
-//! use irs_planner::phases::PhaseMode;
-//! use irs_planner::planner::{self, Threshold};
-//! use irs_planner::radiomap::{self, MapKey, Progress};
-//! use irs_planner::scenario::Scenario;
+//! use irs_model::phases::PhaseMode;
+//! use irs_model::planner::{self, Threshold};
+//! use irs_model::radiomap::{self, MapKey, Progress};
+//! use irs_model::scenario::Scenario;
 //!
 //! let floor = Scenario::builtin("paper-single-user").unwrap();
 //! let key = MapKey::gain(&floor.content_hash(), &floor, PhaseMode::Continuous).unwrap();
@@ -40,9 +40,6 @@
 //!   translate between users and the modules above and hold no physics.
 
 pub mod channel;
-#[cfg(feature = "server")]
-pub mod cli;
-pub mod export;
 pub mod floorplan;
 pub mod geometry;
 pub mod input;
@@ -53,10 +50,7 @@ pub mod placement;
 pub mod planner;
 pub mod radiomap;
 pub mod rate;
-pub mod render;
 pub mod scenario;
-#[cfg(feature = "server")]
-pub mod service;
 pub mod solver;
 pub mod timing;
 pub mod vecmath;

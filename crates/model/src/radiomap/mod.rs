@@ -51,11 +51,13 @@ impl Progress {
     pub fn is_cancelled(&self) -> bool {
         self.cancelled.load(Ordering::Relaxed)
     }
-    pub(crate) fn start(&self, total: usize) {
+    /// Starts counting: `total` units of work, none done.
+    pub fn start(&self, total: usize) {
         self.total.store(total, Ordering::Relaxed);
         self.done.store(0, Ordering::Relaxed);
     }
-    pub(crate) fn advance(&self, cells: usize) {
+    /// Counts `cells` more units done.
+    pub fn advance(&self, cells: usize) {
         self.done.fetch_add(cells, Ordering::Relaxed);
     }
 }

@@ -29,7 +29,6 @@ pub(crate) mod viewer;
 
 pub use errors::Problem;
 
-use crate::scenario::{BUILTIN, Scenario};
 use answers::AnswerCache;
 use auth::{Caller, Tokens};
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
@@ -39,6 +38,7 @@ use axum::response::{IntoResponse, Response};
 use cache::{MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use config::{LogFormat, ServeArgs};
 use errors::ApiError;
+use irs_model::scenario::{BUILTIN, Scenario};
 use jobs::Jobs;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 use queries::QueryPool;
@@ -146,7 +146,7 @@ impl AppState {
                     sync_cells: args.sync_cells,
                     max_rate_cells: args.max_rate_cells,
                     max_sweep: args.max_sweep,
-                    max_draws: args.max_draws.min(crate::montecarlo::MAX_DRAWS),
+                    max_draws: args.max_draws.min(irs_model::montecarlo::MAX_DRAWS),
                     max_build_cpu_s: positive("--max-build-cpu-s", args.max_build_cpu_s)?,
                     max_check_cpu_s: positive("--max-check-cpu-s", args.max_check_cpu_s)?,
                     cache_bytes: args.cache_mb.saturating_mul(1024 * 1024),
@@ -274,7 +274,7 @@ impl AppState {
     pub(crate) async fn shared_map(
         &self,
         map_id: &str,
-    ) -> Result<Option<Arc<crate::radiomap::RadioMap>>, ApiError> {
+    ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, ApiError> {
         if let Some(map) = self.cache().get(map_id).await {
             return Ok(Some(map));
         }
@@ -284,14 +284,14 @@ impl AppState {
         let Some(encoded) = cluster.map(map_id).await? else {
             return Ok(None);
         };
-        let key = crate::radiomap::encoding::peek_key(&encoded)
+        let key = irs_model::radiomap::encoding::peek_key(&encoded)
             .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
         let Some(stored) = self.shared_scenario(&key.scenario_id).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
         let map = tokio::task::spawn_blocking(move || {
-            crate::radiomap::encoding::decode(&encoded, &scenario)
+            irs_model::radiomap::encoding::decode(&encoded, &scenario)
         })
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?

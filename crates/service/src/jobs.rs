@@ -8,15 +8,15 @@
 //! job take the map from the job itself ([`Job::wait_for_map`]), not from the cache, so a
 //! cache that evicts it at once (full of other maps) cannot fail them; the job lets go of the
 //! map as soon as the last of them has it. Cancellation sets the build's flag, which
-//! [`crate::radiomap::build`] checks once per grid row.
+//! [`irs_model::radiomap::build`] checks once per grid row.
 
 use super::auth::{Caller, Owner};
 use super::cache::MapCache;
 use super::errors::ApiError;
 use super::store::{DataDir, Kind};
-use crate::placement::{self, Candidate, Placement, Search};
-use crate::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
-use crate::scenario::Scenario;
+use irs_model::placement::{self, Candidate, Placement, Search};
+use irs_model::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
+use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, VecDeque};
 use std::sync::OnceLock;

@@ -13,10 +13,10 @@
 //!
 //! North (+y) is up. Text uses the public-domain 8×8 bitmap font of `font8x8`.
 
-use crate::planner::PathAnswer;
-use crate::radiomap::{MapKind, RadioMap};
-use crate::scenario::Scenario;
 use font8x8::UnicodeFonts;
+use irs_model::planner::PathAnswer;
+use irs_model::radiomap::{MapKind, RadioMap};
+use irs_model::scenario::Scenario;
 
 /// Largest plot side in pixels (the map itself, without margins).
 pub const MAX_SIDE_PX: usize = 4096;
@@ -491,9 +491,9 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::phases::PhaseMode;
-    use crate::planner::{self, Threshold};
-    use crate::radiomap::{self, MapKey, Progress};
+    use irs_model::phases::PhaseMode;
+    use irs_model::planner::{self, Threshold};
+    use irs_model::radiomap::{self, MapKey, Progress};
 
     fn decode(bytes: Vec<u8>) -> (usize, usize, Vec<u8>) {
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));

@@ -61,13 +61,16 @@ const MOUNT_PROBE_M: f64 = 2.0 * WALL_TOL_M;
 pub const BUILTIN: [(&str, &str); 3] = [
     (
         "paper-single-user",
-        include_str!("../scenarios/paper-single-user.json"),
+        include_str!("../../../scenarios/paper-single-user.json"),
     ),
     (
         "paper-multi-user",
-        include_str!("../scenarios/paper-multi-user.json"),
+        include_str!("../../../scenarios/paper-multi-user.json"),
     ),
-    ("small-test", include_str!("../scenarios/small-test.json")),
+    (
+        "small-test",
+        include_str!("../../../scenarios/small-test.json"),
+    ),
 ];
 
 /// A scenario that has passed [`Scenario::from_json`]: every field finite and consistent.
@@ -1197,7 +1200,7 @@ mod tests {
     #[test]
     fn the_canonical_form_parses_back_to_the_same_scenario() {
         let doc: serde_json::Value =
-            serde_json::from_str(include_str!("../scenarios/paper-multi-user.json")).unwrap();
+            serde_json::from_str(include_str!("../../../scenarios/paper-multi-user.json")).unwrap();
         let written = doc.to_string();
         let text = written.replacen(
             "\"v_max_mps\":1.0",

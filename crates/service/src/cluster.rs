@@ -25,7 +25,7 @@ use super::cache::ScenarioRecord;
 use super::errors::ApiError;
 use super::jobs::JobRecord;
 use super::store;
-use crate::radiomap::MapKey;
+use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
 use redis::streams::{
     StreamAutoClaimOptions, StreamAutoClaimReply, StreamClaimOptions, StreamId, StreamReadOptions,
@@ -543,10 +543,11 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
     };
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
-    let publish = move |map: std::sync::Arc<crate::radiomap::RadioMap>| async move {
-        let encoded = tokio::task::spawn_blocking(move || crate::radiomap::encoding::encode(&map))
-            .await
-            .map_err(|e| e.to_string())?;
+    let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
+        let encoded =
+            tokio::task::spawn_blocking(move || irs_model::radiomap::encoding::encode(&map))
+                .await
+                .map_err(|e| e.to_string())?;
         publisher
             .put_map(&map_id, &encoded)
             .await
@@ -588,8 +589,8 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::radiomap::MapKind;
-    use crate::scenario::Scenario;
+    use irs_model::radiomap::MapKind;
+    use irs_model::scenario::Scenario;
 
     fn entry(fields: &[(&str, &str)]) -> StreamId {
         StreamId {

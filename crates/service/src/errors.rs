@@ -3,9 +3,9 @@
 //! is one. [`parse_json`] backs the API's JSON extractor so malformed bodies, unknown fields and
 //! oversized bodies get the same treatment.
 
-use crate::input::FieldError;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use irs_model::input::FieldError;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 

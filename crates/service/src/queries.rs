@@ -11,7 +11,7 @@
 //! permit is held by the work itself, so a cancelled query still counts until it has stopped.
 
 use super::errors::ApiError;
-use crate::radiomap::Progress;
+use irs_model::radiomap::Progress;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use tokio::sync::{Semaphore, oneshot};

@@ -13,9 +13,9 @@
 //! Importing a keep-out mask as a floor plan of the same room and resolution marks exactly the
 //! mask's cells occupied (tested).
 
-use crate::floorplan::{self, EncodedMap, MapMode};
-use crate::input::FieldError;
-use crate::radiomap::RadioMap;
+use irs_model::floorplan::{self, EncodedMap, MapMode};
+use irs_model::input::FieldError;
+use irs_model::radiomap::RadioMap;
 
 /// Which Nav2 mask.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
@@ -29,7 +29,7 @@ pub enum MaskKind {
 impl std::str::FromStr for MaskKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        crate::input::parse_name(s)
+        irs_model::input::parse_name(s)
     }
 }
 
@@ -179,10 +179,10 @@ pub fn npy(map: &RadioMap) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::phases::PhaseMode;
-    use crate::radiomap::{MapKey, Progress, build};
-    use crate::scenario::Scenario;
     use base64::Engine;
+    use irs_model::phases::PhaseMode;
+    use irs_model::radiomap::{MapKey, Progress, build};
+    use irs_model::scenario::Scenario;
 
     fn small_map() -> (Scenario, RadioMap) {
         let s = Scenario::builtin("small-test").unwrap();
@@ -230,15 +230,15 @@ mod tests {
         let (_, map) = small_map();
         let threshold = -70.0;
         let mask = nav2_mask(&map, MaskKind::Cost, threshold, None).unwrap();
-        let plan = crate::floorplan::FloorPlan {
+        let plan = irs_model::floorplan::FloorPlan {
             image: "".into(),
             resolution: map.grid.resolution_m,
             origin: [0.0; 3],
-            negate: crate::floorplan::Negate(false),
+            negate: irs_model::floorplan::Negate(false),
             occupied_thresh: 1.0,
             free_thresh: 0.0,
             mode: MapMode::Scale,
-            unknown_as: crate::floorplan::UnknownAs::Occupied,
+            unknown_as: irs_model::floorplan::UnknownAs::Occupied,
             obstacle_height_m: None,
         };
         // Decode the PGM's pixels as Nav2 would (image row 0 is the top: cell row ny − 1).
@@ -248,7 +248,7 @@ mod tests {
         let mut pairs = Vec::new();
         for j in 0..ny {
             for i in 0..nx {
-                let cost = crate::floorplan::nav2_value(pixels[(ny - 1 - j) * nx + i], &plan);
+                let cost = irs_model::floorplan::nav2_value(pixels[(ny - 1 - j) * nx + i], &plan);
                 pairs.push((map.values[map.grid.index(i, j)], cost));
             }
         }

@@ -14,9 +14,9 @@
 
 use super::errors::ApiError;
 use super::json;
-use crate::planner::{PhaseFormat, PhasePrecision, Threshold};
 use axum::response::Response;
 use bytes::Bytes;
+use irs_model::planner::{PhaseFormat, PhasePrecision, Threshold};
 use std::time::Instant;
 
 /// What a path answer depends on besides its map's content: the map's id and the query's
@@ -74,7 +74,7 @@ impl OpenAnswer {
     }
 
     /// The answer closed with `took_ms`, the time since `started`, as its last field (where
-    /// [`crate::timing::Timed`] writes it).
+    /// [`irs_model::timing::Timed`] writes it).
     pub fn respond(&self, started: Instant) -> Response {
         json::with_took_ms(&self.0, started)
     }

@@ -5,9 +5,9 @@
 use super::auth::{Caller, Owner};
 use super::errors::ApiError;
 use super::store::{DataDir, Kind};
-use crate::planner::{self, Bottlenecks};
-use crate::radiomap::RadioMap;
-use crate::scenario::{Scenario, hash_hex};
+use irs_model::planner::{self, Bottlenecks};
+use irs_model::radiomap::RadioMap;
+use irs_model::scenario::{Scenario, hash_hex};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
