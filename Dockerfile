@@ -9,6 +9,7 @@ RUN if [ -n "$FEATURES" ]; then apt-get update && apt-get install -y --no-instal
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
 COPY src src
+COPY crates crates
 COPY benches benches
 COPY examples examples
 COPY scenarios scenarios
