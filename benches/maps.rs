@@ -8,9 +8,10 @@
 //! `RAYON_NUM_THREADS=1 cargo bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision, write_phases};
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;
-use irs_model::planner::{self, CellGraph, PhaseFormat, PhasePrecision, Threshold};
+use irs_model::planner::{self, CellGraph, Threshold};
 use irs_model::radiomap::{self, MapKey, Progress};
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;
@@ -305,10 +306,7 @@ fn path_answer(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter_batched(
                 || path.clone(),
-                |mut path| {
-                    path.write_phases(format, precision);
-                    path
-                },
+                |path| write_phases(path, format, precision),
                 criterion::BatchSize::SmallInput,
             )
         });
@@ -319,8 +317,7 @@ fn path_answer(c: &mut Criterion) {
     ] {
         group.bench_function(name, |b| {
             b.iter(|| {
-                let mut path = plan();
-                path.write_phases(PhaseFormat::Radians, precision);
+                let path = write_phases(plan(), PhaseFormat::Radians, precision);
                 serde_json::to_vec(&path).unwrap()
             })
         });

@@ -7,17 +7,19 @@
 
 use clap::{Args, Parser, Subcommand};
 use irs_answers::export::{self, MaskKind};
+use irs_answers::path::{self, CheckedPath};
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
-use irs_model::input::{parse_finite, parse_point};
-use irs_model::montecarlo::{self, CheckedPath, MAX_DRAWS};
+use irs_answers::timing::Timed;
+use irs_model::input::{FieldError, parse_finite, parse_point};
+use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
-use irs_model::planner::{self, PhaseFormat, PhasePrecision, Threshold};
+use irs_model::planner::{self, Threshold};
 use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
-use irs_model::timing::Timed;
 use irs_service::config::ServeArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -288,6 +290,12 @@ impl Failure {
     }
 }
 
+/// A field error as the CLI names it: the request field's flag (`phase_precision` →
+/// `--phase-precision`) and the reason.
+fn flag(e: &FieldError) -> String {
+    format!("--{}: {}", e.field.replace('_', "-"), e.reason)
+}
+
 impl From<Failure> for ExitCode {
     fn from(f: Failure) -> ExitCode {
         eprintln!("error: {}", f.message);
@@ -428,20 +436,17 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
     let started = Instant::now();
-    let mut path = planner::plan(
+    let (format, precision) = path::phase_options(Some(args.phase_format), args.phase_precision)
+        .map_err(|e| Failure::input(flag(&e)))?;
+    let path = planner::plan(
         &map,
         args.start,
         args.goal,
         threshold,
         scenario.mru.v_max_mps,
     )
-    .map_err(|e| Failure::input(format!("--{e}")))?;
-    if args.phase_format == PhaseFormat::Codes && args.phase_precision.is_some() {
-        return Err(Failure::input(
-            "--phase-precision: applies to --phase-format radians only (codes are 2π/65536 steps)",
-        ));
-    }
-    path.write_phases(args.phase_format, args.phase_precision.unwrap_or_default());
+    .map_err(|e| Failure::input(flag(&e)))?;
+    let path = path::write_phases(path, format, precision);
     write_png(
         &args.map,
         &map,
@@ -456,7 +461,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
                 args.map.quiet,
                 "monte carlo",
                 "waypoints",
-                || montecarlo::check_path(&scenario, &map, &path, draws, args.seed, &progress),
+                || path::check(&scenario, &map, &path, draws, args.seed, &progress),
             );
             // Nothing cancels a CLI check: the progress is ours alone.
             Some(checked.map_err(|e| Failure::runtime(e.to_string()))?)
@@ -472,9 +477,9 @@ pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let keepout = export::nav2_mask(&map, MaskKind::Keepout, args.threshold, None)
-        .map_err(|e| Failure::input(format!("--{e}")))?;
+        .map_err(|e| Failure::input(flag(&e)))?;
     let cost = export::nav2_mask(&map, MaskKind::Cost, args.threshold, args.best)
-        .map_err(|e| Failure::input(format!("--{e}")))?;
+        .map_err(|e| Failure::input(flag(&e)))?;
     let out = &args.out;
     std::fs::create_dir_all(out)
         .map_err(|e| Failure::runtime(format!("--out {}: {e}", out.display())))?;
@@ -551,12 +556,12 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
         placement::place(&scenario, &search, &progress)
     })
     .map_err(|e| match e {
-        WorkError::Invalid(e) => Failure::input(format!("--{e}")),
+        WorkError::Invalid(e) => Failure::input(flag(&e)),
         WorkError::Cancelled(e) => Failure::runtime(e.to_string()),
     })?;
     if let (Some(file), Some(best)) = (&args.png, placement.scenarios.first()) {
         let key = MapKey::gain(&best.content_hash(), best, placement.answer.phases)
-            .map_err(|e| Failure::input(format!("--{e}")))?;
+            .map_err(|e| Failure::input(flag(&e)))?;
         let map = radiomap::build(best, &key, &Progress::default())
             .map_err(|e| Failure::runtime(e.to_string()))?;
         let options = match placement.answer.objective {
@@ -566,7 +571,7 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
                     _ => Threshold::Max,
                 };
                 let path = planner::plan(&map, start, goal, threshold, best.mru.v_max_mps)
-                    .map_err(|e| Failure::input(format!("--{e}")))?;
+                    .map_err(|e| Failure::input(flag(&e)))?;
                 RenderOptions::for_path(&map, &path)
             }
             Objective::Coverage { threshold } => RenderOptions {

@@ -232,7 +232,7 @@ fn rate_maps_solve_and_certify_the_concatenated_vector() {
                 "cell {k}: {v} above {}",
                 cells.upper_bound[k]
             );
-            let phases = map.cell_config(k).phases.radians();
+            let phases = map.cell_config(k).phases;
             assert_eq!(phases.iter().map(Vec::len).collect::<Vec<_>>(), [4, 3]);
             solved += 1;
         }

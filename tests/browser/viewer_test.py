@@ -11,9 +11,9 @@ then saves a screenshot. Prints "N passed, 0 failed" and exits 0, or names the f
 """
 
 import json
+import pathlib
 import sys
 import time
-import urllib.request
 
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
@@ -22,27 +22,21 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select, WebDriverWait
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
+import irs_testkit as kit  # noqa: E402
+
 BASE = sys.argv[1].rstrip("/")
 SCREENSHOT = sys.argv[2]
 Q_I, Q_F = (-10.0, 0.0), (10.0, 0.0)
 THRESHOLD = -63.0
 
-checks = []
-
-
-def check(name, condition, detail=""):
-    checks.append((name, bool(condition)))
-    print(("ok   " if condition else "FAIL ") + name + (f": {detail}" if detail else ""), flush=True)
+CHECKS = kit.Checks()
+check = CHECKS.check
 
 
 def api(method, path, body=None):
-    request = urllib.request.Request(BASE + path, method=method)
-    data = None
-    if body is not None:
-        request.add_header("content-type", "application/json")
-        data = json.dumps(body).encode()
-    with urllib.request.urlopen(request, data, timeout=30) as response:
-        return json.load(response)
+    """The JSON answer (a status outside 2xx raises)."""
+    return kit.request(BASE, method, path, body, timeout=30, raise_for_status=True).body
 
 
 options = webdriver.ChromeOptions()
@@ -65,7 +59,7 @@ try:
     key = {"scenario_id": paper, "kind": "gain", "phases": "continuous"}
     map_id = api("POST", "/v1/maps", key)["map_id"]
     wait.until(lambda d: d.execute_script("return document.getElementById('download-map').href").endswith(map_id))
-    check("the viewer shows the paper map", True, map_id)
+    check(True, "the viewer shows the paper map", map_id)
 
     # The threshold typed like a user would: focus the number box, replace, press Enter.
     box = driver.find_element(By.ID, "threshold")
@@ -79,7 +73,7 @@ try:
     except Exception:
         pass
     shown = driver.find_element(By.ID, "coverage").text
-    check("coverage shown is the API's", wanted in shown, f"{shown} (API: {wanted}…)")
+    check(wanted in shown, "coverage shown is the API's", f"{shown} (API: {wanted}…)")
 
     expected = api("POST", "/v1/paths", {"map_id": map_id, "start": list(Q_I), "goal": list(Q_F),
                                          "threshold": THRESHOLD})
@@ -111,15 +105,15 @@ try:
             canvas, int(px - layout["w"] / 2), int(py - layout["h"] / 2)).click().perform()
     wait.until(lambda d: d.find_element(By.ID, "distance").get_attribute("data-value"))
     shown = float(driver.find_element(By.ID, "distance").get_attribute("data-value"))
-    check("distance shown equals the API's answer", shown == expected["distance_m"],
+    check(shown == expected["distance_m"], "distance shown equals the API's answer",
           f"viewer {shown} m, API {expected['distance_m']} m")
-    check("the distance is printed as text", driver.find_element(By.ID, "distance").text ==
-          f"{expected['distance_m']:.2f} m", driver.find_element(By.ID, "distance").text)
+    distance_text = driver.find_element(By.ID, "distance").text
+    check(distance_text == f"{expected['distance_m']:.2f} m", "the distance is printed as text", distance_text)
     rows = driver.find_elements(By.CSS_SELECTOR, "#waypoints tbody tr")
-    check("every waypoint is listed as text", len(rows) == len(expected["waypoints"]), f"{len(rows)} rows")
+    check(len(rows) == len(expected["waypoints"]), "every waypoint is listed as text", f"{len(rows)} rows")
     after = canvas_rgb(inner)
     changed = sum(b != a for b, a in zip(before, after))
-    check("the path is drawn on its cells", changed >= 0.9 * len(inner), f"{changed} of {len(inner)} changed")
+    check(changed >= 0.9 * len(inner), "the path is drawn on its cells", f"{changed} of {len(inner)} changed")
 
     # Hovering a waypoint shows its details.
     px, py = pixel_of(expected["waypoints"][5]["x"], expected["waypoints"][5]["y"])
@@ -127,7 +121,7 @@ try:
         canvas, int(px - layout["w"] / 2), int(py - layout["h"] / 2)).perform()
     tip = driver.find_element(By.ID, "tooltip")
     wait.until(lambda d: tip.is_displayed())
-    check("hovering a waypoint shows its value and phases", "IRS phases: 60" in tip.text, tip.text.replace("\n", " | "))
+    check("IRS phases: 60" in tip.text, "hovering a waypoint shows its value and phases", tip.text.replace("\n", " | "))
 
     driver.save_screenshot(SCREENSHOT)
 
@@ -138,10 +132,10 @@ try:
     rate_key = {"scenario_id": small, "kind": "rate", "phases": "continuous", "access": "noma"}
     wait.until(lambda d: d.execute_script("return document.querySelector('.unit').textContent") == "bit/s/Hz")
     rate_id = api("POST", "/v1/maps", rate_key)["map_id"]
-    check("the rate map is shown after its job", driver.execute_script(
-        "return document.getElementById('download-map').href").endswith(rate_id), rate_id)
+    check(driver.execute_script("return document.getElementById('download-map').href").endswith(rate_id),
+          "the rate map is shown after its job", rate_id)
     gap = driver.find_element(By.ID, "layer-gap")
-    check("the certificate-gap layer is offered for rate maps", gap.is_enabled())
+    check(gap.is_enabled(), "the certificate-gap layer is offered for rate maps")
     pixels = driver.execute_script(
         "const c = arguments[0]; return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data).join();",
         canvas)
@@ -150,21 +144,19 @@ try:
     redrawn = driver.execute_script(
         "const c = arguments[0]; return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data).join();",
         canvas)
-    check("choosing the gap layer (keyboard) redraws the map", pixels != redrawn)
+    check(pixels != redrawn, "choosing the gap layer (keyboard) redraws the map")
 
     errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-    check("no console errors", not errors, json.dumps(errors)[:500])
+    check(not errors, "no console errors", json.dumps(errors)[:500])
     urls = []
     for entry in driver.get_log("performance"):
         message = json.loads(entry["message"])["message"]
         if message["method"] == "Network.requestWillBeSent":
             urls.append(message["params"]["request"]["url"])
     foreign = [u for u in urls if not (u.startswith(BASE + "/") or u.startswith(("data:", "blob:")))]
-    check("no request leaves the server's origin", urls and not foreign,
+    check(urls and not foreign, "no request leaves the server's origin",
           f"{len(urls)} requests" + (f", foreign: {foreign[:5]}" if foreign else ""))
 finally:
     driver.quit()
 
-failed = sum(not ok for _, ok in checks)
-print(f"{len(checks) - failed} passed, {failed} failed")
-sys.exit(1 if failed else 0)
+CHECKS.finish()

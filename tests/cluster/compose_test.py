@@ -12,6 +12,7 @@ everything is taken down (volumes too) at the end.
 """
 import json
 import os
+import pathlib
 import shutil
 import subprocess
 import sys
@@ -19,11 +20,15 @@ import threading
 import time
 import uuid
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cluster_test import (  # noqa: E402
-    ROOT, builds, check, free_port, ready, request, scenario, throughputs, wait_job, wait_until)
+import irs_testkit as kit  # noqa: E402
+from irs_testkit import ROOT, free_port, request, scenario, wait_job, wait_until  # noqa: E402
+from cluster_test import builds, throughputs  # noqa: E402
 
 IMAGE, CLI = sys.argv[1], os.path.abspath(sys.argv[2])
+CHECKS = kit.Checks(stop_on_failure=True)
+check = CHECKS.check
 PROJECT = f"irsci{uuid.uuid4().hex[:6]}"
 PORT = free_port()
 COMPOSE = (["docker-compose"] if shutil.which("docker-compose") else ["docker", "compose"]) + [
@@ -34,7 +39,7 @@ ENV = {**os.environ, "IRS_IMAGE": IMAGE, "IRS_PORT": str(PORT)}
 def compose(*args, check_rc=True):
     out = subprocess.run([*COMPOSE, *args], capture_output=True, text=True, env=ENV)
     if check_rc and out.returncode != 0:
-        raise SystemExit(f"{' '.join(COMPOSE[:1])} {' '.join(args)}: {out.stderr.strip()}")
+        raise kit.Failure(f"{' '.join(COMPOSE[:1])} {' '.join(args)}: {out.stderr.strip()}")
     return out.stdout.strip()
 
 
@@ -54,7 +59,7 @@ class Replica:
         return builds(self.base)
 
     def ready(self):
-        return ready(self.base)
+        return kit.ready(self.base)
 
 
 def main():
@@ -62,7 +67,7 @@ def main():
     compose("up", "-d", "--no-build")
     replicas = [Replica(f"irs{i}") for i in (1, 2, 3)]
     wait_until("every replica ready", lambda: all(r.ready() for r in replicas), 60)
-    wait_until("HAProxy forwarding", lambda: request(proxy, "GET", "/readyz", timeout=5)[0] == 200, 30)
+    wait_until("HAProxy forwarding", lambda: kit.ready(proxy), 30)
     time.sleep(2)  # every replica in HAProxy's rotation (rise 2 at 1 s)
 
     fine = scenario("paper-single-user", lambda d: (d.__setitem__("name", "fine"), d["grid"].__setitem__("resolution_m", 0.02)))
@@ -118,7 +123,7 @@ def main():
     for r in replicas:
         r.refresh()
     wait_until("every replica ready after the restart", lambda: all(r.ready() for r in replicas), 60)
-    wait_until("HAProxy forwarding", lambda: request(proxy, "GET", "/readyz", timeout=5)[0] == 200, 30)
+    wait_until("HAProxy forwarding", lambda: kit.ready(proxy), 30)
     time.sleep(2)
     for map_id in (fine_map, job["map_id"]):
         check(request(proxy, "GET", f"/v1/maps/{map_id}/coverage?threshold=1")[0] == 200,
@@ -126,8 +131,7 @@ def main():
     check(sum(r.builds() for r in replicas) == 0, "with no build (Redis's append-only file kept it)")
 
     path = {"map_id": fine_map, "start": [-10, 0], "goal": [10, 0], "threshold": -62}
-    listed = request(proxy, "GET", "/v1/scenarios")[1]["scenarios"]
-    paper = next(s["id"] for s in listed if s["name"] == "paper-single-user")
+    paper = kit.scenario_id(proxy, "paper-single-user")
     built = request(proxy, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})[1]
     small = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
     for r in replicas:
@@ -138,10 +142,11 @@ def main():
 
 
 if __name__ == "__main__":
+    code = 1
     try:
-        main()
-    except BaseException:
-        print(compose("logs", "--tail", "20", check_rc=False), file=sys.stderr)
-        raise
+        code = CHECKS.run(main)
     finally:
+        if code:
+            print(compose("logs", "--tail", "20", check_rc=False), file=sys.stderr)
         compose("down", "-v", "--remove-orphans", check_rc=False)
+    sys.exit(code)

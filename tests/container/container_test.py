@@ -7,58 +7,41 @@ reaches it as PID 1) within 10 s. Prints the image size and fails above 120 MB.
     tests/container/container_test.py IMAGE CLI_BINARY
 """
 import json
+import pathlib
 import subprocess
 import sys
 import time
-import urllib.request
 import uuid
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
+import irs_testkit as kit  # noqa: E402
 
 IMAGE, CLI = sys.argv[1], sys.argv[2]
 NAME = f"irs-ci-{uuid.uuid4().hex[:8]}"
 VOLUME = f"{NAME}-data"
 MAX_IMAGE_MB = 120
+CHECKS = kit.Checks(stop_on_failure=True)
+check = CHECKS.check
 
 
 def docker(*args, check=True):
     out = subprocess.run(["docker", *args], capture_output=True, text=True)
     if check and out.returncode != 0:
-        raise SystemExit(f"docker {' '.join(args)}: {out.stderr.strip()}")
+        raise kit.Failure(f"docker {' '.join(args)}: {out.stderr.strip()}")
     return out.stdout.strip()
 
 
 def request(base, method, path, body=None):
-    data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(base + path, data, method=method,
-                                 headers={"content-type": "application/json"})
-    try:
-        with urllib.request.urlopen(req, timeout=60) as resp:
-            return resp.status, resp.read().decode()
-    except urllib.error.HTTPError as e:
-        return e.code, e.read().decode()
+    """(status, the body as text): path answers are compared with the CLI's as text."""
+    status, text, _ = kit.request(base, method, path, body, parse="text")
+    return status, text
 
 
 def wait_ready(base, seconds=30):
-    deadline = time.time() + seconds
-    while time.time() < deadline:
-        try:
-            if request(base, "GET", "/readyz")[0] == 200:
-                return
-        except OSError:
-            pass
-        time.sleep(0.2)
-    raise SystemExit(f"{base}/readyz not 200 within {seconds} s:\n{docker('logs', NAME, check=False)}")
-
-
-def metric(base, name):
-    text = request(base, "GET", "/metrics")[1]
-    values = [float(l.rsplit(" ", 1)[1]) for l in text.splitlines() if l.startswith(name)]
-    return sum(values)
-
-
-def check(condition, message):
-    if not condition:
-        raise SystemExit(f"FAIL: {message}")
-    print(f"ok: {message}")
+    try:
+        kit.wait_until(f"{base}/readyz 200", lambda: kit.ready(base, timeout=60), seconds, interval=0.2)
+    except kit.Timeout as e:
+        raise kit.Timeout(f"{e}:\n{docker('logs', NAME, check=False)}") from None
 
 
 def main():
@@ -81,14 +64,11 @@ def main():
         pid1 = docker("exec", NAME, "cat", "/proc/1/cmdline").replace("\0", " ").strip()
         check(pid1.startswith("irs-planner"), f"PID 1 is the server ({pid1!r})")
 
-        with open("scenarios/small-test.json") as f:
-            doc = json.load(f)
-        doc["name"] = "container-test"
+        doc = kit.scenario("small-test", lambda d: d.update(name="container-test"))
         status, body = request(base, "POST", "/v1/scenarios", doc)
         check(status == 201, f"a scenario is registered ({status})")
 
-        listed = json.loads(request(base, "GET", "/v1/scenarios")[1])["scenarios"]
-        paper = next(s["id"] for s in listed if s["name"] == "paper-single-user")
+        paper = kit.scenario_id(base, "paper-single-user")
         status, body = request(base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
         map_id = json.loads(body)["map_id"]
         path_request = {"map_id": map_id, "start": [-10, 0], "goal": [10, 0], "threshold": "max"}
@@ -128,11 +108,11 @@ def main():
         check(status == 200, "after a restart the map is served from the volume")
         status, again = request(base, "POST", "/v1/paths", path_request)
         check(untimed(again) == untimed(api_body), "and the same path is answered")
-        check(metric(base, "irs_map_builds_total") == 0, "without building it again")
+        check(kit.metric(base, "irs_map_builds_total") == 0, "without building it again")
     finally:
         docker("rm", "-f", NAME, check=False)
         docker("volume", "rm", "-f", VOLUME, check=False)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(CHECKS.run(main))

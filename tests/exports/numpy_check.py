@@ -11,47 +11,42 @@ import json
 import subprocess
 import sys
 import tempfile
-import urllib.request
 from pathlib import Path
 
 import numpy
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "support"))
+import irs_testkit as kit  # noqa: E402
+
 binary, base = sys.argv[1], sys.argv[2].rstrip("/")
 scenario = "scenarios/warehouse/warehouse.json"
-checks = 0
+CHECKS = kit.Checks(stop_on_failure=True)
+check = CHECKS.check
 
 
-def check(condition, what):
-    global checks
-    if not condition:
-        sys.exit(f"FAILED: {what}")
-    checks += 1
-    print(f"ok: {what}")
+def main():
+    body = json.loads(subprocess.run([binary, "map", "--scenario", scenario, "--kind", "gain", "--quiet"],
+                                     check=True, capture_output=True).stdout)
+    with tempfile.TemporaryDirectory() as out:
+        subprocess.run([binary, "export", "--scenario", scenario, "--kind", "gain", "--quiet",
+                        "--threshold=-72", "--out", out], check=True, capture_output=True)
+        cli_bytes = (Path(out) / "map.npy").read_bytes()
+        a = numpy.load(Path(out) / "map.npy")
+
+    nx, ny = body["grid"]["nx"], body["grid"]["ny"]
+    check(a.shape == (nx, ny) and a.dtype == numpy.float32, f"shape {a.shape} = (nx, ny) = ({nx}, {ny}), float32")
+    values = numpy.array([[numpy.nan if v is None else v for v in row] for row in body["values"]])
+    check(numpy.array_equal(numpy.isnan(a), numpy.isnan(values)), f"NaN exactly at the {int(numpy.isnan(values).sum())} null cells")
+    finite = ~numpy.isnan(values)
+    check(numpy.array_equal(a[finite], values[finite].astype(numpy.float32)),
+          f"a[i, j] = float32(values[i][j]) for all {int(finite.sum())} free cells")
+
+    document = subprocess.run([binary, "scenario", "--scenario", scenario], check=True, capture_output=True).stdout
+    scenario_id = kit.post(base, "/v1/scenarios", document, raise_for_status=True).body["id"]
+    map_id = kit.post(base, "/v1/maps", {"scenario_id": scenario_id, "kind": "gain"}, raise_for_status=True).body["map_id"]
+    check(map_id == body["map_id"], "the server's map id is the CLI's")
+    served = kit.get(base, f"/v1/maps/{map_id}/values.npy", parse="bytes", raise_for_status=True).body
+    check(served == cli_bytes, f"GET /values.npy is byte-identical to the CLI's map.npy ({len(served)} bytes)")
 
 
-body = json.loads(subprocess.run([binary, "map", "--scenario", scenario, "--kind", "gain", "--quiet"],
-                                 check=True, capture_output=True).stdout)
-with tempfile.TemporaryDirectory() as out:
-    subprocess.run([binary, "export", "--scenario", scenario, "--kind", "gain", "--quiet",
-                    "--threshold=-72", "--out", out], check=True, capture_output=True)
-    cli_bytes = (Path(out) / "map.npy").read_bytes()
-    a = numpy.load(Path(out) / "map.npy")
-
-nx, ny = body["grid"]["nx"], body["grid"]["ny"]
-check(a.shape == (nx, ny) and a.dtype == numpy.float32, f"shape {a.shape} = (nx, ny) = ({nx}, {ny}), float32")
-values = numpy.array([[numpy.nan if v is None else v for v in row] for row in body["values"]])
-check(numpy.array_equal(numpy.isnan(a), numpy.isnan(values)), f"NaN exactly at the {int(numpy.isnan(values).sum())} null cells")
-finite = ~numpy.isnan(values)
-check(numpy.array_equal(a[finite], values[finite].astype(numpy.float32)),
-      f"a[i, j] = float32(values[i][j]) for all {int(finite.sum())} free cells")
-
-document = subprocess.run([binary, "scenario", "--scenario", scenario], check=True, capture_output=True).stdout
-request = urllib.request.Request(base + "/v1/scenarios", document, {"content-type": "application/json"})
-scenario_id = json.load(urllib.request.urlopen(request))["id"]
-request = urllib.request.Request(base + "/v1/maps", json.dumps({"scenario_id": scenario_id, "kind": "gain"}).encode(),
-                                 {"content-type": "application/json"})
-map_id = json.load(urllib.request.urlopen(request))["map_id"]
-check(map_id == body["map_id"], "the server's map id is the CLI's")
-served = urllib.request.urlopen(f"{base}/v1/maps/{map_id}/values.npy").read()
-check(served == cli_bytes, f"GET /values.npy is byte-identical to the CLI's map.npy ({len(served)} bytes)")
-print(f"numpy: {checks} passed, 0 failed")
+sys.exit(CHECKS.run(main))

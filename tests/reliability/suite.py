@@ -9,83 +9,33 @@ case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1
 
 import json
 import os
+import pathlib
 import signal
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
 import time
-import urllib.error
-import urllib.request
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
+import irs_testkit as kit  # noqa: E402
+from irs_testkit import problem_mismatch, scenario  # noqa: E402
+
 BINARY = None
 
 
-def scenario(name, edit=None):
-    with open(os.path.join(ROOT, "scenarios", f"{name}.json")) as f:
-        doc = json.load(f)
-    if edit:
-        edit(doc)
-    return doc
-
-
-class Server:
-    """`irs-planner serve` on a free loopback port with extra flags."""
+class Server(kit.Server):
+    """`irs-planner serve` on a free loopback port with extra flags (no scenario preloaded but
+    the built-in ones); its requests time out after 120 s unless told."""
 
     def __init__(self, *flags):
-        self.empty = tempfile.mkdtemp(prefix="irs-reliability-")
-        self.log = tempfile.NamedTemporaryFile(prefix="irs-reliability-", suffix=".log", delete=False)
-        self.proc = subprocess.Popen(
-            [BINARY, "serve", "--bind", "127.0.0.1:0", "--scenarios", self.empty, *flags],
-            stdout=subprocess.PIPE,
-            stderr=self.log,
-            text=True,
-        )
-        line = self.proc.stdout.readline()
-        assert line.startswith("listening on "), f"server did not start: {line!r}"
-        self.base = line.split()[-1]
-        self.port = int(self.base.rsplit(":", 1)[1])
-
-    def request(self, method, path, body=None, token=None, timeout=120):
-        headers = {}
-        data = None
-        if body is not None:
-            data = json.dumps(body).encode()
-            headers["content-type"] = "application/json"
-        if token:
-            headers["authorization"] = f"Bearer {token}"
-        req = urllib.request.Request(self.base + path, data, headers, method=method)
-        try:
-            with urllib.request.urlopen(req, timeout=timeout) as resp:
-                return resp.status, json.loads(resp.read() or b"null")
-        except urllib.error.HTTPError as e:
-            text = e.read()
-            try:
-                return e.code, json.loads(text)
-            except ValueError:
-                return e.code, text.decode(errors="replace")
-
-    def get(self, path, **kw):
-        return self.request("GET", path, **kw)
-
-    def post(self, path, body, **kw):
-        return self.request("POST", path, body, **kw)
+        empty = tempfile.mkdtemp(prefix="irs-reliability-")
+        super().__init__(BINARY, "--scenarios", empty, *flags, timeout=120)
 
     def timed_get(self, path):
         started = time.perf_counter()
-        status, _ = self.get(path, timeout=10)
+        status, _, _ = self.get(path, timeout=10)
         return status, (time.perf_counter() - started) * 1000
-
-    def metric(self, name):
-        with urllib.request.urlopen(self.base + "/metrics", timeout=10) as resp:
-            text = resp.read().decode()
-        total = 0.0
-        for line in text.splitlines():
-            if line.startswith(name) and (len(line) == len(name) or line[len(name)] in " {"):
-                total += float(line.rsplit(" ", 1)[1])
-        return total
 
     def rss_mb(self, peak=False):
         key = "VmHWM" if peak else "VmRSS"
@@ -95,23 +45,8 @@ class Server:
                     return int(line.split()[1]) / 1024
         return 0.0
 
-    def wait_job(self, job_id, limit_s=120):
-        deadline = time.time() + limit_s
-        while time.time() < deadline:
-            _, job = self.get(f"/v1/jobs/{job_id}")
-            if job["state"] in ("done", "failed", "cancelled"):
-                return job
-            time.sleep(0.05)
-        raise AssertionError(f"job {job_id} did not finish")
-
     def scenario_id(self, name):
-        _, listed = self.get("/v1/scenarios?limit=1000")
-        return next(s["id"] for s in listed["scenarios"] if s["name"] == name)
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
+        return kit.scenario_id(self.base, name)
 
 
 def expect(condition, message):
@@ -150,19 +85,22 @@ def overflow():
         }
         statuses = {}
         for what, doc in cases.items():
-            status, body = server.post("/v1/scenarios", doc)
-            statuses[what] = status
-            expect(status == 422, f"{what}: {status} {body}")
-            expect(body.get("field"), f"{what}: the problem names no field: {body}")
-        status, body = server.post(
+            answer = server.post("/v1/scenarios", doc)
+            statuses[what] = answer.status
+            wrong = problem_mismatch(answer, 422, field=True)
+            expect(not wrong, f"{what}: {wrong}")
+        answer = server.post(
             "/v1/paths", {"map_id": "x", "start": [1, 2, 3], "goal": [1, 2], "threshold": 0})
-        expect(status == 422 and body["field"] == "start", f"3-coordinate start: {status} {body}")
+        wrong = problem_mismatch(answer, 422, field="start")
+        expect(not wrong, f"3-coordinate start: {wrong}")
         # Work above the budget is refused before it starts.
         heavy = scenario("paper-single-user", lambda d: (
             d["irs"].update(grouping="elements", elements_per_sub=3000),
             d["grid"].update(resolution_m=0.02)))
-        status, body = server.post("/v1/maps", {"scenario": heavy, "kind": "gain"})
-        expect(status == 422 and body["code"] == "limit_exceeded", f"budget: {status} {body}")
+        answer = server.post("/v1/maps", {"scenario": heavy, "kind": "gain"})
+        wrong = problem_mismatch(answer, 422, code="limit_exceeded")
+        expect(not wrong, f"budget: {wrong}")
+        body = answer.body
         expect(server.get("/healthz")[0] == 200, "the server died")
         figure("overflow", f"{len(cases) + 2} hostile inputs → 422 naming the field; "
                f"server alive, RSS {server.rss_mb(peak=True):.0f} MB peak "
@@ -182,7 +120,7 @@ def cache():
             doc = scenario("small-test", lambda d: (
                 d.update(name=f"m200k-{k}"),
                 d["irs"].update(nx_sub=20, nz_sub=10, elements_per_sub=1000, grouping="elements")))
-            status, body = server.post("/v1/maps", {"scenario": doc, "kind": "gain"})
+            status, body, _ = server.post("/v1/maps", {"scenario": doc, "kind": "gain"})
             expect(status == 200, f"map {k}: {status} {body}")
         gauge = server.metric("irs_map_cache_bytes") / 2**20
         rss = server.rss_mb()
@@ -216,18 +154,18 @@ def lost_work():
             t.start()
         for t in threads:
             t.join()
-        statuses = [status for status, _ in results]
+        statuses = [status for status, _, _ in results]
         expect(all(s == 200 for s in statuses), f"statuses {statuses}: {results}")
         # Jobs: each done job's map answers at once, and nothing is built twice.
         server.stop()
         server = Server("--cache-mb", "64", "--sync-cells", "100")
         jobs = 0
         for k in range(5):
-            status, job = server.post("/v1/maps", {"scenario": fine(10 + k), "kind": "gain"})
+            status, job, _ = server.post("/v1/maps", {"scenario": fine(10 + k), "kind": "gain"})
             expect(status == 202, f"job {k}: {status} {job}")
             done = server.wait_job(job["job_id"])
             expect(done["state"] == "done", f"job {k}: {done}")
-            status, _ = server.get(f"/v1/maps/{done['map_id']}/coverage?threshold=-60")
+            status, _, _ = server.get(f"/v1/maps/{done['map_id']}/coverage?threshold=-60")
             expect(status == 200, f"job {k} says done but its map answers {status}")
             jobs += 1
         builds = server.metric("irs_map_builds_total")
@@ -250,12 +188,12 @@ def starvation():
     try:
         big = scenario("paper-single-user", lambda d: (
             d.update(name="big"), d["grid"].update(resolution_m=0.02)))
-        status, job = server.post("/v1/maps", {"scenario": big, "kind": "gain"})
+        status, job, _ = server.post("/v1/maps", {"scenario": big, "kind": "gain"})
         expect(status == 202, f"1001² map: {status} {job}")
         done = server.wait_job(job["job_id"])
         big_map = done["map_id"]
         paper = server.scenario_id("paper-single-user")
-        status, small = server.post("/v1/maps", {"scenario_id": paper, "kind": "gain"})
+        status, small, _ = server.post("/v1/maps", {"scenario_id": paper, "kind": "gain"})
         expect(status == 200, f"paper map: {status}")
         cheap_path = {"map_id": small["map_id"], "start": [-8, -8], "goal": [8, 8], "threshold": -60}
         # 100 thresholds across the feasible band: each is a full search of the 1001² grid
@@ -280,7 +218,7 @@ def starvation():
             expect(status == 200, f"healthz {status}")
             health.append(ms)
             started = time.perf_counter()
-            status, _ = server.post("/v1/paths", cheap_path, timeout=10)
+            status, _, _ = server.post("/v1/paths", cheap_path, timeout=10)
             expect(status == 200, f"cached path {status}")
             paths.append((time.perf_counter() - started) * 1000)
             time.sleep(0.05)
@@ -305,7 +243,7 @@ def starvation():
         sock.close()
         started = time.perf_counter()
         one = dict(sweep, thresholds=[-70])
-        status, _ = server.post("/v1/sweeps", one, timeout=60)
+        status, _, _ = server.post("/v1/sweeps", one, timeout=60)
         after_leave = time.perf_counter() - started
         expect(status == 200, f"sweep after a client left: {status}")
         expect(after_leave < 3, f"the abandoned sweep held the worker for {after_leave:.1f} s")
@@ -387,17 +325,17 @@ def ownership():
     try:
         multi = scenario("paper-multi-user", lambda d: (
             d.update(name="owned"), d["grid"].update(resolution_m=0.2)))
-        status, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
+        status, _, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
         expect(status == 401, f"anonymous POST: {status}")
-        status, job = server.post("/v1/maps", {"scenario": multi, "kind": "rate"}, token=alice)
+        status, job, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"}, token=alice)
         expect(status == 202, f"alice's job: {status} {job}")
         path = f"/v1/jobs/{job['job_id']}"
-        status, _ = server.request("DELETE", path, token=bob)
+        status, _, _ = server.request("DELETE", path, token=bob)
         expect(status == 404, f"bob cancels alice's job: {status}")
-        _, bobs = server.get("/v1/jobs", token=bob)
-        _, alices = server.get("/v1/jobs", token=alice)
+        _, bobs, _ = server.get("/v1/jobs", token=bob)
+        _, alices, _ = server.get("/v1/jobs", token=alice)
         expect(len(bobs["jobs"]) == 0 and len(alices["jobs"]) == 1, f"{bobs} {alices}")
-        status, _ = server.request("DELETE", path, token=alice)
+        status, _, _ = server.request("DELETE", path, token=alice)
         expect(status == 202, f"alice cancels her job: {status}")
         figure("ownership", "anonymous POST 401; bob's cancel of alice's job 404, his listing "
                "0 jobs, hers 1; her cancel 202")
@@ -411,7 +349,7 @@ def shutdown():
     try:
         multi = scenario("paper-multi-user", lambda d: (
             d.update(name="long"), d["grid"].update(resolution_m=0.125)))
-        status, job = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
+        status, job, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"})
         expect(status == 202, f"long job: {status}")
         time.sleep(0.5)
         started = time.time()
@@ -420,8 +358,7 @@ def shutdown():
         took = time.time() - started
         expect(code == 0, f"exit code {code}")
         expect(took < 4.0, f"exit took {took:.1f} s")
-        with open(server.log.name) as f:
-            log = f.read()
+        log = server.log_text()
         expect(job["job_id"] in log and "cancelled" in log, "no log line names the cancelled job")
         figure("shutdown", f"SIGTERM with a running rate-map build: exit 0 after {took:.2f} s "
                f"(grace 2 s), the log names the cancelled job")
@@ -446,17 +383,16 @@ def main():
         sys.exit(__doc__)
     BINARY = os.path.abspath(sys.argv[1])
     chosen = sys.argv[2:] or list(CASES)
-    failed = 0
+    checks = kit.Checks()
     for name in chosen:
         started = time.time()
+        error = None
         try:
             CASES[name]()
-            print(f"ok {name} ({time.time() - started:.1f} s)", flush=True)
         except AssertionError as e:
-            failed += 1
-            print(f"FAILED {name}: {e}", flush=True)
-    print(f"{len(chosen) - failed} passed, {failed} failed")
-    sys.exit(1 if failed else 0)
+            error = e
+        checks.check(error is None, f"{name} ({time.time() - started:.1f} s)", error)
+    checks.finish()
 
 
 if __name__ == "__main__":

@@ -155,19 +155,15 @@ def stop_process(proc, timeout=10.0):
 
 
 def kill_process(proc):
-    """SIGKILL of the process group of a process started by `spawn`, and the process reaped."""
+    """SIGKILL of the process group of a process started by `spawn` (what the process itself
+    started too, even once it has exited), and the process reaped."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
     if proc.poll() is None:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            proc.kill()
-        proc.wait()
-    for stream in (proc.stdin, proc.stdout, proc.stderr):
-        if stream is not None:
-            try:
-                stream.close()
-            except OSError:
-                pass
+        proc.kill()
+    proc.wait()
 
 
 def stop_all():

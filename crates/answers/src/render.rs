@@ -38,7 +38,7 @@ pub struct RenderOptions {
 impl RenderOptions {
     /// The picture of a path answer: its threshold dims the cells below it, its waypoints and
     /// its two ends are drawn.
-    pub fn for_path(map: &RadioMap, answer: &PathAnswer) -> Self {
+    pub fn for_path<P>(map: &RadioMap, answer: &PathAnswer<P>) -> Self {
         RenderOptions {
             threshold: answer.threshold,
             path: answer

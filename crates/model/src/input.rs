@@ -54,6 +54,56 @@ pub fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(
     T::deserialize(d).map(Some)
 }
 
+/// A JSON scalar that a field takes as a name or as a number (`"max"` or −68, `"none"` or 2),
+/// read without committing to one JSON library: [`deserialize_scalar`].
+pub(crate) enum Scalar {
+    Text(String),
+    /// The number, and its text as JSON writes it (`2`, `2.0`, `-68.5`).
+    Number(f64, String),
+    /// Anything else, as an error message shows it (`true`, `null`, `an array`).
+    Other(String),
+}
+
+/// Reads a [`Scalar`] from any self-describing format (JSON, YAML).
+pub(crate) fn deserialize_scalar<'de, D: Deserializer<'de>>(d: D) -> Result<Scalar, D::Error> {
+    struct Visitor;
+    impl<'de> serde::de::Visitor<'de> for Visitor {
+        type Value = Scalar;
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            f.write_str("a name or a number")
+        }
+        fn visit_str<E>(self, v: &str) -> Result<Scalar, E> {
+            Ok(Scalar::Text(v.to_string()))
+        }
+        fn visit_u64<E>(self, v: u64) -> Result<Scalar, E> {
+            Ok(Scalar::Number(v as f64, v.to_string()))
+        }
+        fn visit_i64<E>(self, v: i64) -> Result<Scalar, E> {
+            Ok(Scalar::Number(v as f64, v.to_string()))
+        }
+        fn visit_f64<E>(self, v: f64) -> Result<Scalar, E> {
+            // Debug writes the shortest round-trip decimal with a point ("2.0"), as JSON does.
+            Ok(Scalar::Number(v, format!("{v:?}")))
+        }
+        fn visit_bool<E>(self, v: bool) -> Result<Scalar, E> {
+            Ok(Scalar::Other(v.to_string()))
+        }
+        fn visit_unit<E>(self) -> Result<Scalar, E> {
+            Ok(Scalar::Other("null".into()))
+        }
+        fn visit_none<E>(self) -> Result<Scalar, E> {
+            Ok(Scalar::Other("null".into()))
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, _: A) -> Result<Scalar, A::Error> {
+            Ok(Scalar::Other("an array".into()))
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(self, _: A) -> Result<Scalar, A::Error> {
+            Ok(Scalar::Other("an object".into()))
+        }
+    }
+    d.deserialize_any(Visitor)
+}
+
 /// The grammar of a number written as text (query parameters, CLI values), as the OpenAPI
 /// contract states it: an optional sign, at most 30 integer digits, an optional fraction and
 /// an optional exponent of at most two digits. Every such number is finite (< 1e130), so the

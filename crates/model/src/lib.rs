@@ -52,5 +52,4 @@ pub mod radiomap;
 pub mod rate;
 pub mod scenario;
 pub mod solver;
-pub mod timing;
 pub mod vecmath;

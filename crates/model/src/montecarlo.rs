@@ -71,16 +71,6 @@ pub struct MonteCarloReport {
     pub waypoints: Vec<WaypointCheck>,
 }
 
-/// A path answer with its optional Monte Carlo check: the body of `irs-planner plan` and of
-/// `POST /v1/paths`.
-#[derive(Debug, Clone, Serialize)]
-pub struct CheckedPath {
-    #[serde(flatten)]
-    pub path: PathAnswer,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub monte_carlo: Option<MonteCarloReport>,
-}
-
 /// Runs the check for every waypoint of a feasible path (waypoints in parallel, each with its
 /// own seeded generator, so the report is reproducible). `progress` counts the waypoints done;
 /// cancelling it stops the check before the next waypoint.

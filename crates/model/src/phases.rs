@@ -2,6 +2,7 @@
 //! or not at all, and the quantisation of eq. 11's optimal phases to b bits (eq. 43).
 
 use crate::channel::ChannelModel;
+use crate::input::Scalar;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 use std::fmt;
@@ -57,10 +58,10 @@ impl Serialize for PhaseMode {
 
 impl<'de> Deserialize<'de> for PhaseMode {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        match serde_json::Value::deserialize(d)? {
-            serde_json::Value::String(s) => s.parse().map_err(serde::de::Error::custom),
-            serde_json::Value::Number(n) => n.to_string().parse().map_err(serde::de::Error::custom),
-            other => Err(serde::de::Error::custom(format!(
+        match crate::input::deserialize_scalar(d)? {
+            Scalar::Text(s) => s.parse().map_err(serde::de::Error::custom),
+            Scalar::Number(_, text) => text.parse().map_err(serde::de::Error::custom),
+            Scalar::Other(other) => Err(serde::de::Error::custom(format!(
                 "expected \"continuous\", \"none\" or a number of bits, got {other}"
             ))),
         }

@@ -21,7 +21,7 @@ const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
 /// 1.5·2⁵²: adding it rounds a double of magnitude < 2⁵¹ to an integer (to nearest, ties to
 /// even) that then sits in the low bits of the sum's mantissa; subtracting it again leaves the
 /// rounded double. Inline, where `round` is a libm call on the baseline target.
-pub(crate) const ROUNDING_SHIFT: f64 = 6_755_399_441_055_744.0;
+pub const ROUNDING_SHIFT: f64 = 6_755_399_441_055_744.0;
 
 /// The exponential's domain: within it 2^k of the reduction is a normal double.
 pub const EXP_DOMAIN: f64 = 708.0;

@@ -16,7 +16,8 @@ use super::errors::ApiError;
 use super::json;
 use axum::response::Response;
 use bytes::Bytes;
-use irs_model::planner::{PhaseFormat, PhasePrecision, Threshold};
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
+use irs_model::planner::Threshold;
 use std::time::Instant;
 
 /// What a path answer depends on besides its map's content: the map's id and the query's

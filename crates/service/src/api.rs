@@ -17,18 +17,20 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{MethodRouter, delete, get, post};
 use axum::{Json, Router};
 use irs_answers::export::{self, MaskKind};
+use irs_answers::path::{self, CheckedPath};
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
+use irs_answers::timing::Timed;
 use irs_model::input::{FieldError, parse_finite, parse_point, present};
-use irs_model::montecarlo::{self, CheckedPath};
+use irs_model::montecarlo;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Search, What};
-use irs_model::planner::{self, PhaseFormat, PhasePrecision, SweepAnswer, Threshold};
+use irs_model::planner::{self, SweepAnswer, Threshold};
 use irs_model::radiomap::cost;
 use irs_model::radiomap::{MapKey, MapKind, MapStats, Progress, RadioMap, WorkError};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
-use irs_model::timing::Timed;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -1236,19 +1238,12 @@ async fn plan_path(
             "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
         ));
     }
-    let format = request.phase_format.unwrap_or_default();
-    if format == PhaseFormat::Codes && request.phase_precision.is_some() {
-        return Err(ApiError::invalid(
-            "phase_precision",
-            "applies to phase_format radians only (codes are steps of 2π/65536)",
-        ));
-    }
+    let (format, precision) = path::phase_options(request.phase_format, request.phase_precision)?;
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
     let (map, scenario) = match found {
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
-    let precision = request.phase_precision.unwrap_or_default();
     let map_id = map.id.clone();
     // A plain query asked before is answered from the answer cache (service::answers).
     let query = request.monte_carlo_draws.is_none().then(|| {
@@ -1267,13 +1262,13 @@ async fn plan_path(
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let (planned, cache) = (map.clone(), state.cache().clone());
-    let mut path = heavy(&state, "path", cells, move |_| {
+    let path = heavy(&state, "path", cells, move |_| {
         let index = cache.bottlenecks(&map_id, &planned);
         planner::plan_indexed(&planned, &index, start, goal, threshold, v_max)
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
-    path.write_phases(format, precision);
+    let path = path::write_phases(path, format, precision);
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
@@ -1289,7 +1284,7 @@ async fn plan_path(
             let report = state
                 .queries()
                 .run("Monte Carlo check", move |progress| {
-                    montecarlo::check_path(&scenario, &map, &path, draws, seed, progress)
+                    path::check(&scenario, &map, &path, draws, seed, progress)
                 })
                 .await?
                 .map_err(|e| ApiError::internal(e.to_string()))?;

@@ -8,8 +8,8 @@ mod queue;
 pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
 
-use crate::input::{FieldError, parse_finite};
-use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, WorkError};
+use crate::input::{FieldError, Scalar, parse_finite};
+use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, SurfaceRadians, WorkError};
 use crate::scenario::Grid;
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
@@ -45,14 +45,16 @@ impl FromStr for Threshold {
 
 impl<'de> Deserialize<'de> for Threshold {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        match serde_json::Value::deserialize(d)? {
-            serde_json::Value::String(s) if s == "max" => Ok(Threshold::Max),
-            serde_json::Value::Number(n) => n
-                .as_f64()
-                .filter(|v| v.is_finite())
-                .map(Threshold::Value)
-                .ok_or_else(|| serde::de::Error::custom("threshold must be a finite number")),
-            other => Err(serde::de::Error::custom(format!(
+        match crate::input::deserialize_scalar(d)? {
+            Scalar::Text(s) if s == "max" => Ok(Threshold::Max),
+            Scalar::Number(n, _) if n.is_finite() => Ok(Threshold::Value(n)),
+            Scalar::Number(..) => Err(serde::de::Error::custom(
+                "threshold must be a finite number",
+            )),
+            Scalar::Text(s) => Err(serde::de::Error::custom(format!(
+                "expected a number or \"max\", got {s:?}"
+            ))),
+            Scalar::Other(other) => Err(serde::de::Error::custom(format!(
                 "expected a number or \"max\", got {other}"
             ))),
         }
@@ -71,9 +73,10 @@ pub struct Endpoint {
     pub snapped: bool,
 }
 
-/// One waypoint of a path and the configuration to apply there.
+/// One waypoint of a path and the configuration to apply there (phases held as `P`, see
+/// [`CellConfig`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Waypoint {
+pub struct Waypoint<P = SurfaceRadians> {
     pub x: f64,
     pub y: f64,
     pub i: usize,
@@ -81,7 +84,7 @@ pub struct Waypoint {
     /// The map's value at this cell.
     pub value: f64,
     #[serde(flatten)]
-    pub config: CellConfig,
+    pub config: CellConfig<P>,
 }
 
 /// Where a path changes its serving AP (several APs): between waypoint `waypoint − 1` and
@@ -95,9 +98,10 @@ pub struct Handover {
     pub to: usize,
 }
 
-/// The answer to a path query; the same body from the CLI and the API.
+/// The answer to a path query; the same body from the CLI and the API once its phases are
+/// written (`P`, see [`CellConfig`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PathAnswer {
+pub struct PathAnswer<P = SurfaceRadians> {
     pub map_id: String,
     pub unit: &'static str,
     /// The threshold applied (for `"max"`, the largest feasible one).
@@ -110,7 +114,7 @@ pub struct PathAnswer {
     pub max_feasible_threshold: Option<f64>,
     pub start: Endpoint,
     pub goal: Endpoint,
-    pub waypoints: Vec<Waypoint>,
+    pub waypoints: Vec<Waypoint<P>>,
     /// The handovers along the path, in order (empty with one AP).
     pub handovers: Vec<Handover>,
 }
@@ -272,84 +276,33 @@ fn plan_with(
     Ok(answer)
 }
 
-/// How finely a path answer's IRS phases are written. A phase written with 17 significant
-/// digits is ≈ 20 bytes of JSON and most of a path answer (the paper map's path: 49.6 kB in
-/// full, 21.1 kB at the default); no IRS resolves anything near that: 2-bit to 8-bit surfaces
-/// have steps of 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a
-/// reflected term's amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad. A rate
-/// map's phases are already stored to 2π/2¹⁶ (`phases::encode_phase`), so for them `1e-6` and
-/// `full` write the stored phases. Rounded phases are written by
-/// [`SurfacePhases::to_decimals`], straight from θ to digits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-pub enum PhasePrecision {
-    /// Rounded to 2 decimals (error ≤ 0.005 rad).
-    #[serde(rename = "1e-2")]
-    Centi,
-    /// Rounded to 3 decimals (error ≤ 5·10⁻⁴ rad).
-    #[serde(rename = "1e-3")]
-    Milli,
-    /// Rounded to 4 decimals (error ≤ 5·10⁻⁵ rad), the default.
-    #[default]
-    #[serde(rename = "1e-4")]
-    TenthMilli,
-    /// Rounded to 6 decimals (error ≤ 5·10⁻⁷ rad).
-    #[serde(rename = "1e-6")]
-    Micro,
-    /// Every bit of the f64 (the shortest decimal that reads back to the same number).
-    #[serde(rename = "full")]
-    Full,
-}
-
-impl PhasePrecision {
-    /// Decimals kept, `None` for full precision.
-    fn decimals(self) -> Option<u32> {
-        match self {
-            PhasePrecision::Centi => Some(2),
-            PhasePrecision::Milli => Some(3),
-            PhasePrecision::TenthMilli => Some(4),
-            PhasePrecision::Micro => Some(6),
-            PhasePrecision::Full => None,
-        }
-    }
-}
-
-impl FromStr for PhasePrecision {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::input::parse_name(s)
-    }
-}
-
-/// How a path answer writes its IRS phases: decimals in radians (`irs_phases_rad`, rounded to
-/// a [`PhasePrecision`]), or 16-bit codes in base64 (`irs_phase_codes`,
-/// [`SurfacePhases::Codes`]): within π/2¹⁶ ≈ 4.8·10⁻⁵ rad, as fine as the default 10⁻⁴ rad,
-/// in 2.7 characters a phase instead of 6–7, and directly the levels a b-bit surface
-/// controller takes (c >> (16 − b)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PhaseFormat {
-    #[default]
-    Radians,
-    Codes,
-}
-
-impl FromStr for PhaseFormat {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::input::parse_name(s)
-    }
-}
-
-impl PathAnswer {
-    /// Writes every waypoint's IRS phases as `format` asks, radians rounded to `precision`.
-    pub fn write_phases(&mut self, format: PhaseFormat, precision: PhasePrecision) {
-        for waypoint in &mut self.waypoints {
-            let phases = &mut waypoint.config.phases;
-            match (format, precision.decimals()) {
-                (PhaseFormat::Codes, _) => *phases = phases.to_codes(),
-                (PhaseFormat::Radians, None) => {}
-                (PhaseFormat::Radians, Some(decimals)) => *phases = phases.to_decimals(decimals),
-            }
+impl<P> PathAnswer<P> {
+    /// The same answer with every waypoint's phases held as `f` makes them.
+    pub fn map_phases<Q>(self, mut f: impl FnMut(P) -> Q) -> PathAnswer<Q> {
+        PathAnswer {
+            waypoints: self
+                .waypoints
+                .into_iter()
+                .map(|w| Waypoint {
+                    x: w.x,
+                    y: w.y,
+                    i: w.i,
+                    j: w.j,
+                    value: w.value,
+                    config: w.config.map_phases(&mut f),
+                })
+                .collect(),
+            map_id: self.map_id,
+            unit: self.unit,
+            threshold: self.threshold,
+            feasible: self.feasible,
+            reason: self.reason,
+            distance_m: self.distance_m,
+            travel_time_s: self.travel_time_s,
+            max_feasible_threshold: self.max_feasible_threshold,
+            start: self.start,
+            goal: self.goal,
+            handovers: self.handovers,
         }
     }
 }
@@ -401,68 +354,6 @@ pub fn sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::radiomap::SurfacePhases;
-
-    /// Each precision writes its number of decimals (the writer itself is tested in
-    /// radiomap::phase_text); `full` keeps every bit; codes are codes.
-    #[test]
-    fn write_phases_applies_the_precision_asked_for() {
-        let theta = 4.71238898038469;
-        let answer = |format, precision| {
-            let end = Endpoint {
-                requested: [0.0, 0.0],
-                x: 0.0,
-                y: 0.0,
-                i: 0,
-                j: 0,
-                snapped: false,
-            };
-            let mut path = PathAnswer {
-                map_id: String::new(),
-                unit: "dB",
-                threshold: None,
-                feasible: true,
-                reason: None,
-                distance_m: Some(0.0),
-                travel_time_s: Some(0.0),
-                max_feasible_threshold: None,
-                start: end.clone(),
-                goal: end,
-                waypoints: vec![Waypoint {
-                    x: 0.0,
-                    y: 0.0,
-                    i: 0,
-                    j: 0,
-                    value: 0.0,
-                    config: CellConfig {
-                        ap: 0,
-                        phases: SurfacePhases::Radians(vec![vec![theta, 0.5]]),
-                        power_w: None,
-                        decoding_order: None,
-                    },
-                }],
-                handovers: Vec::new(),
-            };
-            path.write_phases(format, precision);
-            serde_json::to_value(&path.waypoints[0].config).unwrap()
-        };
-        assert_eq!(PhasePrecision::default(), PhasePrecision::TenthMilli);
-        for (precision, written) in [
-            ("1e-2", vec![4.71, 0.5]),
-            ("1e-3", vec![4.712, 0.5]),
-            ("1e-4", vec![4.7124, 0.5]),
-            ("1e-6", vec![4.712389, 0.5]),
-            ("full", vec![theta, 0.5]),
-        ] {
-            let precision: PhasePrecision = precision.parse().unwrap();
-            let config = answer(PhaseFormat::Radians, precision);
-            assert_eq!(config["irs_phases_rad"], serde_json::json!([written]));
-        }
-        let codes = answer(PhaseFormat::Codes, PhasePrecision::default());
-        assert!(codes["irs_phase_codes"][0].is_string());
-        assert_eq!("1e-6".parse::<PhasePrecision>(), Ok(PhasePrecision::Micro));
-        assert!("1e-5".parse::<PhasePrecision>().is_err());
-    }
 
     #[test]
     fn thresholds_parse_as_in_json() {

@@ -6,7 +6,6 @@
 //! * [`rate_cells`]: the communication rate map U (eqs. 26 and 37), in bit/s/Hz, solved per cell
 //!   by [`crate::solver`].
 //! * [`body`]: statistics, coverage and the JSON body of a built map.
-//! * [`phase_text`]: a waypoint's IRS phases as radians, rounded decimals or 16-bit codes.
 //!
 //! Occupied cells hold NaN (JSON null, the paper's −∞).
 
@@ -15,12 +14,10 @@ pub mod cost;
 pub mod encoding;
 pub mod gain;
 pub mod key;
-pub mod phase_text;
 pub mod rate_cells;
 
 pub use body::{CertificateSummary, MapBody, MapStats};
 pub use key::{MapKey, MapKind};
-pub use phase_text::SurfacePhases;
 pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
@@ -93,14 +90,19 @@ pub enum CellSolutions {
     Rate(RateCells),
 }
 
-/// The configuration to apply at one waypoint.
+/// The IRS phase vector θ of one configuration, one vector per IRS in scenario order (N_s
+/// values each, in [0, 2π); none for phases `none`).
+pub type SurfaceRadians = Vec<Vec<f64>>;
+
+/// The configuration to apply at one waypoint. `P` is how its phases are held: radians in the
+/// model, the written form (decimals or codes) in an answer.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct CellConfig {
+pub struct CellConfig<P = SurfaceRadians> {
     /// The AP serving this cell (an index into the scenario's APs; 0 with one AP).
     pub ap: usize,
     /// The IRS phases, written as `irs_phases_rad` or `irs_phase_codes`.
     #[serde(flatten)]
-    pub phases: SurfacePhases,
+    pub phases: P,
     /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub power_w: Option<Vec<f64>>,
@@ -144,10 +146,21 @@ pub(crate) fn per_surface(flat: &[f64], lengths: &[usize]) -> Vec<Vec<f64>> {
 }
 
 impl CellConfig {
-    /// The phases of every surface concatenated (the vector θ the channel model takes), as
-    /// written (codes decoded).
+    /// The phases of every surface concatenated (the vector θ the channel model takes).
     pub fn concatenated_phases(&self) -> Vec<f64> {
-        self.phases.radians().concat()
+        self.phases.concat()
+    }
+}
+
+impl<P> CellConfig<P> {
+    /// The same configuration with its phases held as `f` makes them.
+    pub fn map_phases<Q>(self, f: impl FnOnce(P) -> Q) -> CellConfig<Q> {
+        CellConfig {
+            ap: self.ap,
+            phases: f(self.phases),
+            power_w: self.power_w,
+            decoding_order: self.decoding_order,
+        }
     }
 }
 
@@ -166,10 +179,10 @@ impl RadioMap {
                 let model = &models[ap];
                 CellConfig {
                     ap,
-                    phases: SurfacePhases::Radians(per_surface(
+                    phases: per_surface(
                         &gain::waypoint_phases(model, [x, y, *antenna_height_m], self.key.phases),
                         &model.surface_lengths(),
-                    )),
+                    ),
                     power_w: None,
                     decoding_order: None,
                 }

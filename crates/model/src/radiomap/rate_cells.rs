@@ -2,7 +2,7 @@
 //! by the SDR bound, in parallel over grid rows; the per-cell argmax (phases, power split,
 //! decoding order) is kept because a path answer returns it at each waypoint.
 
-use super::{Cancelled, CellConfig, MapKey, Progress, SurfacePhases};
+use super::{Cancelled, CellConfig, MapKey, Progress};
 use crate::channel::ChannelModel;
 use crate::phases::{PhaseMode, decode_phase, encode_phase};
 use crate::rate::{Access, RateModel};
@@ -32,13 +32,13 @@ impl RateCells {
         let n = self.subsurfaces;
         CellConfig {
             ap: 0,
-            phases: SurfacePhases::Radians(super::per_surface(
+            phases: super::per_surface(
                 &self.phases[index * n..(index + 1) * n]
                     .iter()
                     .map(|&code| decode_phase(code))
                     .collect::<Vec<_>>(),
                 &self.surface_lengths,
-            )),
+            ),
             power_w: Some(self.power_w[index * users..(index + 1) * users].to_vec()),
             decoding_order: (self.model.access == Access::Noma)
                 .then(|| self.model.order_labels(self.order[index] as usize)),

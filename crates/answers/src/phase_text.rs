@@ -10,15 +10,17 @@
 
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::value::RawValue;
 use std::f64::consts::TAU;
+use std::str::FromStr;
 
-use crate::vecmath::ROUNDING_SHIFT;
+use irs_model::planner::PathAnswer;
+use irs_model::vecmath::ROUNDING_SHIFT;
 
 /// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
 /// each; none for phases `none`), in radians or as the compact codes a path answer may be
-/// asked for (planner::PhaseFormat).
+/// asked for ([`PhaseFormat`]).
 #[derive(Debug, Clone, Serialize)]
 pub enum SurfacePhases {
     /// θ in [0, 2π).
@@ -28,7 +30,7 @@ pub enum SurfacePhases {
     /// with each phase rounded to d decimals: kept as text, so serialising it is one copy.
     #[serde(rename = "irs_phases_rad")]
     Decimals(Box<RawValue>),
-    /// Each surface's phases as 16-bit codes c, θ = 2π·c/2¹⁶ ([`crate::phases::encode_phase`],
+    /// Each surface's phases as 16-bit codes c, θ = 2π·c/2¹⁶ ([`irs_model::phases::encode_phase`],
     /// within π/2¹⁶ of the phase), little-endian, two bytes a phase, in base64 (RFC 4648 with
     /// padding): 2.7 characters a phase against 6–7 for a decimal at 10⁻⁴ rad.
     #[serde(rename = "irs_phase_codes")]
@@ -65,7 +67,9 @@ impl SurfacePhases {
                 .map(|phases| {
                     let mut bytes = Vec::with_capacity(2 * phases.len());
                     for &theta in phases {
-                        bytes.extend_from_slice(&crate::phases::encode_phase(theta).to_le_bytes());
+                        bytes.extend_from_slice(
+                            &irs_model::phases::encode_phase(theta).to_le_bytes(),
+                        );
                     }
                     BASE64.encode(bytes)
                 })
@@ -133,7 +137,7 @@ impl SurfacePhases {
                     bytes
                         .chunks_exact(2)
                         .map(|pair| {
-                            crate::phases::decode_phase(u16::from_le_bytes([pair[0], pair[1]]))
+                            irs_model::phases::decode_phase(u16::from_le_bytes([pair[0], pair[1]]))
                         })
                         .collect()
                 })
@@ -150,6 +154,90 @@ impl SurfacePhases {
             SurfacePhases::Codes(surfaces) => surfaces.iter().map(|s| 3 + s.len()).sum(),
         }
     }
+}
+
+/// How finely a path answer's IRS phases are written. A phase written with 17 significant
+/// digits is ≈ 20 bytes of JSON and most of a path answer (the paper map's path: 49.6 kB in
+/// full, 21.1 kB at the default); no IRS resolves anything near that: 2-bit to 8-bit surfaces
+/// have steps of 1.57 to 0.025 rad, and a phase error ε costs at most a factor cos ε of a
+/// reflected term's amplitude, 1 − 1.25·10⁻⁹ (10⁻⁸ dB) at the default ε ≤ 5·10⁻⁵ rad. A rate
+/// map's phases are already stored to 2π/2¹⁶ (`phases::encode_phase`), so for them `1e-6` and
+/// `full` write the stored phases. Rounded phases are written by
+/// [`SurfacePhases::to_decimals`], straight from θ to digits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+pub enum PhasePrecision {
+    /// Rounded to 2 decimals (error ≤ 0.005 rad).
+    #[serde(rename = "1e-2")]
+    Centi,
+    /// Rounded to 3 decimals (error ≤ 5·10⁻⁴ rad).
+    #[serde(rename = "1e-3")]
+    Milli,
+    /// Rounded to 4 decimals (error ≤ 5·10⁻⁵ rad), the default.
+    #[default]
+    #[serde(rename = "1e-4")]
+    TenthMilli,
+    /// Rounded to 6 decimals (error ≤ 5·10⁻⁷ rad).
+    #[serde(rename = "1e-6")]
+    Micro,
+    /// Every bit of the f64 (the shortest decimal that reads back to the same number).
+    #[serde(rename = "full")]
+    Full,
+}
+
+impl PhasePrecision {
+    /// Decimals kept, `None` for full precision.
+    fn decimals(self) -> Option<u32> {
+        match self {
+            PhasePrecision::Centi => Some(2),
+            PhasePrecision::Milli => Some(3),
+            PhasePrecision::TenthMilli => Some(4),
+            PhasePrecision::Micro => Some(6),
+            PhasePrecision::Full => None,
+        }
+    }
+}
+
+impl FromStr for PhasePrecision {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        irs_model::input::parse_name(s)
+    }
+}
+
+/// How a path answer writes its IRS phases: decimals in radians (`irs_phases_rad`, rounded to
+/// a [`PhasePrecision`]), or 16-bit codes in base64 (`irs_phase_codes`,
+/// [`SurfacePhases::Codes`]): within π/2¹⁶ ≈ 4.8·10⁻⁵ rad, as fine as the default 10⁻⁴ rad,
+/// in 2.7 characters a phase instead of 6–7, and directly the levels a b-bit surface
+/// controller takes (c >> (16 − b)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PhaseFormat {
+    #[default]
+    Radians,
+    Codes,
+}
+
+impl FromStr for PhaseFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        irs_model::input::parse_name(s)
+    }
+}
+
+/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
+pub fn write_phases(
+    path: PathAnswer,
+    format: PhaseFormat,
+    precision: PhasePrecision,
+) -> PathAnswer<SurfacePhases> {
+    path.map_phases(|radians| {
+        let phases = SurfacePhases::Radians(radians);
+        match (format, precision.decimals()) {
+            (PhaseFormat::Codes, _) => phases.to_codes(),
+            (PhaseFormat::Radians, None) => phases,
+            (PhaseFormat::Radians, Some(decimals)) => phases.to_decimals(decimals),
+        }
+    })
 }
 
 /// "00", "01", …, "99": two digits of a number per lookup, half the divisions of one at a time.
@@ -212,6 +300,70 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use irs_model::planner::{Endpoint, Waypoint};
+    use irs_model::radiomap::CellConfig;
+
+    /// Each precision writes its number of decimals (the writer itself is tested in
+    /// radiomap::phase_text); `full` keeps every bit; codes are codes.
+    #[test]
+    fn write_phases_applies_the_precision_asked_for() {
+        let theta = 4.71238898038469;
+        let answer = |format, precision| {
+            let end = Endpoint {
+                requested: [0.0, 0.0],
+                x: 0.0,
+                y: 0.0,
+                i: 0,
+                j: 0,
+                snapped: false,
+            };
+            let path = PathAnswer {
+                map_id: String::new(),
+                unit: "dB",
+                threshold: None,
+                feasible: true,
+                reason: None,
+                distance_m: Some(0.0),
+                travel_time_s: Some(0.0),
+                max_feasible_threshold: None,
+                start: end.clone(),
+                goal: end,
+                waypoints: vec![Waypoint {
+                    x: 0.0,
+                    y: 0.0,
+                    i: 0,
+                    j: 0,
+                    value: 0.0,
+                    config: CellConfig {
+                        ap: 0,
+                        phases: vec![vec![theta, 0.5]],
+                        power_w: None,
+                        decoding_order: None,
+                    },
+                }],
+                handovers: Vec::new(),
+            };
+            let path = write_phases(path, format, precision);
+            serde_json::to_value(&path.waypoints[0].config).unwrap()
+        };
+        assert_eq!(PhasePrecision::default(), PhasePrecision::TenthMilli);
+        for (precision, written) in [
+            ("1e-2", vec![4.71, 0.5]),
+            ("1e-3", vec![4.712, 0.5]),
+            ("1e-4", vec![4.7124, 0.5]),
+            ("1e-6", vec![4.712389, 0.5]),
+            ("full", vec![theta, 0.5]),
+        ] {
+            let precision: PhasePrecision = precision.parse().unwrap();
+            let config = answer(PhaseFormat::Radians, precision);
+            assert_eq!(config["irs_phases_rad"], serde_json::json!([written]));
+        }
+        let codes = answer(PhaseFormat::Codes, PhasePrecision::default());
+        assert!(codes["irs_phase_codes"][0].is_string());
+        assert_eq!("1e-6".parse::<PhasePrecision>(), Ok(PhasePrecision::Micro));
+        assert!("1e-5".parse::<PhasePrecision>().is_err());
+    }
+
     use rand::{RngExt, SeedableRng};
 
     fn decimals_text(surfaces: Vec<Vec<f64>>, decimals: u32) -> String {

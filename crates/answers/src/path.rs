@@ -1,0 +1,55 @@
+//! The path use case, one function per step for `irs-planner plan` and `POST /v1/paths`: the
+//! phase options checked once ([`phase_options`]), the planner's answer with its phases written
+//! as asked ([`write_phases`]), and the optional Monte Carlo check of what is sent ([`check`]).
+//! Finding the map and running the work (a progress bar, a query pool) stay with each front
+//! door.
+
+use crate::phase_text::{PhaseFormat, PhasePrecision, SurfacePhases};
+use irs_model::input::FieldError;
+use irs_model::montecarlo::{self, MonteCarloReport};
+use irs_model::planner::PathAnswer;
+use irs_model::radiomap::{Cancelled, Progress, RadioMap};
+use irs_model::scenario::Scenario;
+use serde::Serialize;
+
+pub use crate::phase_text::write_phases;
+
+/// A path answer with its optional Monte Carlo check: the body of `irs-planner plan` and of
+/// `POST /v1/paths`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CheckedPath {
+    #[serde(flatten)]
+    pub path: PathAnswer<SurfacePhases>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monte_carlo: Option<MonteCarloReport>,
+}
+
+/// The phase format and precision of a path answer, defaults applied. A precision applies to
+/// radians only: with codes it is refused (field `phase_precision`) rather than ignored.
+pub fn phase_options(
+    format: Option<PhaseFormat>,
+    precision: Option<PhasePrecision>,
+) -> Result<(PhaseFormat, PhasePrecision), FieldError> {
+    let format = format.unwrap_or_default();
+    if format == PhaseFormat::Codes && precision.is_some() {
+        return Err(FieldError::new(
+            "phase_precision",
+            "applies to phase_format radians only (codes are steps of 2π/65536)",
+        ));
+    }
+    Ok((format, precision.unwrap_or_default()))
+}
+
+/// The Monte Carlo check (paper Fig. 10) of a written path: it evaluates the phases as sent
+/// (decimals read back, codes decoded), not the unrounded ones.
+pub fn check(
+    scenario: &Scenario,
+    map: &RadioMap,
+    path: &PathAnswer<SurfacePhases>,
+    draws: usize,
+    seed: u64,
+    progress: &Progress,
+) -> Result<MonteCarloReport, Cancelled> {
+    let sent = path.clone().map_phases(|phases| phases.radians());
+    montecarlo::check_path(scenario, map, &sent, draws, seed, progress)
+}
