@@ -418,7 +418,7 @@ pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.source)?;
     let started = Instant::now();
     let map = build_map(args, &scenario)?;
-    let body = Timed::since(started, map.body());
+    let body = Timed::since(started, irs_answers::map::body(&map));
     write_png(args, &map, &scenario, RenderOptions::default())?;
     print_json(&body)
 }

@@ -6,6 +6,7 @@
 //! read, so the two front doors answer the same bytes. It holds no HTTP and no CLI.
 
 pub mod export;
+pub mod map;
 pub mod path;
 pub mod phase_text;
 pub mod render;

@@ -700,7 +700,7 @@ async fn get_map(
     let map = cached_map(&state, &map_id).await?;
     let cells = map.grid.cells();
     let bytes = heavy(&state, "map body", cells, move |_| {
-        serde_json::to_vec(&Timed::since(started, map.body()))
+        serde_json::to_vec(&Timed::since(started, irs_answers::map::body(&map)))
     })
     .await?;
     let bytes = bytes.map_err(|e| ApiError::internal(format!("serialising the map: {e}")))?;

@@ -1,9 +1,7 @@
-//! What a built map says about itself: summary statistics, coverage η(γ) (eq. 44), the
-//! certificate summary of rate maps, and the JSON body that the CLI's `map` and
-//! `GET /v1/maps/{id}` print.
+//! What a built map says about itself: summary statistics, coverage η(γ) (eq. 44) and the
+//! certificate summary of rate maps.
 
-use super::{CellSolutions, MapKey, RadioMap};
-use crate::scenario::Grid;
+use super::{CellSolutions, RadioMap};
 use serde::Serialize;
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -27,25 +25,6 @@ pub struct CertificateSummary {
     pub median_gap: Option<f64>,
     pub mean_gap: Option<f64>,
     pub max_gap: Option<f64>,
-}
-
-/// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct MapBody {
-    pub map_id: String,
-    pub key: MapKey,
-    pub unit: &'static str,
-    pub grid: Grid,
-    pub stats: MapStats,
-    /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
-    /// maps, where no configuration serves every SRU).
-    pub values: Vec<Vec<Option<f64>>>,
-    /// Rate maps: the certificate summary.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub certificate: Option<CertificateSummary>,
-    /// Rate maps: the SDR upper bound per cell, laid out like `values`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub upper_bound: Option<Vec<Vec<Option<f64>>>>,
 }
 
 impl RadioMap {
@@ -86,38 +65,27 @@ impl RadioMap {
         coverage(&self.values, &self.occupied, threshold)
     }
 
-    fn as_rows(&self, data: &[f64]) -> Vec<Vec<Option<f64>>> {
-        data.chunks(self.grid.ny)
-            .map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect())
-            .collect()
+    /// The certificate summary of a rate map (None for gain maps): how close its values are to
+    /// the SDR bound over its cells.
+    pub fn certificate_summary(&self) -> Option<CertificateSummary> {
+        let CellSolutions::Rate(rate) = &self.cells else {
+            return None;
+        };
+        let mut gaps = rate.gaps(&self.values);
+        gaps.sort_by(f64::total_cmp);
+        Some(CertificateSummary {
+            cells: gaps.len(),
+            median_gap: (!gaps.is_empty()).then(|| gaps[gaps.len() / 2]),
+            mean_gap: (!gaps.is_empty()).then(|| gaps.iter().sum::<f64>() / gaps.len() as f64),
+            max_gap: gaps.last().copied(),
+        })
     }
 
-    /// The map's JSON body.
-    pub fn body(&self) -> MapBody {
-        let (certificate, upper_bound) = match &self.cells {
-            CellSolutions::Gain { .. } => (None, None),
-            CellSolutions::Rate(rate) => {
-                let mut gaps = rate.gaps(&self.values);
-                gaps.sort_by(f64::total_cmp);
-                let summary = CertificateSummary {
-                    cells: gaps.len(),
-                    median_gap: (!gaps.is_empty()).then(|| gaps[gaps.len() / 2]),
-                    mean_gap: (!gaps.is_empty())
-                        .then(|| gaps.iter().sum::<f64>() / gaps.len() as f64),
-                    max_gap: gaps.last().copied(),
-                };
-                (Some(summary), Some(self.as_rows(&rate.upper_bound)))
-            }
-        };
-        MapBody {
-            map_id: self.id.clone(),
-            key: self.key.clone(),
-            unit: self.key.unit(),
-            grid: self.grid,
-            stats: self.stats(),
-            values: self.as_rows(&self.values),
-            certificate,
-            upper_bound,
+    /// Rate maps: the SDR upper bound per cell (flat, like `values`).
+    pub fn upper_bound(&self) -> Option<&[f64]> {
+        match &self.cells {
+            CellSolutions::Gain { .. } => None,
+            CellSolutions::Rate(rate) => Some(&rate.upper_bound),
         }
     }
 }

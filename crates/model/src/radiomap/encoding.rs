@@ -242,7 +242,8 @@ mod tests {
                 "cell {index}"
             );
         }
-        assert_eq!(back.body().stats, map.body().stats);
+        assert_eq!(back.stats(), map.stats());
+        assert_eq!(back.certificate_summary(), map.certificate_summary());
         // At most the bytes held in memory, minus the channel models.
         assert!(
             bytes.len() <= map.size_bytes() + 64,

@@ -16,7 +16,7 @@ pub mod gain;
 pub mod key;
 pub mod rate_cells;
 
-pub use body::{CertificateSummary, MapBody, MapStats};
+pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
 pub use rate_cells::RateCells;
 

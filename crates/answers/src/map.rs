@@ -1,0 +1,46 @@
+//! The map use case's answer: the body that `irs-planner map` prints and
+//! `GET /v1/maps/{id}` returns.
+
+use irs_model::radiomap::{CertificateSummary, MapKey, MapStats, RadioMap};
+use irs_model::scenario::Grid;
+use serde::Serialize;
+
+/// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MapBody {
+    pub map_id: String,
+    pub key: MapKey,
+    pub unit: &'static str,
+    pub grid: Grid,
+    pub stats: MapStats,
+    /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
+    /// maps, where no configuration serves every SRU).
+    pub values: Vec<Vec<Option<f64>>>,
+    /// Rate maps: the certificate summary.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub certificate: Option<CertificateSummary>,
+    /// Rate maps: the SDR upper bound per cell, laid out like `values`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upper_bound: Option<Vec<Vec<Option<f64>>>>,
+}
+
+/// The map's body.
+pub fn body(map: &RadioMap) -> MapBody {
+    MapBody {
+        map_id: map.id.clone(),
+        key: map.key.clone(),
+        unit: map.key.unit(),
+        grid: map.grid,
+        stats: map.stats(),
+        values: rows(map, &map.values),
+        certificate: map.certificate_summary(),
+        upper_bound: map.upper_bound().map(|bound| rows(map, bound)),
+    }
+}
+
+/// Flat per-cell data as rows of the grid (`[i][j]`), null where not finite.
+fn rows(map: &RadioMap, data: &[f64]) -> Vec<Vec<Option<f64>>> {
+    data.chunks(map.grid.ny)
+        .map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect())
+        .collect()
+}
