@@ -1,17 +1,15 @@
 //! Floors given as pixels and as walls give the maps their boxes give (docs/scenarios.md
 //! "Floor plans"): the paper floor drawn as a 0.05 m raster and as walls, cell by cell.
 
+mod common;
+
 use base64::Engine;
+use common::gain_map;
 use irs_model::floorplan::{self, MapMode};
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::radiomap::RadioMap;
 use irs_model::scenario::Scenario;
-
-fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
-    let key = MapKey::gain(&s.content_hash(), s, phases).unwrap();
-    radiomap::build(s, &key, &Progress::default()).unwrap()
-}
 
 /// The paper floor with its five boxes replaced by a floor plan: 400 × 400 pixels of 0.05 m
 /// from (−10, −10), a pixel occupied where its centre lies in a box, 1.3 m high.

@@ -1,14 +1,15 @@
 //! Placement search (docs/model.md §7): the ranking equals an exhaustive loop that builds every
 //! candidate's map with the ordinary map builder and scores it with the ordinary planner.
 
+mod common;
+
+use common::{Q_F, Q_I};
+
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Search, Segment, What};
 use irs_model::planner::{self, Threshold};
 use irs_model::radiomap::{self, MapKey, Progress};
 use irs_model::scenario::Scenario;
-
-const Q_I: [f64; 2] = [-10.0, 0.0];
-const Q_F: [f64; 2] = [10.0, 0.0];
 
 fn walls(segments: &[([f64; 2], [f64; 2])], step: f64) -> Candidates {
     Candidates {

@@ -1,17 +1,18 @@
 //! The paper's Section IV figures (docs/model.md §9) as regression tests, with stated tolerances.
 //! Maps are built once per configuration and shared between tests.
 
+mod common;
+
+use common::{Q_F, Q_I, build};
+
 use irs_model::channel::{C64, ChannelModel};
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use irs_model::radiomap::{MapKind, RadioMap};
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;
 use irs_model::solver::{self, SolverKind, objective};
 use std::sync::OnceLock;
-
-const Q_I: [f64; 2] = [-10.0, 0.0];
-const Q_F: [f64; 2] = [10.0, 0.0];
 
 fn single_user() -> &'static Scenario {
     static S: OnceLock<Scenario> = OnceLock::new();
@@ -21,11 +22,6 @@ fn single_user() -> &'static Scenario {
 fn multi_user() -> &'static Scenario {
     static S: OnceLock<Scenario> = OnceLock::new();
     S.get_or_init(|| Scenario::builtin("paper-multi-user").unwrap())
-}
-
-fn build(s: &Scenario, kind: MapKind, phases: PhaseMode, access: Option<Access>) -> RadioMap {
-    let key = MapKey::new(&s.content_hash(), s, kind, Some(phases), access, None).unwrap();
-    radiomap::build(s, &key, &Progress::default()).unwrap()
 }
 
 fn max_threshold(map: &RadioMap) -> f64 {

@@ -1,15 +1,13 @@
 //! Several IRSs and several APs on one floor (docs/model.md §2–3): the generalisations reduce to
 //! the single-surface model where they must, and add up as they must.
 
+mod common;
+
+use common::gain_map;
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;
-use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::radiomap::{self, MapKey, Progress};
 use irs_model::scenario::Scenario;
-
-fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
-    let key = MapKey::gain(&s.content_hash(), s, phases).unwrap();
-    radiomap::build(s, &key, &Progress::default()).unwrap()
-}
 
 /// The paper floor (or `edit` of it) with its IRS whole and split into its west and east
 /// halves (5 × 6 sub-surfaces each, at the very positions they had).
