@@ -12,8 +12,8 @@
 //! An answer is kept as its JSON without the closing brace; `took_ms` (the time this request
 //! took, a lookup for a kept answer) is appended per request.
 
-use super::errors::ApiError;
-use super::json;
+use crate::app::Error;
+use crate::http::json;
 use axum::response::Response;
 use bytes::Bytes;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
@@ -67,10 +67,10 @@ pub(crate) struct OpenAnswer(Bytes);
 
 impl OpenAnswer {
     /// `body`, a serialised JSON object, opened for its last field.
-    pub fn new(mut body: Vec<u8>) -> Result<Self, ApiError> {
+    pub fn new(mut body: Vec<u8>) -> Result<Self, Error> {
         match body.pop() {
             Some(b'}') => Ok(OpenAnswer(Bytes::from(body))),
-            _ => Err(ApiError::internal("a path answer is a JSON object")),
+            _ => Err(Error::internal("a path answer is a JSON object")),
         }
     }
 

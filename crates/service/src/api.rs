@@ -3,14 +3,15 @@
 
 use super::AppState;
 use super::answers::{OpenAnswer, PathQuery};
-use super::auth::Caller;
+use super::app::Error;
+use super::app::identity::Caller;
 use super::cache::ScenarioSummary;
 use super::cluster::Cluster;
-use super::errors::{ApiError, parse_json};
+use super::http::json::serialize_sized;
+use super::http::problem::{ApiError, parse_json};
 use super::jobs::{
     Job, JobRecord, JobState, JobView, MapRequestOutcome, PlacementOutcome, PlacementSearch, Work,
 };
-use super::json::serialize_sized;
 use axum::extract::{FromRequest, Path, Query, Request, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -154,7 +155,7 @@ struct Page {
 }
 
 impl Page {
-    fn of(query: &HashMap<String, String>) -> Result<Page, ApiError> {
+    fn of(query: &HashMap<String, String>) -> Result<Page, Error> {
         only_query(query, &["limit", "cursor"])?;
         let limit = match query.get("limit") {
             None => DEFAULT_PAGE,
@@ -163,7 +164,7 @@ impl Page {
                 .ok()
                 .filter(|n| (1..=MAX_PAGE).contains(n))
                 .ok_or_else(|| {
-                    ApiError::limit_exceeded(
+                    Error::limit_exceeded(
                         "limit",
                         MAX_PAGE as u64,
                         format!("must be a whole number from 1 to {MAX_PAGE}"),
@@ -174,7 +175,7 @@ impl Page {
         if let Some(c) = &cursor
             && (c.is_empty() || c.len() > 128 || !c.bytes().all(|b| b.is_ascii_alphanumeric()))
         {
-            return Err(ApiError::invalid(
+            return Err(Error::invalid(
                 "cursor",
                 "not a cursor this server gave: use a listing's next_cursor",
             ));
@@ -224,7 +225,7 @@ async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiErr
         return Err(ApiError::not_ready());
     }
     if let Some(reason) = state.cluster().and_then(|c| c.unavailable()) {
-        return Err(ApiError::store_unavailable(reason));
+        return Err(Error::unavailable(reason).into());
     }
     Ok(Json(Readiness {
         status: "ready",
@@ -290,8 +291,8 @@ struct ScenarioDocument {
 }
 
 /// A scenario document embedded in a request at `prefix` (e.g. `"map.scenario."`).
-fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, ApiError> {
-    Scenario::from_value(value).map_err(|e| ApiError::invalid_scenario(e.within(prefix)))
+fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, Error> {
+    Scenario::from_value(value).map_err(|e| Error::InvalidScenario(e.within(prefix)))
 }
 
 async fn register_scenario(
@@ -323,7 +324,7 @@ async fn get_scenario(
     let stored = state
         .shared_scenario(&id)
         .await?
-        .ok_or_else(|| ApiError::not_found("scenario", &id))?;
+        .ok_or_else(|| Error::not_found("scenario", &id))?;
     Ok(Json(ScenarioDocument {
         summary: stored.summary(),
         scenario: (*stored.scenario).clone(),
@@ -344,7 +345,11 @@ async fn delete_scenario(
         .into_iter()
         .find(|j| j.scenario_id == id)
     {
-        return Err(ApiError::scenario_in_use(&id, &job.id));
+        return Err(Error::ScenarioInUse {
+            id,
+            job_id: job.id.clone(),
+        }
+        .into());
     }
     if state.registry().delete(&id, &caller)? {
         state.cache().remove_scenario_maps(&id).await;
@@ -401,7 +406,7 @@ fn summary(map: &RadioMap) -> MapSummary {
 
 /// In a cluster: brings a scenario registered on another replica here, so the synchronous
 /// [`scenario_of`] finds it (nothing to do for an inline scenario or a local one).
-async fn fetch_scenario(state: &AppState, scenario_id: Option<&str>) -> Result<(), ApiError> {
+async fn fetch_scenario(state: &AppState, scenario_id: Option<&str>) -> Result<(), Error> {
     if let Some(id) = scenario_id
         && state.cluster().is_some()
     {
@@ -417,12 +422,12 @@ fn scenario_of(
     scenario_id: Option<String>,
     scenario: Option<serde_json::Map<String, serde_json::Value>>,
     prefix: &str,
-) -> Result<(String, Arc<Scenario>, bool), ApiError> {
+) -> Result<(String, Arc<Scenario>, bool), Error> {
     match (scenario_id, scenario) {
         (Some(id), None) => {
             // An unknown id is "not found" (404), as an unknown map_id is, naming the field.
             let stored = state.registry().get(&id).ok_or_else(|| {
-                ApiError::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
+                Error::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
             })?;
             Ok((id, stored.scenario.clone(), false))
         }
@@ -430,7 +435,7 @@ fn scenario_of(
             let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
             Ok((scenario.content_hash(), Arc::new(scenario), true))
         }
-        _ => Err(ApiError::invalid(
+        _ => Err(Error::invalid(
             format!("{prefix}scenario_id"),
             "give exactly one of scenario_id (a registered scenario) and scenario (an inline document)",
         )),
@@ -445,7 +450,7 @@ fn resolve(
     caller: &Caller,
     request: MapRequest,
     prefix: &str,
-) -> Result<(Arc<Scenario>, MapKey), ApiError> {
+) -> Result<(Arc<Scenario>, MapKey), Error> {
     let (id, scenario, inline) = scenario_of(state, request.scenario_id, request.scenario, prefix)?;
     let key = MapKey::new(
         &id,
@@ -459,7 +464,7 @@ fn resolve(
     let cells = scenario.grid().cells();
     let limit = state.limits().max_rate_cells;
     if key.kind == MapKind::Rate && cells > limit {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             format!("{prefix}kind"),
             limit as u64,
             format!("rate maps are limited to {limit} cells; this grid has {cells}"),
@@ -474,7 +479,7 @@ fn resolve(
     // A map the cache could never hold would be built, handed out once and dropped: refuse it.
     let (bytes, budget) = (cost::map_bytes(&scenario, &key), state.limits().cache_bytes);
     if bytes > budget as f64 {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             format!("{prefix}kind"),
             budget,
             format!(
@@ -494,11 +499,11 @@ fn resolve(
 
 /// Refuses work whose estimated CPU time exceeds the budget (422 naming `field` and the limit
 /// in seconds), before any of it is done.
-fn check_budget(field: &str, what: &str, seconds: f64, budget: f64) -> Result<(), ApiError> {
+fn check_budget(field: &str, what: &str, seconds: f64, budget: f64) -> Result<(), Error> {
     if seconds <= budget {
         return Ok(());
     }
-    Err(ApiError::limit_exceeded(
+    Err(Error::limit_exceeded(
         field,
         budget.ceil() as u64,
         format!(
@@ -515,7 +520,7 @@ async fn obtain(
     caller: &Caller,
     scenario: Arc<Scenario>,
     key: MapKey,
-) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
+) -> Result<Result<Arc<RadioMap>, Response>, Error> {
     let cheap = key.kind == MapKind::Gain && scenario.grid().cells() <= state.limits().sync_cells;
     if let Some(cluster) = state.cluster() {
         return obtain_shared(state, cluster, caller, key, cheap).await;
@@ -530,9 +535,9 @@ async fn obtain(
             // The job hands its map over itself, whatever the cache has done with it since.
             match job.wait_for_map().await {
                 Some(map) => Ok(Ok(map)),
-                None => Err(ApiError::build_failed(job.view().error.unwrap_or_else(
-                    || format!("job {} ended {} without a map", job.id, job.state().label()),
-                ))),
+                None => Err(Error::BuildFailed(job.view().error.unwrap_or_else(|| {
+                    format!("job {} ended {} without a map", job.id, job.state().label())
+                }))),
             }
         }
         MapRequestOutcome::Building(job) => Ok(Err(accepted(job.view()))),
@@ -548,7 +553,7 @@ async fn obtain_shared(
     caller: &Caller,
     key: MapKey,
     cheap: bool,
-) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
+) -> Result<Result<Arc<RadioMap>, Response>, Error> {
     let map_id = key.id();
     if let Some(map) = state.shared_map(&map_id).await? {
         return Ok(Ok(map));
@@ -557,7 +562,7 @@ async fn obtain_shared(
     let stored = state
         .shared_scenario(&key.scenario_id)
         .await?
-        .ok_or_else(|| ApiError::not_found("scenario", &key.scenario_id))?;
+        .ok_or_else(|| Error::not_found("scenario", &key.scenario_id))?;
     state.share_scenario(&stored, false).await?;
     let queued = JobRecord::queued(&key, caller.owner().as_ref());
     let (job_id, _) = cluster
@@ -579,13 +584,13 @@ async fn obtain_shared(
             JobState::Done => {
                 return match state.shared_map(&map_id).await? {
                     Some(map) => Ok(Ok(map)),
-                    None => Err(ApiError::build_failed(format!(
+                    None => Err(Error::BuildFailed(format!(
                         "job {job_id} is done but its map is in no store"
                     ))),
                 };
             }
             s if s.is_terminal() => {
-                return Err(ApiError::build_failed(current.error.unwrap_or_else(|| {
+                return Err(Error::BuildFailed(current.error.unwrap_or_else(|| {
                     format!("job {job_id} ended {} without a map", s.label())
                 })));
             }
@@ -644,19 +649,25 @@ async fn list_maps(
     }))
 }
 
-async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, ApiError> {
+async fn cached_map(state: &AppState, map_id: &str) -> Result<Arc<RadioMap>, Error> {
     if let Some(map) = state.shared_map(map_id).await? {
         return Ok(map);
     }
     if let Some(job) = state.jobs().building(map_id).await {
-        return Err(ApiError::map_not_ready(map_id, &job.id));
+        return Err(Error::MapNotReady {
+            map_id: map_id.to_string(),
+            job_id: job.id.clone(),
+        });
     }
     if let Some(cluster) = state.cluster()
         && let Some(job_id) = cluster.building(map_id).await?
     {
-        return Err(ApiError::map_not_ready(map_id, &job_id));
+        return Err(Error::MapNotReady {
+            map_id: map_id.to_string(),
+            job_id,
+        });
     }
-    Err(ApiError::not_found("map", map_id))
+    Err(Error::not_found("map", map_id))
 }
 
 /// Drops a cached map (the next request for it builds it again). A map being built answers
@@ -666,14 +677,18 @@ async fn delete_map(
     Path(map_id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
     if let Some(job) = state.jobs().building(&map_id).await {
-        return Err(ApiError::map_not_ready(&map_id, &job.id));
+        return Err(Error::MapNotReady {
+            map_id,
+            job_id: job.id.clone(),
+        }
+        .into());
     }
     let mut removed = state.cache().remove(&map_id).await;
     if let Some(cluster) = state.cluster() {
         removed |= cluster.delete_map(&map_id).await?;
     }
     if !removed {
-        return Err(ApiError::not_found("map", &map_id));
+        return Err(Error::not_found("map", &map_id).into());
     }
     tracing::info!(map_id = %map_id, "map deleted");
     Ok(StatusCode::NO_CONTENT)
@@ -683,12 +698,12 @@ async fn delete_map(
 async fn map_and_scenario(
     state: &AppState,
     map_id: &str,
-) -> Result<(Arc<RadioMap>, Arc<Scenario>), ApiError> {
+) -> Result<(Arc<RadioMap>, Arc<Scenario>), Error> {
     let map = cached_map(state, map_id).await?;
     let stored = state
         .shared_scenario(&map.key.scenario_id)
         .await?
-        .ok_or_else(|| ApiError::not_found("scenario", &map.key.scenario_id))?;
+        .ok_or_else(|| Error::not_found("scenario", &map.key.scenario_id))?;
     Ok((map, stored.scenario.clone()))
 }
 
@@ -703,7 +718,7 @@ async fn get_map(
         serde_json::to_vec(&Timed::since(started, irs_answers::map::body(&map)))
     })
     .await?;
-    let bytes = bytes.map_err(|e| ApiError::internal(format!("serialising the map: {e}")))?;
+    let bytes = bytes.map_err(|e| Error::internal(format!("serialising the map: {e}")))?;
     Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
 }
 
@@ -723,7 +738,7 @@ async fn heavy<T: Send + 'static>(
     what: &'static str,
     cells: usize,
     work: impl FnOnce(&Progress) -> T + Send + 'static,
-) -> Result<T, ApiError> {
+) -> Result<T, Error> {
     if cells <= INLINE_WORK_CELLS {
         return Ok(work(&Progress::default()));
     }
@@ -731,12 +746,9 @@ async fn heavy<T: Send + 'static>(
 }
 
 /// Rejects query parameters outside `allowed`, naming the first unknown one.
-fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), ApiError> {
+fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), Error> {
     match query.keys().find(|k| !allowed.contains(&k.as_str())) {
-        Some(unknown) => Err(ApiError::invalid(
-            unknown.clone(),
-            "unknown query parameter",
-        )),
+        Some(unknown) => Err(Error::invalid(unknown.clone(), "unknown query parameter")),
         None => Ok(()),
     }
 }
@@ -758,10 +770,10 @@ async fn coverage(
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
     only_query(&query, &["threshold"])?;
-    let threshold = query.get("threshold").ok_or_else(|| {
-        ApiError::invalid("threshold", "the threshold query parameter is required")
-    })?;
-    let threshold = parse_finite(threshold).map_err(|e| ApiError::invalid("threshold", e))?;
+    let threshold = query
+        .get("threshold")
+        .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
+    let threshold = parse_finite(threshold).map_err(|e| Error::invalid("threshold", e))?;
     let map = cached_map(&state, &map_id).await?;
     let eta = map.coverage(threshold);
     let free = map.free_cells();
@@ -779,10 +791,10 @@ async fn coverage(
 fn query_point(
     query: &HashMap<String, String>,
     name: &'static str,
-) -> Result<Option<[f64; 2]>, ApiError> {
+) -> Result<Option<[f64; 2]>, Error> {
     query
         .get(name)
-        .map(|text| parse_point(text).map_err(|e| ApiError::invalid(name, e)))
+        .map(|text| parse_point(text).map_err(|e| Error::invalid(name, e)))
         .transpose()
 }
 
@@ -797,16 +809,17 @@ async fn image(
         None => Threshold::Max,
         Some(text) => text
             .parse::<Threshold>()
-            .map_err(|e| ApiError::invalid("threshold", e))?,
+            .map_err(|e| Error::invalid("threshold", e))?,
     };
     let path_ends = match (query_point(&query, "start")?, query_point(&query, "goal")?) {
         (Some(s), Some(g)) => Some((s, g)),
         (None, None) => None,
         (start, _) => {
-            return Err(ApiError::invalid(
+            return Err(Error::invalid(
                 if start.is_none() { "start" } else { "goal" },
                 "give both start and goal, or neither",
-            ));
+            )
+            .into());
         }
     };
     let cell_px = query
@@ -816,7 +829,7 @@ async fn image(
                 .ok()
                 .filter(|px| (1..=render::MAX_CELL_PX).contains(px))
                 .ok_or_else(|| {
-                    ApiError::limit_exceeded(
+                    Error::limit_exceeded(
                         "cell_px",
                         render::MAX_CELL_PX as u64,
                         format!(
@@ -850,7 +863,7 @@ async fn image(
         .run("picture", render)
         .await??
         .ok_or_else(|| {
-            ApiError::limit_exceeded(
+            Error::limit_exceeded(
                 "cell_px",
                 render::MAX_SIDE_PX as u64,
                 format!(
@@ -873,18 +886,17 @@ async fn nav2_mask(
     let number = |name: &'static str| {
         query
             .get(name)
-            .map(|text| parse_finite(text).map_err(|e| ApiError::invalid(name, e)))
+            .map(|text| parse_finite(text).map_err(|e| Error::invalid(name, e)))
             .transpose()
     };
-    let threshold = number("threshold")?.ok_or_else(|| {
-        ApiError::invalid("threshold", "the threshold query parameter is required")
-    })?;
+    let threshold = number("threshold")?
+        .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
     let best = number("best")?;
     let kind = query
         .get("mask")
         .map(|text| {
             text.parse::<MaskKind>()
-                .map_err(|e| ApiError::invalid("mask", e))
+                .map_err(|e| Error::invalid("mask", e))
         })
         .transpose()?
         .unwrap_or_default();
@@ -894,7 +906,7 @@ async fn nav2_mask(
         export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
     })
     .await?
-    .map_err(|e| ApiError::invalid(e.field, e.reason))?;
+    .map_err(|e| Error::invalid(e.field, e.reason))?;
     let disposition = format!("attachment; filename=\"{map_id}-{}.tar\"", kind.stem());
     Ok((
         [
@@ -988,11 +1000,12 @@ async fn place(
     let started = Instant::now();
     let keep = request.keep.unwrap_or(DEFAULT_KEEP);
     if keep > MAX_KEEP {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             "keep",
             MAX_KEEP as u64,
             format!("at most {MAX_KEEP} candidates are registered"),
-        ));
+        )
+        .into());
     }
     fetch_scenario(&state, request.scenario_id.as_deref()).await?;
     let (_, scenario, inline) = scenario_of(&state, request.scenario_id, request.scenario, "")?;
@@ -1030,25 +1043,22 @@ async fn place(
         candidates,
         keep,
     };
-    let job = state.jobs().place(
-        state.cache(),
-        checked,
-        caller.owner(),
-        move |s| {
+    let job = state
+        .jobs()
+        .place(state.cache(), checked, caller.owner(), move |s| {
             registrar
                 .register_scenario(s, "api", &owner)
-                .inspect_err(|e| {
-                    tracing::warn!(error = %e.problem.detail, "a placement candidate was not registered")
-                })
+                .inspect_err(
+                    |e| tracing::warn!(error = %e, "a placement candidate was not registered"),
+                )
                 .is_ok()
-        },
-    )?;
+        })?;
     if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells {
         return Ok(accepted(job.view()));
     }
     job.finished().await;
     let outcome = job.placement().ok_or_else(|| {
-        ApiError::build_failed(
+        Error::BuildFailed(
             job.view()
                 .error
                 .unwrap_or_else(|| format!("job {} did not finish", job.id)),
@@ -1065,13 +1075,18 @@ async fn get_placement(
         .jobs()
         .get(&placement_id)
         .filter(|j| matches!(j.work, Work::Placement { .. }))
-        .ok_or_else(|| ApiError::not_found("placement", &placement_id))?;
+        .ok_or_else(|| Error::not_found("placement", &placement_id))?;
     match job.placement() {
         Some(outcome) => Ok(Json(placement_body(&job, &outcome)).into_response()),
-        None if job.state().is_terminal() => {
-            Err(ApiError::job_finished(&job.id, job.view().state.label()))
+        None if job.state().is_terminal() => Err(Error::JobFinished {
+            job_id: job.id.clone(),
+            state: job.view().state.label(),
         }
-        None => Err(ApiError::placement_not_ready(&job.id)),
+        .into()),
+        None => Err(Error::PlacementNotReady {
+            job_id: job.id.clone(),
+        }
+        .into()),
     }
 }
 
@@ -1119,7 +1134,7 @@ async fn get_job(
     {
         return Ok(Json(record.view()));
     }
-    Err(ApiError::not_found("job", &id))
+    Err(Error::not_found("job", &id).into())
 }
 
 async fn cancel_job(
@@ -1134,9 +1149,13 @@ async fn cancel_job(
             .job(&id)
             .await?
             .filter(|r| caller.may_touch(r.owner().as_ref()))
-            .ok_or_else(|| ApiError::not_found("job", &id))?;
+            .ok_or_else(|| Error::not_found("job", &id))?;
         if record.state.is_terminal() {
-            return Err(ApiError::job_finished(&id, record.state.label()));
+            return Err(Error::JobFinished {
+                job_id: id,
+                state: record.state.label(),
+            }
+            .into());
         }
         cluster.request_cancel(&id).await?;
         return Ok((StatusCode::ACCEPTED, Json(record.view())));
@@ -1185,7 +1204,7 @@ async fn map_for_query(
     caller: &Caller,
     map_id: Option<String>,
     map: Option<MapRequest>,
-) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, ApiError> {
+) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, Error> {
     match (map_id, map) {
         (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
         (None, Some(request)) => {
@@ -1195,18 +1214,18 @@ async fn map_for_query(
                 .await?
                 .map(|m| (m, scenario)))
         }
-        _ => Err(ApiError::invalid(
+        _ => Err(Error::invalid(
             "map_id",
             "give exactly one of map_id and map",
         )),
     }
 }
 
-fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], ApiError> {
+fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], Error> {
     if p.iter().all(|v| v.is_finite()) {
         Ok(p)
     } else {
-        Err(ApiError::invalid(field, "coordinates must be finite"))
+        Err(Error::invalid(field, "coordinates must be finite"))
     }
 }
 
@@ -1222,21 +1241,23 @@ async fn plan_path(
     if let Some(draws) = request.monte_carlo_draws
         && (draws == 0 || draws > limit)
     {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             "monte_carlo_draws",
             limit as u64,
             format!("must lie in 1..={limit}"),
-        ));
+        )
+        .into());
     }
     if request
         .seed
         .is_some_and(|seed| seed > MAX_JSON_SAFE_INTEGER)
     {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             "seed",
             MAX_JSON_SAFE_INTEGER,
             "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
-        ));
+        )
+        .into());
     }
     let (format, precision) = path::phase_options(request.phase_format, request.phase_precision)?;
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
@@ -1287,7 +1308,7 @@ async fn plan_path(
                     path::check(&scenario, &map, &path, draws, seed, progress)
                 })
                 .await?
-                .map_err(|e| ApiError::internal(e.to_string()))?;
+                .map_err(|e| Error::internal(e.to_string()))?;
             Some(report)
         }
         _ => None,
@@ -1332,17 +1353,15 @@ async fn sweep(
     let goal = check_point("goal", request.goal)?;
     let limit = state.limits().max_sweep;
     if request.thresholds.is_empty() || request.thresholds.len() > limit {
-        return Err(ApiError::limit_exceeded(
+        return Err(Error::limit_exceeded(
             "thresholds",
             limit as u64,
             format!("give 1 to {limit} thresholds"),
-        ));
+        )
+        .into());
     }
     if let Some(k) = request.thresholds.iter().position(|t| !t.is_finite()) {
-        return Err(ApiError::invalid(
-            format!("thresholds[{k}]"),
-            "must be a finite number",
-        ));
+        return Err(Error::invalid(format!("thresholds[{k}]"), "must be a finite number").into());
     }
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
     let (map, scenario) = match found {
@@ -1359,8 +1378,8 @@ async fn sweep(
     })
     .await?
     .map_err(|e| match e {
-        WorkError::Invalid(e) => ApiError::from(e),
-        WorkError::Cancelled(c) => ApiError::internal(c.to_string()),
+        WorkError::Invalid(e) => Error::from(e),
+        WorkError::Cancelled(c) => Error::internal(c.to_string()),
     })?;
     Ok(Json(Timed::since(started, answer)).into_response())
 }

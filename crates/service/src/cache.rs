@@ -2,9 +2,9 @@
 //! least recently used API scenarios evicted first) and the map cache (moka, bounded by bytes
 //! through a weigher, keyed by the map id = hash of the map key).
 
-use super::auth::{Caller, Owner};
-use super::errors::ApiError;
 use super::store::{DataDir, Kind};
+use crate::app::Error;
+use crate::app::identity::{Caller, Owner};
 use irs_model::planner::{self, Bottlenecks};
 use irs_model::radiomap::RadioMap;
 use irs_model::scenario::{Scenario, hash_hex};
@@ -151,7 +151,7 @@ impl ScenarioRegistry {
         source: &'static str,
         owner: Option<Owner>,
         in_use: impl FnOnce() -> HashSet<String>,
-    ) -> Result<(Arc<StoredScenario>, bool), ApiError> {
+    ) -> Result<(Arc<StoredScenario>, bool), Error> {
         // One canonical form for both the id and the weight (a floor plan's is megabytes).
         let canonical = scenario.canonical_json();
         let id = hash_hex(canonical.as_bytes());
@@ -169,7 +169,7 @@ impl ScenarioRegistry {
             return Ok((existing, false));
         }
         if bytes > self.budget_bytes {
-            return Err(ApiError::registry_full(format!(
+            return Err(Error::RegistryFull(format!(
                 "the scenario takes about {bytes} bytes, more than the registry's whole budget of {} bytes",
                 self.budget_bytes
             )));
@@ -187,7 +187,7 @@ impl ScenarioRegistry {
             while by_id.len() >= self.limit || held + bytes > self.budget_bytes {
                 let Some((_, victim, freed)) = victims.next() else {
                     metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
-                    return Err(ApiError::registry_full(format!(
+                    return Err(Error::RegistryFull(format!(
                         "the registry holds {} scenarios in {held} bytes (limits: {} scenarios, \
                          {} bytes) and cached maps or live jobs need every one",
                         by_id.len(),
@@ -229,22 +229,25 @@ impl ScenarioRegistry {
     /// Removes `caller`'s registration of an API scenario; the scenario goes with its last
     /// registration (true then). Built-in and preloaded files stay (409); a scenario the caller
     /// did not register is not found (404), as if it were not there.
-    pub fn delete(&self, id: &str, caller: &Caller) -> Result<bool, ApiError> {
+    pub fn delete(&self, id: &str, caller: &Caller) -> Result<bool, Error> {
         let mut by_id = self.by_id.write().expect("registry lock");
         let Some(stored) = by_id.get(id) else {
-            return Err(ApiError::not_found("scenario", id));
+            return Err(Error::not_found("scenario", id));
         };
         if stored.source != "api" {
-            return Err(ApiError::scenario_protected(id, stored.source));
+            return Err(Error::ScenarioProtected {
+                id: id.to_string(),
+                origin: stored.source,
+            });
         }
         let gone = {
             let mut owners = stored.owners.lock().expect("owners lock");
             match caller {
                 Caller::Open => true,
-                Caller::Anonymous => return Err(ApiError::not_found("scenario", id)),
+                Caller::Anonymous => return Err(Error::not_found("scenario", id)),
                 Caller::Owner(me) => {
                     if !owners.remove(me) {
-                        return Err(ApiError::not_found("scenario", id));
+                        return Err(Error::not_found("scenario", id));
                     }
                     owners.is_empty()
                 }

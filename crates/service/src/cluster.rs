@@ -22,9 +22,9 @@
 //! the ping succeeds again (the client reconnects by itself).
 
 use super::cache::ScenarioRecord;
-use super::errors::ApiError;
 use super::jobs::JobRecord;
 use super::store;
+use crate::app::Error;
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
 use redis::streams::{
@@ -156,7 +156,7 @@ impl Cluster {
         *state = down;
     }
 
-    fn error(&self, e: &redis::RedisError) -> ApiError {
+    fn error(&self, e: &redis::RedisError) -> Error {
         let reason = format!("Redis: {e}");
         if e.is_io_error()
             || e.is_timeout()
@@ -165,19 +165,19 @@ impl Cluster {
         {
             self.mark(Some(reason.clone()));
         }
-        ApiError::store_unavailable(reason)
+        Error::unavailable(reason)
     }
 
     /// The command connection, or 503 while Redis is down.
-    fn conn(&self) -> Result<ConnectionManager, ApiError> {
+    fn conn(&self) -> Result<ConnectionManager, Error> {
         if let Some(reason) = self.unavailable() {
-            return Err(ApiError::store_unavailable(reason));
+            return Err(Error::unavailable(reason));
         }
         self.commands
             .read()
             .expect("cluster lock")
             .clone()
-            .ok_or_else(|| ApiError::store_unavailable("not connected to Redis yet"))
+            .ok_or_else(|| Error::unavailable("not connected to Redis yet"))
     }
 
     /// Pings Redis forever: connects the first time, creates the consumer group, and keeps
@@ -223,7 +223,7 @@ impl Cluster {
         id: &str,
         record: &ScenarioRecord,
         replace: bool,
-    ) -> Result<(), ApiError> {
+    ) -> Result<(), Error> {
         let mut conn = self.conn()?;
         if !replace {
             let present: bool = conn
@@ -240,7 +240,7 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn scenario(&self, id: &str) -> Result<Option<ScenarioRecord>, ApiError> {
+    pub async fn scenario(&self, id: &str) -> Result<Option<ScenarioRecord>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn
             .get(scenario_key(id))
@@ -249,7 +249,7 @@ impl Cluster {
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn delete_scenario(&self, id: &str) -> Result<(), ApiError> {
+    pub async fn delete_scenario(&self, id: &str) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.del::<_, ()>(scenario_key(id))
             .await
@@ -257,7 +257,7 @@ impl Cluster {
     }
 
     /// Stores a map's encoded bytes, framed with their digest.
-    pub async fn put_map(&self, id: &str, encoded: &[u8]) -> Result<(), ApiError> {
+    pub async fn put_map(&self, id: &str, encoded: &[u8]) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
             .await
@@ -265,7 +265,7 @@ impl Cluster {
     }
 
     /// A map's encoded bytes, if Redis has it and its digest checks out.
-    pub async fn map(&self, id: &str) -> Result<Option<Vec<u8>>, ApiError> {
+    pub async fn map(&self, id: &str) -> Result<Option<Vec<u8>>, Error> {
         let mut conn = self.conn()?;
         let framed: Option<Vec<u8>> = conn.get(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(framed.and_then(|bytes| match store::unframe(&bytes) {
@@ -277,13 +277,13 @@ impl Cluster {
         }))
     }
 
-    pub async fn delete_map(&self, id: &str) -> Result<bool, ApiError> {
+    pub async fn delete_map(&self, id: &str) -> Result<bool, Error> {
         let mut conn = self.conn()?;
         let removed: usize = conn.del(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(removed > 0)
     }
 
-    pub async fn put_job(&self, record: &JobRecord) -> Result<(), ApiError> {
+    pub async fn put_job(&self, record: &JobRecord) -> Result<(), Error> {
         let mut conn = self.conn()?;
         let json = serde_json::to_string(record).expect("records serialise");
         conn.set_ex::<_, _, ()>(job_key(&record.job_id), json, RECORD_TTL_S)
@@ -291,13 +291,13 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn job(&self, id: &str) -> Result<Option<JobRecord>, ApiError> {
+    pub async fn job(&self, id: &str) -> Result<Option<JobRecord>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn request_cancel(&self, id: &str) -> Result<(), ApiError> {
+    pub async fn request_cancel(&self, id: &str) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set_ex::<_, _, ()>(cancel_key(id), 1, RECORD_TTL_S)
             .await
@@ -312,7 +312,7 @@ impl Cluster {
     }
 
     /// The job building `map_id` somewhere in the cluster, if one is.
-    pub async fn building(&self, map_id: &str) -> Result<Option<String>, ApiError> {
+    pub async fn building(&self, map_id: &str) -> Result<Option<String>, Error> {
         let mut conn = self.conn()?;
         conn.get(lock_key(map_id)).await.map_err(|e| self.error(&e))
     }
@@ -326,7 +326,7 @@ impl Cluster {
         key: &MapKey,
         queued: JobRecord,
         queue_limit: usize,
-    ) -> Result<(String, bool), ApiError> {
+    ) -> Result<(String, bool), Error> {
         let mut conn = self.conn()?;
         for _ in 0..3 {
             let existing: Option<String> = conn
@@ -338,7 +338,7 @@ impl Cluster {
             }
             let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
             if waiting >= queue_limit {
-                return Err(ApiError::queue_full(queue_limit));
+                return Err(Error::QueueFull { limit: queue_limit });
             }
             let options = SetOptions::default()
                 .conditional_set(ExistenceCheck::NX)
@@ -374,7 +374,7 @@ impl Cluster {
             }
             return Ok((queued.job_id, true));
         }
-        Err(ApiError::store_unavailable(
+        Err(Error::unavailable(
             "the build lock changed hands three times in a row; retry",
         ))
     }
@@ -531,7 +531,7 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
         Ok(Some(stored)) => stored.scenario.clone(),
         other => {
             let reason = match other {
-                Err(e) => e.problem.detail,
+                Err(e) => e.to_string(),
                 _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
             };
             let _ = cluster
@@ -551,7 +551,7 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
         publisher
             .put_map(&map_id, &encoded)
             .await
-            .map_err(|e| e.problem.detail)
+            .map_err(|e| e.to_string())
     };
     let job = state.jobs().build_shared(
         build.job_id.clone(),

@@ -10,10 +10,10 @@
 //! map as soon as the last of them has it. Cancellation sets the build's flag, which
 //! [`irs_model::radiomap::build`] checks once per grid row.
 
-use super::auth::{Caller, Owner};
 use super::cache::MapCache;
-use super::errors::ApiError;
 use super::store::{DataDir, Kind};
+use crate::app::Error;
+use crate::app::identity::{Caller, Owner};
 use irs_model::placement::{self, Candidate, Placement, Search};
 use irs_model::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
@@ -565,7 +565,7 @@ impl Jobs {
         scenario: Arc<Scenario>,
         key: MapKey,
         owner: Option<Owner>,
-    ) -> Result<MapRequestOutcome, ApiError> {
+    ) -> Result<MapRequestOutcome, Error> {
         let map_id = key.id();
         let mut in_flight = self.in_flight.lock().await;
         if let Some(map) = cache.get(&map_id).await {
@@ -576,7 +576,9 @@ impl Jobs {
         }
         if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
         {
-            return Err(ApiError::queue_full(self.queue_limit));
+            return Err(Error::QueueFull {
+                limit: self.queue_limit,
+            });
         }
         let job = self.admit_map(uuid::Uuid::new_v4().simple().to_string(), &key, owner);
         in_flight.insert(map_id, job.clone());
@@ -661,7 +663,7 @@ impl Jobs {
         search: PlacementSearch,
         owner: Option<Owner>,
         register: impl Fn(Scenario) -> bool + Send + 'static,
-    ) -> Result<Arc<Job>, ApiError> {
+    ) -> Result<Arc<Job>, Error> {
         let PlacementSearch {
             scenario,
             search,
@@ -670,7 +672,9 @@ impl Jobs {
         } = search;
         if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
         {
-            return Err(ApiError::queue_full(self.queue_limit));
+            return Err(Error::QueueFull {
+                limit: self.queue_limit,
+            });
         }
         let job = self.admit(
             scenario.content_hash(),
@@ -868,14 +872,17 @@ impl Jobs {
     }
 
     /// Cancels a queued or running job; a job of another token is not found (404).
-    pub fn cancel(&self, id: &str, caller: &Caller) -> Result<Arc<Job>, ApiError> {
+    pub fn cancel(&self, id: &str, caller: &Caller) -> Result<Arc<Job>, Error> {
         let job = self
             .get(id)
             .filter(|job| caller.may_touch(job.owner.as_ref()))
-            .ok_or_else(|| ApiError::not_found("job", id))?;
+            .ok_or_else(|| Error::not_found("job", id))?;
         let state = job.state();
         if state.is_terminal() {
-            return Err(ApiError::job_finished(id, state.label()));
+            return Err(Error::JobFinished {
+                job_id: id.to_string(),
+                state: state.label(),
+            });
         }
         job.progress.cancel();
         job.cancel.notify_one();

@@ -2,24 +2,23 @@
 //! pool, `tracing` spans per request and per job, Prometheus metrics. The contract is
 //! `openapi.yaml`.
 //!
-//! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `cache` (scenario
-//! registry, map cache and the maps' widest-path indexes), `answers` (path answers kept for
-//! repeated queries), `jobs` (map builds and placement searches), `json` (large answers written
-//! into one buffer, rounded numbers from integers), `queries` (admission
-//! of heavy queries), `auth` (bearer tokens and ownership), `server` (the accept loop and its
-//! timeouts), `store` (the data directory of `--data-dir`), `cluster` (replicas sharing Redis,
-//! `--redis-url`), `errors` (problem+json; [`Problem`]
-//! is the body of every error answer), `viewer` (the built-in map viewer at `/`).
+//! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `http`
+//! (problem+json answers, [`Problem`] being the body of every error answer, authentication at
+//! the door, JSON bodies written into one buffer), `app` (the application's own error type and
+//! identity: tokens, owners, callers), `cache` (scenario registry, map cache and the maps'
+//! widest-path indexes), `answers` (path answers kept for repeated queries), `jobs` (map builds
+//! and placement searches), `queries` (admission of heavy queries), `server` (the accept loop
+//! and its timeouts), `store` (the data directory of `--data-dir`), `cluster` (replicas sharing
+//! Redis, `--redis-url`), `viewer` (the built-in map viewer at `/`).
 
 pub(crate) mod answers;
 pub mod api;
-pub(crate) mod auth;
+pub(crate) mod app;
 pub(crate) mod cache;
 pub(crate) mod cluster;
 pub mod config;
-pub(crate) mod errors;
+pub(crate) mod http;
 pub(crate) mod jobs;
-pub(crate) mod json;
 pub(crate) mod priority;
 pub mod probe;
 pub(crate) mod queries;
@@ -27,17 +26,18 @@ pub(crate) mod server;
 pub(crate) mod store;
 pub(crate) mod viewer;
 
-pub use errors::Problem;
+pub use http::problem::Problem;
 
 use answers::AnswerCache;
-use auth::{Caller, Tokens};
+use app::Error;
+use app::identity::{Caller, Tokens};
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::http::{HeaderValue, Method, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use cache::{MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use config::{LogFormat, ServeArgs};
-use errors::ApiError;
+use http::problem::ApiError;
 use irs_model::scenario::{BUILTIN, Scenario};
 use jobs::Jobs;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
@@ -204,7 +204,7 @@ impl AppState {
         scenario: Scenario,
         source: &'static str,
         caller: &Caller,
-    ) -> Result<(Arc<cache::StoredScenario>, bool), ApiError> {
+    ) -> Result<(Arc<cache::StoredScenario>, bool), Error> {
         self.registry()
             .register(scenario, source, caller.owner(), || {
                 let mut needed = self.cache().scenario_ids();
@@ -228,7 +228,7 @@ impl AppState {
     pub(crate) async fn shared_scenario(
         &self,
         id: &str,
-    ) -> Result<Option<Arc<cache::StoredScenario>>, ApiError> {
+    ) -> Result<Option<Arc<cache::StoredScenario>>, Error> {
         if let Some(stored) = self.registry().get(id) {
             return Ok(Some(stored));
         }
@@ -239,9 +239,9 @@ impl AppState {
             return Ok(None);
         };
         let scenario = Scenario::from_json(&record.document.to_string())
-            .map_err(|e| ApiError::internal(format!("shared scenario {id}: {e}")))?;
+            .map_err(|e| Error::internal(format!("shared scenario {id}: {e}")))?;
         if scenario.content_hash() != id {
-            return Err(ApiError::internal(format!(
+            return Err(Error::internal(format!(
                 "shared scenario {id} has another id in this build"
             )));
         }
@@ -258,7 +258,7 @@ impl AppState {
         &self,
         stored: &cache::StoredScenario,
         replace: bool,
-    ) -> Result<(), ApiError> {
+    ) -> Result<(), Error> {
         match self.cluster() {
             Some(cluster) if stored.source == "api" => {
                 cluster
@@ -274,7 +274,7 @@ impl AppState {
     pub(crate) async fn shared_map(
         &self,
         map_id: &str,
-    ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, ApiError> {
+    ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, Error> {
         if let Some(map) = self.cache().get(map_id).await {
             return Ok(Some(map));
         }
@@ -285,7 +285,7 @@ impl AppState {
             return Ok(None);
         };
         let key = irs_model::radiomap::encoding::peek_key(&encoded)
-            .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
+            .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
         let Some(stored) = self.shared_scenario(&key.scenario_id).await? else {
             return Ok(None);
         };
@@ -294,10 +294,10 @@ impl AppState {
             irs_model::radiomap::encoding::decode(&encoded, &scenario)
         })
         .await
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
+        .map_err(|e| Error::internal(e.to_string()))?
+        .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
         if map.id != map_id {
-            return Err(ApiError::internal(format!(
+            return Err(Error::internal(format!(
                 "shared map {map_id} holds another map"
             )));
         }
@@ -325,7 +325,7 @@ fn registrants(owners: Vec<String>) -> Vec<Caller> {
     }
     owners
         .into_iter()
-        .map(|o| Caller::Owner(auth::Owner::from_digest(o)))
+        .map(|o| Caller::Owner(app::identity::Owner::from_digest(o)))
         .collect()
 }
 
@@ -337,7 +337,7 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
             Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
         state
             .register_scenario(scenario, "builtin", &Caller::Open)
-            .map_err(|e| e.problem.detail)?;
+            .map_err(|e| e.to_string())?;
     }
     let Ok(entries) = std::fs::read_dir(dir) else {
         tracing::info!(dir = %dir.display(), "no scenarios directory; serving the built-in scenarios");
@@ -354,7 +354,7 @@ pub fn preload(state: &AppState, dir: &std::path::Path) -> Result<(), String> {
             Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let (stored, created) = state
             .register_scenario(scenario, "file", &Caller::Open)
-            .map_err(|e| e.problem.detail)?;
+            .map_err(|e| e.to_string())?;
         tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
     }
     Ok(())
@@ -384,7 +384,7 @@ pub fn restore(state: &AppState) {
         };
         for owner in registrants(record.owners) {
             if let Err(e) = state.register_scenario(scenario.clone(), "api", &owner) {
-                tracing::warn!(scenario_id = %id, error = %e.problem.detail, "recorded scenario not registered");
+                tracing::warn!(scenario_id = %id, error = %e, "recorded scenario not registered");
             }
         }
         scenarios += 1;
@@ -415,7 +415,7 @@ pub fn app(state: AppState) -> axum::Router {
         .fallback(route_not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(max_body))
-        .layer(middleware::from_fn_with_state(state.clone(), auth::authenticate))
+        .layer(middleware::from_fn_with_state(state.clone(), http::auth::authenticate))
         .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
         // gzip or brotli when the client accepts it (a 577k-cell map body is 10.9 MB of JSON);
         // tower-http's default predicate leaves PNGs and tiny bodies alone.

@@ -10,7 +10,7 @@
 //! flag, which sweeps check per threshold and Monte Carlo checks per waypoint. The worker's
 //! permit is held by the work itself, so a cancelled query still counts until it has stopped.
 
-use super::errors::ApiError;
+use crate::app::Error;
 use irs_model::radiomap::Progress;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -71,14 +71,18 @@ impl QueryPool {
         &self,
         what: &'static str,
         work: impl FnOnce(&Progress) -> T + Send + 'static,
-    ) -> Result<T, ApiError> {
+    ) -> Result<T, Error> {
         let permit = match self.permits.clone().try_acquire_owned() {
             Ok(permit) => permit,
             Err(_) => {
                 if self.waiting.fetch_add(1, Ordering::SeqCst) >= self.queue_limit {
                     self.waiting.fetch_sub(1, Ordering::SeqCst);
                     metrics::counter!("irs_queries_refused_total", "what" => what).increment(1);
-                    return Err(ApiError::busy(what, self.queue_limit, RETRY_AFTER_S));
+                    return Err(Error::Busy {
+                        what,
+                        limit: self.queue_limit,
+                        retry_after_s: RETRY_AFTER_S,
+                    });
                 }
                 metrics::gauge!("irs_queries_waiting").increment(1.0);
                 let _waiting = Waiting(&self.waiting);
@@ -86,7 +90,7 @@ impl QueryPool {
                     .clone()
                     .acquire_owned()
                     .await
-                    .map_err(|e| ApiError::internal(format!("query pool closed: {e}")))?
+                    .map_err(|e| Error::internal(format!("query pool closed: {e}")))?
             }
         };
         let progress = Arc::new(Progress::default());
@@ -102,8 +106,8 @@ impl QueryPool {
         guard.0 = None;
         match answer {
             Ok(Ok(answer)) => Ok(answer),
-            Ok(Err(_)) => Err(ApiError::internal(format!("the {what} failed"))),
-            Err(_) => Err(ApiError::internal(format!("the {what} worker stopped"))),
+            Ok(Err(_)) => Err(Error::internal(format!("the {what} failed"))),
+            Err(_) => Err(Error::internal(format!("the {what} worker stopped"))),
         }
     }
 }

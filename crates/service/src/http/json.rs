@@ -7,22 +7,23 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use std::time::Instant;
 
-use super::errors::ApiError;
+use super::problem::ApiError;
 
 /// `value` serialised into one buffer of about `capacity` bytes (sized by the caller so it is not
 /// regrown and copied on the way to hundreds of kilobytes).
-pub(super) fn serialize_sized(
+pub(crate) fn serialize_sized(
     value: &impl Serialize,
     capacity: usize,
 ) -> Result<Vec<u8>, ApiError> {
     let mut body = Vec::with_capacity(capacity);
-    serde_json::to_writer(&mut body, value).map_err(|e| ApiError::internal(e.to_string()))?;
+    serde_json::to_writer(&mut body, value)
+        .map_err(|e| ApiError::from(crate::app::Error::internal(e.to_string())))?;
     Ok(body)
 }
 
 /// A JSON answer from `open`, an object's text without its closing brace, closed with
 /// `took_ms` (the milliseconds since `started`, to the microsecond) as its last field.
-pub(super) fn with_took_ms(open: &[u8], started: Instant) -> Response {
+pub(crate) fn with_took_ms(open: &[u8], started: Instant) -> Response {
     let took_ms = started.elapsed().as_micros() as f64 / 1e3;
     let mut body = Vec::with_capacity(open.len() + 32);
     body.extend_from_slice(open);
@@ -32,6 +33,6 @@ pub(super) fn with_took_ms(open: &[u8], started: Instant) -> Response {
             body.push(b'}');
             ([(header::CONTENT_TYPE, "application/json")], body).into_response()
         }
-        Err(e) => ApiError::internal(e.to_string()).into_response(),
+        Err(e) => ApiError::from(crate::app::Error::internal(e.to_string())).into_response(),
     }
 }

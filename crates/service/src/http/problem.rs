@@ -1,8 +1,11 @@
 //! Every 4xx/5xx answer as RFC 9457 `application/problem+json`: a machine `type` and `code`, a
 //! `title`, the `status`, a human `detail`, and the offending `field` (and `limit`) where there
-//! is one. [`parse_json`] backs the API's JSON extractor so malformed bodies, unknown fields and
-//! oversized bodies get the same treatment.
+//! is one. The application's errors ([`app::Error`]) become problems here and only here; the
+//! errors of the transport itself (a malformed or oversized body, an unknown route, a request
+//! timeout) are built here directly. [`parse_json`] backs the API's JSON extractor so malformed
+//! bodies, unknown fields and oversized bodies get the same treatment.
 
+use crate::app;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use irs_model::input::FieldError;
@@ -62,6 +65,10 @@ impl ApiError {
         self.problem.limit = Some(limit);
         self
     }
+    fn with_job(mut self, job_id: String) -> Self {
+        self.problem.job_id = Some(job_id);
+        self
+    }
 
     pub fn malformed_json(detail: impl Into<String>) -> Self {
         Self::new(
@@ -70,37 +77,6 @@ impl ApiError {
             "Malformed JSON body",
             detail,
         )
-    }
-    pub fn invalid(field: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "invalid_field",
-            "Invalid field",
-            detail,
-        )
-        .with_field(field)
-    }
-    /// A scenario document that failed validation (its own problem code, so clients can tell a
-    /// bad floor from a bad request parameter).
-    pub fn invalid_scenario(error: FieldError) -> Self {
-        let detail = error.to_string();
-        Self::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "invalid_scenario",
-            "Invalid scenario",
-            detail,
-        )
-        .with_field(error.field)
-    }
-    pub fn limit_exceeded(field: impl Into<String>, limit: u64, detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "limit_exceeded",
-            "Limit exceeded",
-            detail,
-        )
-        .with_field(field)
-        .with_limit(limit)
     }
     pub fn body_too_large(limit: u64) -> Self {
         Self::new(
@@ -119,14 +95,6 @@ impl ApiError {
             detail,
         )
     }
-    pub fn not_found(what: &'static str, id: &str) -> Self {
-        Self::new(
-            StatusCode::NOT_FOUND,
-            "not_found",
-            "Not found",
-            format!("no {what} with id {id:?}"),
-        )
-    }
     pub fn route_not_found(path: &str) -> Self {
         Self::new(
             StatusCode::NOT_FOUND,
@@ -143,112 +111,6 @@ impl ApiError {
             "this route does not take that method",
         )
     }
-    pub fn map_not_ready(map_id: &str, job_id: &str) -> Self {
-        let mut e = Self::new(
-            StatusCode::CONFLICT,
-            "map_not_ready",
-            "Map not ready",
-            format!("map {map_id} is being built by job {job_id}; poll /v1/jobs/{job_id}"),
-        );
-        e.problem.job_id = Some(job_id.to_string());
-        e
-    }
-    pub fn placement_not_ready(job_id: &str) -> Self {
-        let mut e = Self::new(
-            StatusCode::CONFLICT,
-            "placement_not_ready",
-            "Placement not ready",
-            format!("placement {job_id} is still running; poll /v1/jobs/{job_id}"),
-        );
-        e.problem.job_id = Some(job_id.to_string());
-        e
-    }
-    pub fn scenario_protected(id: &str, source: &str) -> Self {
-        Self::new(
-            StatusCode::CONFLICT,
-            "scenario_protected",
-            "Scenario is part of the configuration",
-            format!(
-                "scenario {id} comes from the server's {source} scenarios and cannot be deleted"
-            ),
-        )
-    }
-    pub fn scenario_in_use(id: &str, job_id: &str) -> Self {
-        let mut e = Self::new(
-            StatusCode::CONFLICT,
-            "scenario_in_use",
-            "Scenario in use",
-            format!("job {job_id} is building a map of scenario {id}; cancel it or wait"),
-        );
-        e.problem.job_id = Some(job_id.to_string());
-        e
-    }
-    pub fn job_finished(job_id: &str, state: &str) -> Self {
-        Self::new(
-            StatusCode::CONFLICT,
-            "job_finished",
-            "Job already finished",
-            format!("job {job_id} is already {state}"),
-        )
-    }
-    pub fn internal(detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "internal_error",
-            "Internal error",
-            detail,
-        )
-    }
-    pub fn build_failed(detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "build_failed",
-            "Map build failed",
-            detail,
-        )
-    }
-    pub fn queue_full(limit: usize) -> Self {
-        let mut e = Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "queue_full",
-            "Job queue full",
-            format!("{limit} map builds are already waiting for a worker; retry later"),
-        )
-        .with_limit(limit as u64);
-        e.retry_after_s = Some(5);
-        e
-    }
-    pub fn registry_full(detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::INSUFFICIENT_STORAGE,
-            "registry_full",
-            "Scenario registry full",
-            detail,
-        )
-    }
-    /// Heavy queries are all taken and `limit` more wait: come back in `retry_after_s`.
-    pub fn busy(what: &str, limit: usize, retry_after_s: u64) -> Self {
-        let mut e = Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "busy",
-            "Server busy",
-            format!(
-                "every query worker is busy and {limit} heavy queries already wait; this {what} \
-                 was not started: retry later"
-            ),
-        )
-        .with_limit(limit as u64);
-        e.retry_after_s = Some(retry_after_s);
-        e
-    }
-    pub fn unauthorized(detail: impl Into<String>) -> Self {
-        Self::new(
-            StatusCode::UNAUTHORIZED,
-            "unauthorized",
-            "Unauthorized",
-            detail,
-        )
-    }
     /// The request as a whole took longer than the server's request timeout.
     pub fn request_timeout(seconds: u64) -> Self {
         let mut e = Self::new(
@@ -261,20 +123,6 @@ impl ApiError {
             ),
         )
         .with_limit(seconds);
-        e.retry_after_s = Some(1);
-        e
-    }
-    /// The shared store (Redis, `--redis-url`) cannot be used now; the replica retries by itself.
-    pub fn store_unavailable(detail: impl Into<String>) -> Self {
-        let mut e = Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "store_unavailable",
-            "Shared store unavailable",
-            format!(
-                "{}; maps this replica holds still answer, everything else needs the shared store: retry shortly",
-                detail.into()
-            ),
-        );
         e.retry_after_s = Some(1);
         e
     }
@@ -304,7 +152,138 @@ impl ApiError {
 /// A request field the engine rejected: 422 `invalid_field` naming it.
 impl From<FieldError> for ApiError {
     fn from(error: FieldError) -> Self {
-        ApiError::invalid(error.field, error.reason)
+        app::Error::from(error).into()
+    }
+}
+
+/// The one mapping of the application's errors to problems: status, code, title, the field
+/// and limit they name, and `Retry-After` where waiting helps. The detail is the error's text.
+impl From<app::Error> for ApiError {
+    fn from(error: app::Error) -> Self {
+        use app::Error as E;
+        let detail = error.to_string();
+        match error {
+            E::NotFound { field, .. } => {
+                let mut e = Self::new(StatusCode::NOT_FOUND, "not_found", "Not found", detail);
+                e.problem.field = field;
+                e
+            }
+            E::Invalid { field, .. } => Self::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_field",
+                "Invalid field",
+                detail,
+            )
+            .with_field(field),
+            E::InvalidScenario(error) => Self::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_scenario",
+                "Invalid scenario",
+                detail,
+            )
+            .with_field(error.field),
+            E::LimitExceeded { field, limit, .. } => Self::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "limit_exceeded",
+                "Limit exceeded",
+                detail,
+            )
+            .with_field(field)
+            .with_limit(limit),
+            E::QueueFull { limit } => {
+                let mut e = Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "queue_full",
+                    "Job queue full",
+                    detail,
+                )
+                .with_limit(limit as u64);
+                e.retry_after_s = Some(5);
+                e
+            }
+            E::Busy {
+                limit,
+                retry_after_s,
+                ..
+            } => {
+                let mut e = Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "busy",
+                    "Server busy",
+                    detail,
+                )
+                .with_limit(limit as u64);
+                e.retry_after_s = Some(retry_after_s);
+                e
+            }
+            E::Unavailable { .. } => {
+                let mut e = Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "store_unavailable",
+                    "Shared store unavailable",
+                    detail,
+                );
+                e.retry_after_s = Some(1);
+                e
+            }
+            E::RegistryFull(_) => Self::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "registry_full",
+                "Scenario registry full",
+                detail,
+            ),
+            E::ScenarioProtected { .. } => Self::new(
+                StatusCode::CONFLICT,
+                "scenario_protected",
+                "Scenario is part of the configuration",
+                detail,
+            ),
+            E::ScenarioInUse { job_id, .. } => Self::new(
+                StatusCode::CONFLICT,
+                "scenario_in_use",
+                "Scenario in use",
+                detail,
+            )
+            .with_job(job_id),
+            E::MapNotReady { job_id, .. } => Self::new(
+                StatusCode::CONFLICT,
+                "map_not_ready",
+                "Map not ready",
+                detail,
+            )
+            .with_job(job_id),
+            E::PlacementNotReady { job_id } => Self::new(
+                StatusCode::CONFLICT,
+                "placement_not_ready",
+                "Placement not ready",
+                detail,
+            )
+            .with_job(job_id),
+            E::JobFinished { .. } => Self::new(
+                StatusCode::CONFLICT,
+                "job_finished",
+                "Job already finished",
+                detail,
+            ),
+            E::BuildFailed(_) => Self::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "build_failed",
+                "Map build failed",
+                detail,
+            ),
+            E::Unauthorized(_) => Self::new(
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "Unauthorized",
+                detail,
+            ),
+            E::Internal(_) => Self::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "internal_error",
+                "Internal error",
+                detail,
+            ),
+        }
     }
 }
 
@@ -348,9 +327,10 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         serde_json::from_slice(bytes).map_err(|e| ApiError::malformed_json(e.to_string()))?;
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
-        ApiError::invalid(
+        app::Error::invalid(
             if path == "." { "$".to_string() } else { path },
             e.into_inner().to_string(),
         )
+        .into()
     })
 }

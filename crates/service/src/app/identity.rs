@@ -1,4 +1,6 @@
-//! Bearer-token authentication and ownership (off unless tokens are configured).
+//! Identity: bearer tokens and ownership (off unless tokens are configured). Who a request's
+//! caller is ([`Tokens::caller`]) is decided here; `http::auth` only reads the header and turns
+//! a refusal into a 401.
 //!
 //! With tokens set (`--api-tokens`, `--api-tokens-file`), every `POST` and `DELETE` needs
 //! `Authorization: Bearer <token>` (401 otherwise): they start builds and searches, register
@@ -10,12 +12,7 @@
 //! A token is never stored in a record or a log: an owner is named by the first 16 hex digits
 //! of the token's SHA-256.
 
-use super::AppState;
-use super::errors::ApiError;
-use axum::extract::{FromRequestParts, Request, State};
-use axum::http::{Method, header, request::Parts};
-use axum::middleware::Next;
-use axum::response::{IntoResponse, Response};
+use super::Error;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::path::Path;
@@ -101,6 +98,38 @@ impl Tokens {
     pub fn count(&self) -> usize {
         self.owners.len()
     }
+
+    /// The caller presenting `authorization` (the header's value, if any) for a request that
+    /// `writes` or only reads. Refused: a token this server does not accept, and a write
+    /// without a token while authentication is on.
+    pub fn caller(&self, authorization: Option<&str>, writes: bool) -> Result<Caller, Error> {
+        if !self.enabled() {
+            return Ok(Caller::Open);
+        }
+        let caller = match authorization {
+            None => Caller::Anonymous,
+            Some(value) => {
+                let token = value
+                    .strip_prefix("Bearer ")
+                    .or_else(|| value.strip_prefix("bearer "));
+                match token.and_then(|t| self.owners.get(t.trim())) {
+                    Some(owner) => Caller::Owner(owner.clone()),
+                    None => {
+                        metrics::counter!("irs_auth_failures_total").increment(1);
+                        return Err(Error::Unauthorized(
+                            "the bearer token is not one this server accepts".into(),
+                        ));
+                    }
+                }
+            }
+        };
+        if writes && caller == Caller::Anonymous {
+            return Err(Error::Unauthorized(
+                "this server requires a bearer token for POST and DELETE: send Authorization: Bearer <token>".into(),
+            ));
+        }
+        Ok(caller)
+    }
 }
 
 /// Who is calling, as the handlers see it.
@@ -132,63 +161,4 @@ impl Caller {
             Caller::Owner(me) => owner == Some(me),
         }
     }
-}
-
-impl<S: Send + Sync> FromRequestParts<S> for Caller {
-    type Rejection = std::convert::Infallible;
-
-    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, Self::Rejection> {
-        Ok(parts
-            .extensions
-            .get::<Caller>()
-            .cloned()
-            .unwrap_or(Caller::Open))
-    }
-}
-
-/// Middleware: resolves the caller from `Authorization` and refuses unauthenticated writes.
-pub(crate) async fn authenticate(
-    State(state): State<AppState>,
-    mut request: Request,
-    next: Next,
-) -> Response {
-    let tokens = state.tokens();
-    if !tokens.enabled() {
-        request.extensions_mut().insert(Caller::Open);
-        return next.run(request).await;
-    }
-    let presented = request
-        .headers()
-        .get(header::AUTHORIZATION)
-        .map(|v| v.to_str().unwrap_or(""));
-    let caller = match presented {
-        None => Caller::Anonymous,
-        Some(value) => {
-            let token = value
-                .strip_prefix("Bearer ")
-                .or_else(|| value.strip_prefix("bearer "));
-            match token.and_then(|t| tokens.owners.get(t.trim())) {
-                Some(owner) => Caller::Owner(owner.clone()),
-                None => {
-                    metrics::counter!("irs_auth_failures_total").increment(1);
-                    return ApiError::unauthorized(
-                        "the bearer token is not one this server accepts",
-                    )
-                    .into_response();
-                }
-            }
-        }
-    };
-    let writes = matches!(
-        *request.method(),
-        Method::POST | Method::DELETE | Method::PUT | Method::PATCH
-    );
-    if writes && caller == Caller::Anonymous {
-        return ApiError::unauthorized(
-            "this server requires a bearer token for POST and DELETE: send Authorization: Bearer <token>",
-        )
-        .into_response();
-    }
-    request.extensions_mut().insert(caller);
-    next.run(request).await
 }
