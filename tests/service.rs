@@ -241,7 +241,7 @@ fn openapi_query_patterns_are_the_servers_number_grammar() {
 
 #[tokio::test]
 async fn openapi_paths_are_exactly_the_served_routes() {
-    let mut served: Vec<(String, String)> = irs_service::api::route_table()
+    let mut served: Vec<(String, String)> = irs_service::http::route_table()
         .into_iter()
         .flat_map(|(path, methods, _)| {
             methods

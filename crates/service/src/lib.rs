@@ -2,9 +2,9 @@
 //! pool, `tracing` spans per request and per job, Prometheus metrics. The contract is
 //! `openapi.yaml`.
 //!
-//! Layout: [`config`] (flags and environment), [`api`] (routes and handlers), `http`
-//! (problem+json answers, [`Problem`] being the body of every error answer, authentication at
-//! the door, JSON bodies written into one buffer), `app` (the application's own error type and
+//! Layout: [`config`] (flags and environment), [`http`] (the route table, one module of
+//! handlers per resource, the middleware stack, problem+json answers with [`Problem`] the body
+//! of every error answer, authentication at the door), `app` (the application's own error type and
 //! identity: tokens, owners, callers), `cache` (scenario registry, map cache and the maps'
 //! widest-path indexes), `answers` (path answers kept for repeated queries), `jobs` (map builds
 //! and placement searches), `queries` (admission of heavy queries), `server` (the accept loop
@@ -12,12 +12,12 @@
 //! Redis, `--redis-url`), `viewer` (the built-in map viewer at `/`).
 
 pub(crate) mod answers;
-pub mod api;
+
 pub(crate) mod app;
 pub(crate) mod cache;
 pub(crate) mod cluster;
 pub mod config;
-pub(crate) mod http;
+pub mod http;
 pub(crate) mod jobs;
 pub(crate) mod priority;
 pub mod probe;
@@ -31,13 +31,9 @@ pub use http::problem::Problem;
 use answers::AnswerCache;
 use app::Error;
 use app::identity::{Caller, Tokens};
-use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
-use axum::http::{HeaderValue, Method, header};
-use axum::middleware::{self, Next};
-use axum::response::{IntoResponse, Response};
+use axum::http::HeaderValue;
 use cache::{MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use config::{LogFormat, ServeArgs};
-use http::problem::ApiError;
 use irs_model::scenario::{BUILTIN, Scenario};
 use jobs::Jobs;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
@@ -45,11 +41,6 @@ use queries::QueryPool;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use tower::ServiceBuilder;
-use tower_http::compression::CompressionLayer;
-use tower_http::cors::{AllowOrigin, CorsLayer};
-use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
-use tower_http::trace::TraceLayer;
 
 /// Request limits, from the configuration.
 #[derive(Debug, Clone)]
@@ -69,10 +60,6 @@ pub(crate) struct Limits {
     /// (`--queue` + `--workers` of this replica: the same bound one replica alone has).
     pub cluster_queue: usize,
 }
-
-/// Longest `x-request-id` taken from a client (a UUID is 36 characters); a longer one, or one
-/// with characters outside `[A-Za-z0-9._:-]`, is replaced by a fresh UUID so logs stay clean.
-const MAX_REQUEST_ID_CHARS: usize = 64;
 
 /// Shared state of the handlers.
 #[derive(Clone)]
@@ -196,6 +183,10 @@ impl AppState {
     }
     pub(crate) fn tokens(&self) -> &Tokens {
         &self.inner.tokens
+    }
+    /// The origins allowed by CORS (`--cors-origin`); none: no CORS headers at all.
+    pub(crate) fn cors_origins(&self) -> &[HeaderValue] {
+        &self.inner.cors_origins
     }
     /// Registers a scenario for `caller`, evicting the least recently used unneeded ones if the
     /// registry is full (see [`ScenarioRegistry`]).
@@ -398,103 +389,6 @@ pub async fn warm_from_disk(state: &AppState) {
     state.cache().warm(state.limits().cache_bytes).await;
 }
 
-/// The full application: routes, fallbacks, metrics, authentication, the request timeout,
-/// request ids, tracing, CORS (only when origins are configured) and the body limit.
-pub fn app(state: AppState) -> axum::Router {
-    let max_body = state.limits().max_body_bytes;
-    let cors = (!state.inner.cors_origins.is_empty()).then(|| {
-        CorsLayer::new()
-            .allow_origin(AllowOrigin::list(state.inner.cors_origins.clone()))
-            .allow_methods([Method::GET, Method::POST, Method::DELETE])
-            .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION, header::ACCEPT])
-            .expose_headers([header::LOCATION, header::RETRY_AFTER])
-            .max_age(Duration::from_secs(600))
-    });
-    let router = api::router()
-        .route_layer(middleware::from_fn(track_metrics))
-        .fallback(route_not_found)
-        .method_not_allowed_fallback(method_not_allowed)
-        .layer(DefaultBodyLimit::max(max_body))
-        .layer(middleware::from_fn_with_state(state.clone(), http::auth::authenticate))
-        .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
-        // gzip or brotli when the client accepts it (a 577k-cell map body is 10.9 MB of JSON);
-        // tower-http's default predicate leaves PNGs and tiny bodies alone.
-        .layer(CompressionLayer::new())
-        .layer(
-            ServiceBuilder::new()
-                .layer(middleware::from_fn(clean_request_id))
-                .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
-                .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
-                    let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
-                    tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %request_id)
-                }))
-                .layer(PropagateRequestIdLayer::x_request_id()),
-        );
-    let router = match cors {
-        Some(cors) => router.layer(cors),
-        None => router,
-    };
-    router.with_state(state)
-}
-
-/// Drops a client's `x-request-id` that is too long or has characters that do not belong in a
-/// log line; [`SetRequestIdLayer`] then gives the request a fresh UUID.
-async fn clean_request_id(mut req: Request, next: Next) -> Response {
-    let acceptable = |v: &HeaderValue| {
-        let bytes = v.as_bytes();
-        !bytes.is_empty()
-            && bytes.len() <= MAX_REQUEST_ID_CHARS
-            && bytes
-                .iter()
-                .all(|b| b.is_ascii_alphanumeric() || b"._:-".contains(b))
-    };
-    if req
-        .headers()
-        .get("x-request-id")
-        .is_some_and(|v| !acceptable(v))
-    {
-        req.headers_mut().remove("x-request-id");
-    }
-    next.run(req).await
-}
-
-/// Answers 503 when a request takes longer than the request timeout (the handler's future is
-/// dropped, which cancels its heavy query, see `queries`).
-async fn request_timeout(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let limit = state.limits().request_timeout;
-    match tokio::time::timeout(limit, next.run(req)).await {
-        Ok(response) => response,
-        Err(_) => {
-            metrics::counter!("irs_request_timeouts_total").increment(1);
-            ApiError::request_timeout(limit.as_secs()).into_response()
-        }
-    }
-}
-
-async fn route_not_found(State(_): State<AppState>, req: Request) -> Response {
-    metrics::counter!("http_requests_total", "route" => "unmatched", "method" => req.method().to_string(), "status" => "404").increment(1);
-    ApiError::route_not_found(req.uri().path()).into_response()
-}
-
-async fn method_not_allowed() -> Response {
-    ApiError::method_not_allowed().into_response()
-}
-
-async fn track_metrics(req: Request, next: Next) -> Response {
-    let started = Instant::now();
-    let route = req
-        .extensions()
-        .get::<MatchedPath>()
-        .map_or("unmatched".to_string(), |m| m.as_str().to_string());
-    let method = req.method().to_string();
-    let response = next.run(req).await;
-    let status = response.status().as_u16().to_string();
-    metrics::counter!("http_requests_total", "route" => route.clone(), "method" => method, "status" => status).increment(1);
-    metrics::histogram!("http_request_duration_seconds", "route" => route)
-        .record(started.elapsed().as_secs_f64());
-    response
-}
-
 fn init_tracing(format: LogFormat) {
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env()
@@ -649,7 +543,7 @@ pub fn run(args: ServeArgs) -> Result<(), ServeError> {
             tracing::info!(replica = %cluster.replica, "sharing scenarios, maps and jobs through Redis");
         }
         let stopping = state.clone();
-        let connections = server::serve(listener, app(state.clone()), limits, async move {
+        let connections = server::serve(listener, http::app(state.clone()), limits, async move {
             shutdown_signal().await;
             stopping.set_ready(false);
         })

@@ -1,7 +1,372 @@
-//! The HTTP layer: problem+json answers ([`problem`]) and authentication at the door
-//! ([`auth`]). Handlers parse a request, call the application and render its answer; the
-//! application's errors become problems only here.
+//! The HTTP layer: the route table (the contract is `openapi.yaml`) and one module per resource
+//! ([`scenarios`], [`maps`], [`paths`] with sweeps and coverage, [`exports`], [`jobs`],
+//! [`placements`], [`ops`] for health, readiness, version and metrics). A handler parses its
+//! request, calls the application and renders the answer; all physics lives in the library
+//! crates. Also here: the JSON body extractor, listings' pages, problem+json answers
+//! ([`problem`], where the application's errors become problems) and authentication at the door
+//! ([`auth`]).
 
 pub(crate) mod auth;
+mod exports;
+mod jobs;
 pub(crate) mod json;
+mod maps;
+mod ops;
+mod paths;
+mod placements;
 pub(crate) mod problem;
+mod scenarios;
+
+use crate::AppState;
+use crate::app::Error;
+use crate::jobs::JobView;
+use axum::extract::{DefaultBodyLimit, MatchedPath, State};
+use axum::extract::{FromRequest, Request};
+use axum::http::{HeaderValue, Method};
+use axum::http::{StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{MethodRouter, delete, get, post};
+use axum::{Json, Router};
+use irs_model::radiomap::Progress;
+use problem::{ApiError, parse_json};
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+use tower::ServiceBuilder;
+use tower_http::compression::CompressionLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::trace::TraceLayer;
+
+/// Every route: path, methods, handler. The router is built from this table and a test checks
+/// it against `openapi.yaml`.
+pub fn route_table() -> Vec<(
+    &'static str,
+    &'static [&'static str],
+    MethodRouter<AppState>,
+)> {
+    vec![
+        ("/", &["get"], get(crate::viewer::index)),
+        ("/viewer/viewer.js", &["get"], get(crate::viewer::script)),
+        ("/viewer/viewer.css", &["get"], get(crate::viewer::style)),
+        ("/healthz", &["get"], get(ops::healthz)),
+        ("/readyz", &["get"], get(ops::readyz)),
+        ("/version", &["get"], get(ops::version)),
+        ("/metrics", &["get"], get(ops::metrics_text)),
+        (
+            "/v1/scenarios",
+            &["get", "post"],
+            get(scenarios::list_scenarios).post(scenarios::register_scenario),
+        ),
+        (
+            "/v1/scenarios/{scenario_id}",
+            &["get", "delete"],
+            get(scenarios::get_scenario).delete(scenarios::delete_scenario),
+        ),
+        (
+            "/v1/maps",
+            &["get", "post"],
+            get(maps::list_maps).post(maps::request_map),
+        ),
+        (
+            "/v1/maps/{map_id}",
+            &["get", "delete"],
+            get(maps::get_map).delete(maps::delete_map),
+        ),
+        ("/v1/maps/{map_id}/coverage", &["get"], get(paths::coverage)),
+        ("/v1/maps/{map_id}/image.png", &["get"], get(exports::image)),
+        (
+            "/v1/maps/{map_id}/nav2-mask",
+            &["get"],
+            get(exports::nav2_mask),
+        ),
+        (
+            "/v1/maps/{map_id}/values.npy",
+            &["get"],
+            get(exports::values_npy),
+        ),
+        ("/v1/jobs", &["get"], get(jobs::list_jobs)),
+        (
+            "/v1/jobs/{job_id}",
+            &["get", "delete"],
+            get(jobs::get_job).merge(delete(jobs::cancel_job)),
+        ),
+        ("/v1/placements", &["post"], post(placements::place)),
+        (
+            "/v1/placements/{placement_id}",
+            &["get"],
+            get(placements::get_placement),
+        ),
+        ("/v1/paths", &["post"], post(paths::plan_path)),
+        ("/v1/sweeps", &["post"], post(paths::sweep)),
+    ]
+}
+
+pub fn router() -> Router<AppState> {
+    route_table()
+        .into_iter()
+        .fold(Router::new(), |r, (path, _, handler)| {
+            r.route(path, handler)
+        })
+}
+
+/// The JSON body extractor of this API: strict parsing, problem+json on every failure, and the
+/// configured body limit named in the 413.
+pub(crate) struct Body<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+        let Some(ct) = req.headers().get(header::CONTENT_TYPE) else {
+            return Err(ApiError::unsupported_media_type(
+                "the body must be JSON: send Content-Type: application/json",
+            ));
+        };
+        let ct = ct.to_str().unwrap_or("");
+        let essence = ct
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        if essence != "application/json" && !essence.ends_with("+json") {
+            return Err(ApiError::unsupported_media_type(format!(
+                "expected application/json, got {ct:?}"
+            )));
+        }
+        let limit = state.limits().max_body_bytes;
+        let timeout = state.limits().body_timeout;
+        let read = axum::body::Bytes::from_request(req, state);
+        let bytes = tokio::time::timeout(timeout, read)
+            .await
+            .map_err(|_| ApiError::body_timeout(timeout.as_secs()))?
+            .map_err(|rejection| {
+                if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::body_too_large(limit as u64)
+                } else {
+                    ApiError::malformed_json(rejection.body_text())
+                }
+            })?;
+        parse_json(&bytes).map(Body)
+    }
+}
+
+/// Items per page of a listing when the client does not say, and at most.
+const DEFAULT_PAGE: usize = 100;
+const MAX_PAGE: usize = 1000;
+
+/// A listing's `limit` and `cursor` query parameters (the cursor is the `next_cursor` of the
+/// page before: the key of its last item).
+struct Page {
+    limit: usize,
+    cursor: Option<String>,
+}
+
+impl Page {
+    fn of(query: &HashMap<String, String>) -> Result<Page, Error> {
+        only_query(query, &["limit", "cursor"])?;
+        let limit = match query.get("limit") {
+            None => DEFAULT_PAGE,
+            Some(text) => text
+                .parse::<usize>()
+                .ok()
+                .filter(|n| (1..=MAX_PAGE).contains(n))
+                .ok_or_else(|| {
+                    Error::limit_exceeded(
+                        "limit",
+                        MAX_PAGE as u64,
+                        format!("must be a whole number from 1 to {MAX_PAGE}"),
+                    )
+                })?,
+        };
+        let cursor = query.get("cursor").cloned();
+        if let Some(c) = &cursor
+            && (c.is_empty() || c.len() > 128 || !c.bytes().all(|b| b.is_ascii_alphanumeric()))
+        {
+            return Err(Error::invalid(
+                "cursor",
+                "not a cursor this server gave: use a listing's next_cursor",
+            ));
+        }
+        Ok(Page { limit, cursor })
+    }
+
+    /// The page of `items` (in listing order, each with its key) after the cursor, and the
+    /// cursor of the next page if there is one. `after(key, cursor)` tells whether an item
+    /// comes after the cursor in listing order.
+    fn cut<T>(
+        &self,
+        items: Vec<(String, T)>,
+        after: impl Fn(&str, &str) -> bool,
+    ) -> (Vec<T>, Option<String>) {
+        let mut rest = items
+            .into_iter()
+            .filter(|(key, _)| self.cursor.as_deref().is_none_or(|c| after(key, c)));
+        let page: Vec<(String, T)> = rest.by_ref().take(self.limit).collect();
+        let next = match rest.next() {
+            Some(_) => page.last().map(|(key, _)| key.clone()),
+            None => None,
+        };
+        (page.into_iter().map(|(_, item)| item).collect(), next)
+    }
+}
+
+/// Refuses work whose estimated CPU time exceeds the budget (422 naming `field` and the limit
+/// in seconds), before any of it is done.
+fn check_budget(field: &str, what: &str, seconds: f64, budget: f64) -> Result<(), Error> {
+    if seconds <= budget {
+        return Ok(());
+    }
+    Err(Error::limit_exceeded(
+        field,
+        budget.ceil() as u64,
+        format!(
+            "this {what} would take about {seconds:.0} s of CPU, above the server's budget of \
+             {budget:.0} s: use a coarser grid, fewer elements (coherent grouping) or fewer \
+             candidates or draws"
+        ),
+    ))
+}
+
+fn accepted(view: JobView) -> Response {
+    let location = view.href.clone();
+    (
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(view),
+    )
+        .into_response()
+}
+
+/// Work on a map with more cells than this (path and sweep searches, map bodies, exports) is a
+/// heavy query, run on the query pool under its admission control (`super::queries`). A
+/// search or a serialisation touches every cell at a few tens of nanoseconds each, so past
+/// ~10 000 cells it would hold an async worker thread for longer than the ~0.1–1 ms tokio
+/// budgets between awaits, and every other request on that thread (health checks included)
+/// would wait. Below it (the paper's map has 1 681 cells) the work is cheaper than the
+/// hand-off to another thread.
+const INLINE_WORK_CELLS: usize = 10_000;
+
+/// Runs `work` inline for small maps and as a heavy query for big ones (see
+/// [`INLINE_WORK_CELLS`]); the work's [`Progress`] is cancelled if the client goes.
+async fn heavy<T: Send + 'static>(
+    state: &AppState,
+    what: &'static str,
+    cells: usize,
+    work: impl FnOnce(&Progress) -> T + Send + 'static,
+) -> Result<T, Error> {
+    if cells <= INLINE_WORK_CELLS {
+        return Ok(work(&Progress::default()));
+    }
+    state.queries().run(what, work).await
+}
+
+/// Rejects query parameters outside `allowed`, naming the first unknown one.
+fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), Error> {
+    match query.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(unknown) => Err(Error::invalid(unknown.clone(), "unknown query parameter")),
+        None => Ok(()),
+    }
+}
+
+/// Longest `x-request-id` taken from a client (a UUID is 36 characters); a longer one, or one
+/// with characters outside `[A-Za-z0-9._:-]`, is replaced by a fresh UUID so logs stay clean.
+const MAX_REQUEST_ID_CHARS: usize = 64;
+
+/// The full application: routes, fallbacks, metrics, authentication, the request timeout,
+/// request ids, tracing, CORS (only when origins are configured) and the body limit.
+pub(crate) fn app(state: AppState) -> axum::Router {
+    let max_body = state.limits().max_body_bytes;
+    let cors = (!state.cors_origins().is_empty()).then(|| {
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(state.cors_origins().to_vec()))
+            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION, header::ACCEPT])
+            .expose_headers([header::LOCATION, header::RETRY_AFTER])
+            .max_age(Duration::from_secs(600))
+    });
+    let router = router()
+        .route_layer(middleware::from_fn(track_metrics))
+        .fallback(route_not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(middleware::from_fn_with_state(state.clone(), auth::authenticate))
+        .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
+        // gzip or brotli when the client accepts it (a 577k-cell map body is 10.9 MB of JSON);
+        // tower-http's default predicate leaves PNGs and tiny bodies alone.
+        .layer(CompressionLayer::new())
+        .layer(
+            ServiceBuilder::new()
+                .layer(middleware::from_fn(clean_request_id))
+                .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
+                .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
+                    let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
+                    tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %request_id)
+                }))
+                .layer(PropagateRequestIdLayer::x_request_id()),
+        );
+    let router = match cors {
+        Some(cors) => router.layer(cors),
+        None => router,
+    };
+    router.with_state(state)
+}
+
+/// Drops a client's `x-request-id` that is too long or has characters that do not belong in a
+/// log line; [`SetRequestIdLayer`] then gives the request a fresh UUID.
+async fn clean_request_id(mut req: Request, next: Next) -> Response {
+    let acceptable = |v: &HeaderValue| {
+        let bytes = v.as_bytes();
+        !bytes.is_empty()
+            && bytes.len() <= MAX_REQUEST_ID_CHARS
+            && bytes
+                .iter()
+                .all(|b| b.is_ascii_alphanumeric() || b"._:-".contains(b))
+    };
+    if req
+        .headers()
+        .get("x-request-id")
+        .is_some_and(|v| !acceptable(v))
+    {
+        req.headers_mut().remove("x-request-id");
+    }
+    next.run(req).await
+}
+
+/// Answers 503 when a request takes longer than the request timeout (the handler's future is
+/// dropped, which cancels its heavy query, see `queries`).
+async fn request_timeout(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let limit = state.limits().request_timeout;
+    match tokio::time::timeout(limit, next.run(req)).await {
+        Ok(response) => response,
+        Err(_) => {
+            metrics::counter!("irs_request_timeouts_total").increment(1);
+            ApiError::request_timeout(limit.as_secs()).into_response()
+        }
+    }
+}
+
+async fn route_not_found(State(_): State<AppState>, req: Request) -> Response {
+    metrics::counter!("http_requests_total", "route" => "unmatched", "method" => req.method().to_string(), "status" => "404").increment(1);
+    ApiError::route_not_found(req.uri().path()).into_response()
+}
+
+async fn method_not_allowed() -> Response {
+    ApiError::method_not_allowed().into_response()
+}
+
+async fn track_metrics(req: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or("unmatched".to_string(), |m| m.as_str().to_string());
+    let method = req.method().to_string();
+    let response = next.run(req).await;
+    let status = response.status().as_u16().to_string();
+    metrics::counter!("http_requests_total", "route" => route.clone(), "method" => method, "status" => status).increment(1);
+    metrics::histogram!("http_request_duration_seconds", "route" => route)
+        .record(started.elapsed().as_secs_f64());
+    response
+}

@@ -1,0 +1,169 @@
+//! The map's exports: `image.png` (with a path drawn on it), `nav2-mask` (a Nav2 keep-out or
+//! cost mask as YAML + PGM in a tar) and `values.npy` (NumPy).
+
+use super::maps::{cached_map, map_and_scenario};
+use super::problem::ApiError;
+use super::{heavy, only_query};
+use crate::AppState;
+use crate::app::Error;
+use axum::extract::{Path, Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use irs_answers::export::{self, MaskKind};
+use irs_answers::render::{self, RenderOptions};
+use irs_model::input::{FieldError, parse_finite, parse_point};
+use irs_model::planner::{self, Threshold};
+use irs_model::radiomap::Progress;
+use std::collections::HashMap;
+
+/// An optional "x,y" query parameter.
+pub(super) fn query_point(
+    query: &HashMap<String, String>,
+    name: &'static str,
+) -> Result<Option<[f64; 2]>, Error> {
+    query
+        .get(name)
+        .map(|text| parse_point(text).map_err(|e| Error::invalid(name, e)))
+        .transpose()
+}
+
+/// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
+pub(super) async fn image(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(&query, &["threshold", "start", "goal", "cell_px"])?;
+    let threshold = match query.get("threshold") {
+        None => Threshold::Max,
+        Some(text) => text
+            .parse::<Threshold>()
+            .map_err(|e| Error::invalid("threshold", e))?,
+    };
+    let path_ends = match (query_point(&query, "start")?, query_point(&query, "goal")?) {
+        (Some(s), Some(g)) => Some((s, g)),
+        (None, None) => None,
+        (start, _) => {
+            return Err(Error::invalid(
+                if start.is_none() { "start" } else { "goal" },
+                "give both start and goal, or neither",
+            )
+            .into());
+        }
+    };
+    let cell_px = query
+        .get("cell_px")
+        .map(|text| {
+            text.parse::<usize>()
+                .ok()
+                .filter(|px| (1..=render::MAX_CELL_PX).contains(px))
+                .ok_or_else(|| {
+                    Error::limit_exceeded(
+                        "cell_px",
+                        render::MAX_CELL_PX as u64,
+                        format!(
+                            "must be a whole number of pixels from 1 to {}",
+                            render::MAX_CELL_PX
+                        ),
+                    )
+                })
+        })
+        .transpose()?;
+    let (map, scenario) = map_and_scenario(&state, &map_id).await?;
+    // Rendering touches every pixel (up to 4096² of them), so it is always a heavy query.
+    let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
+        let options = match path_ends {
+            Some((s, g)) => {
+                RenderOptions::for_path(&map, &planner::plan(&map, s, g, threshold, 1.0)?)
+            }
+            None => RenderOptions {
+                threshold: match threshold {
+                    Threshold::Value(t) => Some(t),
+                    Threshold::Max => None,
+                },
+                ..RenderOptions::default()
+            },
+        };
+        let options = RenderOptions { cell_px, ..options };
+        Ok(render::png(&map, &scenario, &options))
+    };
+    let bytes = state
+        .queries()
+        .run("picture", render)
+        .await??
+        .ok_or_else(|| {
+            Error::limit_exceeded(
+                "cell_px",
+                render::MAX_SIDE_PX as u64,
+                format!(
+                    "the picture would exceed {} pixels a side",
+                    render::MAX_SIDE_PX
+                ),
+            )
+        })?;
+    Ok(([(header::CONTENT_TYPE, "image/png")], bytes).into_response())
+}
+
+/// A Nav2 mask of the map at `threshold` (keep-out by default, or `mask=cost` with an optional
+/// `best`): its YAML and PGM in one tar archive.
+pub(super) async fn nav2_mask(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(&query, &["threshold", "mask", "best"])?;
+    let number = |name: &'static str| {
+        query
+            .get(name)
+            .map(|text| parse_finite(text).map_err(|e| Error::invalid(name, e)))
+            .transpose()
+    };
+    let threshold = number("threshold")?
+        .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
+    let best = number("best")?;
+    let kind = query
+        .get("mask")
+        .map(|text| {
+            text.parse::<MaskKind>()
+                .map_err(|e| Error::invalid("mask", e))
+        })
+        .transpose()?
+        .unwrap_or_default();
+    let map = cached_map(&state, &map_id).await?;
+    let cells = map.grid.cells();
+    let archive = heavy(&state, "mask export", cells, move |_| {
+        export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
+    })
+    .await?
+    .map_err(|e| Error::invalid(e.field, e.reason))?;
+    let disposition = format!("attachment; filename=\"{map_id}-{}.tar\"", kind.stem());
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/x-tar".to_string()),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        archive,
+    )
+        .into_response())
+}
+
+/// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).
+pub(super) async fn values_npy(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(&query, &[])?;
+    let map = cached_map(&state, &map_id).await?;
+    let cells = map.grid.cells();
+    let bytes = heavy(&state, "values export", cells, move |_| export::npy(&map)).await?;
+    let disposition = format!("attachment; filename=\"{map_id}.npy\"");
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        bytes,
+    )
+        .into_response())
+}

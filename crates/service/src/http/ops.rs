@@ -1,0 +1,64 @@
+//! The operations endpoints: `/healthz` (the process answers), `/readyz` (ready to serve, and
+//! in a cluster the shared store reachable), `/version` and `/metrics` (Prometheus text).
+
+use super::problem::ApiError;
+use crate::AppState;
+use crate::app::Error;
+use axum::Json;
+use axum::extract::State;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use irs_model::solver::SolverKind;
+use serde::Serialize;
+
+#[derive(Serialize)]
+pub(super) struct Health {
+    status: &'static str,
+}
+
+pub(super) async fn healthz() -> Json<Health> {
+    Json(Health { status: "ok" })
+}
+
+#[derive(Serialize)]
+pub(super) struct Readiness {
+    status: &'static str,
+    scenarios: usize,
+}
+
+pub(super) async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
+    if !state.is_ready() {
+        return Err(ApiError::not_ready());
+    }
+    if let Some(reason) = state.cluster().and_then(|c| c.unavailable()) {
+        return Err(Error::unavailable(reason).into());
+    }
+    Ok(Json(Readiness {
+        status: "ready",
+        scenarios: state.registry().len(),
+    }))
+}
+
+#[derive(Serialize)]
+pub(super) struct Version {
+    name: &'static str,
+    version: &'static str,
+    sdr_sca_available: bool,
+}
+
+pub(super) async fn version() -> Json<Version> {
+    Json(Version {
+        name: env!("CARGO_PKG_NAME"),
+        version: env!("CARGO_PKG_VERSION"),
+        sdr_sca_available: SolverKind::SdrSca.is_available(),
+    })
+}
+
+pub(super) async fn metrics_text(State(state): State<AppState>) -> Response {
+    state.cache().record_size();
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.render_metrics(),
+    )
+        .into_response()
+}

@@ -1,0 +1,273 @@
+//! `/v1/paths`, `/v1/sweeps` and `/v1/maps/{map_id}/coverage`: the queries on a built map
+//! (a path at a threshold, a sweep of thresholds, the covered share of the floor).
+
+use super::json::serialize_sized;
+use super::maps::{MapRequest, cached_map, fetch_scenario, map_and_scenario, obtain, resolve};
+use super::problem::ApiError;
+use super::{Body, check_budget, heavy, only_query};
+use crate::AppState;
+use crate::answers::{OpenAnswer, PathQuery};
+use crate::app::Error;
+use crate::app::identity::Caller;
+use axum::Json;
+use axum::extract::{Path, Query, State};
+use axum::response::{IntoResponse, Response};
+use irs_answers::path::{self, CheckedPath};
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
+use irs_answers::timing::Timed;
+use irs_model::input::{parse_finite, present};
+use irs_model::montecarlo;
+use irs_model::planner::{self, SweepAnswer, Threshold};
+use irs_model::radiomap::{MapKind, RadioMap, WorkError};
+use irs_model::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Serialize)]
+pub(super) struct Coverage {
+    map_id: String,
+    unit: &'static str,
+    threshold: f64,
+    /// η(γ), paper eq. 44.
+    coverage: f64,
+    free_cells: usize,
+    covered_cells: usize,
+}
+
+pub(super) async fn coverage(
+    State(state): State<AppState>,
+    Path(map_id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<Coverage>, ApiError> {
+    only_query(&query, &["threshold"])?;
+    let threshold = query
+        .get("threshold")
+        .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
+    let threshold = parse_finite(threshold).map_err(|e| Error::invalid("threshold", e))?;
+    let map = cached_map(&state, &map_id).await?;
+    let eta = map.coverage(threshold);
+    let free = map.free_cells();
+    Ok(Json(Coverage {
+        map_id,
+        unit: map.key.unit(),
+        threshold,
+        coverage: eta,
+        free_cells: free,
+        covered_cells: (eta * free as f64).round() as usize,
+    }))
+}
+
+/// 2^53 − 1: integers above it lose precision in JavaScript and other double-based JSON clients.
+pub(super) const MAX_JSON_SAFE_INTEGER: u64 = (1 << 53) - 1;
+
+/// A path query names its map by `map_id` (a built map) or `map` (the request defining it).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct PathRequest {
+    #[serde(default, deserialize_with = "present")]
+    map_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    map: Option<MapRequest>,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+    /// Monte Carlo draws per waypoint for the Jensen-gap check (paper Fig. 10).
+    #[serde(default, deserialize_with = "present")]
+    monte_carlo_draws: Option<usize>,
+    #[serde(default, deserialize_with = "present")]
+    seed: Option<u64>,
+    /// How finely the waypoints' phases are written in radians (default 1e-4 rad).
+    #[serde(default, deserialize_with = "present")]
+    phase_precision: Option<PhasePrecision>,
+    /// Radians (default) or 16-bit codes in base64.
+    #[serde(default, deserialize_with = "present")]
+    phase_format: Option<PhaseFormat>,
+}
+
+/// The map a path or sweep query names, or the 202 answer while it is built.
+pub(super) async fn map_for_query(
+    state: &AppState,
+    caller: &Caller,
+    map_id: Option<String>,
+    map: Option<MapRequest>,
+) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, Error> {
+    match (map_id, map) {
+        (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
+        (None, Some(request)) => {
+            fetch_scenario(state, request.scenario_id.as_deref()).await?;
+            let (scenario, key) = resolve(state, caller, request, "map.")?;
+            Ok(obtain(state, caller, scenario.clone(), key)
+                .await?
+                .map(|m| (m, scenario)))
+        }
+        _ => Err(Error::invalid(
+            "map_id",
+            "give exactly one of map_id and map",
+        )),
+    }
+}
+
+pub(super) fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], Error> {
+    if p.iter().all(|v| v.is_finite()) {
+        Ok(p)
+    } else {
+        Err(Error::invalid(field, "coordinates must be finite"))
+    }
+}
+
+pub(super) async fn plan_path(
+    State(state): State<AppState>,
+    caller: Caller,
+    Body(request): Body<PathRequest>,
+) -> Result<Response, ApiError> {
+    let started = Instant::now();
+    let start = check_point("start", request.start)?;
+    let goal = check_point("goal", request.goal)?;
+    let limit = state.limits().max_draws;
+    if let Some(draws) = request.monte_carlo_draws
+        && (draws == 0 || draws > limit)
+    {
+        return Err(Error::limit_exceeded(
+            "monte_carlo_draws",
+            limit as u64,
+            format!("must lie in 1..={limit}"),
+        )
+        .into());
+    }
+    if request
+        .seed
+        .is_some_and(|seed| seed > MAX_JSON_SAFE_INTEGER)
+    {
+        return Err(Error::limit_exceeded(
+            "seed",
+            MAX_JSON_SAFE_INTEGER,
+            "must be at most 2^53 − 1, the largest integer every JSON client keeps exact",
+        )
+        .into());
+    }
+    let (format, precision) = path::phase_options(request.phase_format, request.phase_precision)?;
+    let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
+    let (map, scenario) = match found {
+        Ok(found) => found,
+        Err(accepted) => return Ok(accepted),
+    };
+    let map_id = map.id.clone();
+    // A plain query asked before is answered from the answer cache (service::answers).
+    let query = request.monte_carlo_draws.is_none().then(|| {
+        PathQuery::new(
+            map_id.clone(),
+            start,
+            goal,
+            request.threshold,
+            format,
+            precision,
+        )
+    });
+    if let Some(kept) = query.as_ref().and_then(|q| state.answers().get(q)) {
+        return Ok(kept.respond(started));
+    }
+    let cells = map.grid.cells();
+    let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
+    let (planned, cache) = (map.clone(), state.cache().clone());
+    let path = heavy(&state, "path", cells, move |_| {
+        let index = cache.bottlenecks(&map_id, &planned);
+        planner::plan_indexed(&planned, &index, start, goal, threshold, v_max)
+    })
+    .await??;
+    // Written before the Monte Carlo check, which then evaluates the phases as sent.
+    let path = path::write_phases(path, format, precision);
+    let monte_carlo = match request.monte_carlo_draws {
+        Some(draws) if path.feasible => {
+            let rate = map.key.kind == MapKind::Rate;
+            check_budget(
+                "monte_carlo_draws",
+                "Monte Carlo check",
+                montecarlo::check_seconds(&scenario, path.waypoints.len(), draws, rate),
+                state.limits().max_check_cpu_s,
+            )?;
+            let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
+            let seed = request.seed.unwrap_or(1);
+            // Thousands of draws per waypoint: always a heavy query, cancelled with its client.
+            let report = state
+                .queries()
+                .run("Monte Carlo check", move |progress| {
+                    path::check(&scenario, &map, &path, draws, seed, progress)
+                })
+                .await?
+                .map_err(|e| Error::internal(e.to_string()))?;
+            Some(report)
+        }
+        _ => None,
+    };
+    // Sized up front: the phases' text and ~150 bytes per waypoint's other fields, so the
+    // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
+    let capacity = 512
+        + path
+            .waypoints
+            .iter()
+            .map(|w| 150 + w.config.phases.json_len_hint())
+            .sum::<usize>();
+    let answer = OpenAnswer::new(serialize_sized(
+        &CheckedPath { path, monte_carlo },
+        capacity,
+    )?)?;
+    if let Some(query) = query {
+        state.answers().insert(query, answer.clone());
+    }
+    Ok(answer.respond(started))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SweepRequest {
+    #[serde(default, deserialize_with = "present")]
+    map_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    map: Option<MapRequest>,
+    start: [f64; 2],
+    goal: [f64; 2],
+    thresholds: Vec<f64>,
+}
+
+pub(super) async fn sweep(
+    State(state): State<AppState>,
+    caller: Caller,
+    Body(request): Body<SweepRequest>,
+) -> Result<Response, ApiError> {
+    let started = Instant::now();
+    let start = check_point("start", request.start)?;
+    let goal = check_point("goal", request.goal)?;
+    let limit = state.limits().max_sweep;
+    if request.thresholds.is_empty() || request.thresholds.len() > limit {
+        return Err(Error::limit_exceeded(
+            "thresholds",
+            limit as u64,
+            format!("give 1 to {limit} thresholds"),
+        )
+        .into());
+    }
+    if let Some(k) = request.thresholds.iter().position(|t| !t.is_finite()) {
+        return Err(Error::invalid(format!("thresholds[{k}]"), "must be a finite number").into());
+    }
+    let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
+    let (map, scenario) = match found {
+        Ok(found) => found,
+        Err(accepted) => return Ok(accepted),
+    };
+    let (cells, v_max, thresholds) = (map.grid.cells(), scenario.mru.v_max_mps, request.thresholds);
+    // A sweep is one search per threshold: heavy once thresholds × cells is, not cells alone.
+    let work = cells.saturating_mul(thresholds.len());
+    let cache = state.cache().clone();
+    let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
+        let index = cache.bottlenecks(&map.id, &map);
+        planner::sweep(&map, &index, start, goal, &thresholds, v_max, progress)
+    })
+    .await?
+    .map_err(|e| match e {
+        WorkError::Invalid(e) => Error::from(e),
+        WorkError::Cancelled(c) => Error::internal(c.to_string()),
+    })?;
+    Ok(Json(Timed::since(started, answer)).into_response())
+}
