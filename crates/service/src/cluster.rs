@@ -458,7 +458,7 @@ impl Cluster {
 
 /// Reads builds from the stream whenever this replica has a free worker, forever (a task
 /// per replica, started with the server).
-pub(crate) async fn run_builder(state: super::AppState, cluster: std::sync::Arc<Cluster>) {
+pub(crate) async fn run_builder(state: super::App, cluster: std::sync::Arc<Cluster>) {
     let mut conn: Option<ConnectionManager> = None;
     loop {
         if state.jobs().free_workers() == 0 || cluster.unavailable().is_some() {
@@ -491,7 +491,7 @@ pub(crate) async fn run_builder(state: super::AppState, cluster: std::sync::Arc<
 
 /// Builds one stream entry on this replica: the map goes to Redis, the record follows the
 /// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
-async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, build: BuildEntry) {
+async fn build_entry(state: super::App, cluster: std::sync::Arc<Cluster>, build: BuildEntry) {
     let record = cluster.job(&build.job_id).await.ok().flatten();
     let owner = record.as_ref().and_then(|r| r.owner());
     let end = |mut record: JobRecord, state: super::jobs::JobState, error: Option<String>| {
@@ -527,7 +527,7 @@ async fn build_entry(state: super::AppState, cluster: std::sync::Arc<Cluster>, b
         cluster.finish(&build).await;
         return;
     }
-    let scenario = match state.shared_scenario(&build.key.scenario_id).await {
+    let scenario = match state.scenario(&build.key.scenario_id).await {
         Ok(Some(stored)) => stored.scenario.clone(),
         other => {
             let reason = match other {

@@ -1,8 +1,291 @@
-//! The application: what the service does, independent of HTTP. Its errors ([`Error`]) carry
-//! no status code (`http::problem` maps them), and identity ([`identity`]: tokens, owners,
-//! callers) is decided here, not in the transport.
+//! The application: what the service does, independent of HTTP. [`App`] is the facade the
+//! handlers call: it owns the scenario registry, the map and answer caches, the jobs, the query
+//! pool, identity and, in a cluster, the coordination through the shared store, so a handler
+//! never chooses between memory, disk and Redis. Its errors ([`Error`]) carry no status code
+//! (`http::problem` maps them), and identity ([`identity`]: tokens, owners, callers) is decided
+//! here, not in the transport.
 
 pub(crate) mod error;
 pub(crate) mod identity;
+pub(crate) mod maps;
+pub(crate) mod scenarios;
+mod work;
 
 pub(crate) use error::Error;
+
+use crate::answers::AnswerCache;
+use crate::cache::{self, MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
+use crate::config::ServeArgs;
+use crate::jobs::Jobs;
+use crate::queries::QueryPool;
+use crate::{cluster, store};
+use axum::http::HeaderValue;
+use identity::{Caller, Tokens};
+use irs_model::scenario::{BUILTIN, Scenario};
+use metrics_exporter_prometheus::PrometheusHandle;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// Request limits, from the configuration.
+#[derive(Debug, Clone)]
+pub(crate) struct Limits {
+    pub max_body_bytes: usize,
+    pub sync_cells: usize,
+    pub max_rate_cells: usize,
+    pub max_sweep: usize,
+    pub max_draws: usize,
+    pub max_build_cpu_s: f64,
+    pub max_check_cpu_s: f64,
+    /// The map cache's budget: a map estimated bigger is refused before its build.
+    pub cache_bytes: u64,
+    pub body_timeout: Duration,
+    pub request_timeout: Duration,
+    /// In a cluster: builds queued or running in the whole stream before a request gets 503
+    /// (`--queue` + `--workers` of this replica: the same bound one replica alone has).
+    pub cluster_queue: usize,
+}
+
+/// Shared state of the handlers.
+#[derive(Clone)]
+pub struct App {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    limits: Limits,
+    registry: Arc<ScenarioRegistry>,
+    cache: MapCache,
+    answers: AnswerCache,
+    jobs: Arc<Jobs>,
+    queries: QueryPool,
+    tokens: Tokens,
+    cors_origins: Vec<HeaderValue>,
+    /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
+    disk: Option<Arc<store::DataDir>>,
+    /// `--redis-url`, if set: the store shared with the other replicas.
+    cluster: Option<Arc<cluster::Cluster>>,
+    ready: AtomicBool,
+    metrics: PrometheusHandle,
+}
+
+impl App {
+    /// The state for `args`; an error names the setting that is wrong.
+    pub fn new(args: &ServeArgs, metrics: PrometheusHandle) -> Result<Self, String> {
+        let positive = |flag: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                Err(format!(
+                    "{flag} must be a positive number of seconds, got {v}"
+                ))
+            }
+        };
+        let cors_origins = args
+            .cors_origin
+            .iter()
+            .map(|o| {
+                HeaderValue::from_str(o.trim())
+                    .ok()
+                    .filter(|_| o.starts_with("http://") || o.starts_with("https://"))
+                    .ok_or_else(|| format!("--cors-origin {o:?}: not an http(s) origin"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mb = |v: u64| usize::try_from(v.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX);
+        let disk = match &args.data_dir {
+            Some(dir) => Some(Arc::new(store::DataDir::open(
+                dir,
+                args.data_maps_mb.saturating_mul(1024 * 1024),
+            )?)),
+            None => None,
+        };
+        let registry = Arc::new(ScenarioRegistry::new(
+            args.max_scenarios,
+            mb(args.registry_mb),
+            disk.clone(),
+        ));
+        let cache = MapCache::new(
+            args.cache_mb.saturating_mul(1024 * 1024),
+            disk.clone().map(|dir| MapDisk {
+                dir,
+                scenarios: registry.clone(),
+            }),
+        );
+        Ok(App {
+            inner: Arc::new(Inner {
+                limits: Limits {
+                    max_body_bytes: args.max_body_kb.saturating_mul(1024),
+                    sync_cells: args.sync_cells,
+                    max_rate_cells: args.max_rate_cells,
+                    max_sweep: args.max_sweep,
+                    max_draws: args.max_draws.min(irs_model::montecarlo::MAX_DRAWS),
+                    max_build_cpu_s: positive("--max-build-cpu-s", args.max_build_cpu_s)?,
+                    max_check_cpu_s: positive("--max-check-cpu-s", args.max_check_cpu_s)?,
+                    cache_bytes: args.cache_mb.saturating_mul(1024 * 1024),
+                    body_timeout: Duration::from_secs(args.body_timeout_s.max(1)),
+                    request_timeout: Duration::from_secs(args.request_timeout_s.max(1)),
+                    cluster_queue: args.queue + args.workers(),
+                },
+                registry,
+                cache,
+                answers: AnswerCache::new(args.answer_cache_mb.saturating_mul(1024 * 1024)),
+                jobs: Arc::new(Jobs::new(
+                    args.workers(),
+                    args.queue,
+                    args.job_history,
+                    disk.clone(),
+                )),
+                queries: QueryPool::new(args.query_workers(), args.query_queue)?,
+                tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
+                cors_origins,
+                disk,
+                cluster: match &args.redis_url {
+                    Some(url) => Some(Arc::new(cluster::Cluster::new(url)?)),
+                    None => None,
+                },
+                ready: AtomicBool::new(false),
+                metrics,
+            }),
+        })
+    }
+    pub(crate) fn limits(&self) -> &Limits {
+        &self.inner.limits
+    }
+    pub(crate) fn registry(&self) -> &ScenarioRegistry {
+        &self.inner.registry
+    }
+    pub(crate) fn cache(&self) -> &MapCache {
+        &self.inner.cache
+    }
+    pub(crate) fn answers(&self) -> &AnswerCache {
+        &self.inner.answers
+    }
+    pub(crate) fn jobs(&self) -> &Arc<Jobs> {
+        &self.inner.jobs
+    }
+    pub(crate) fn queries(&self) -> &QueryPool {
+        &self.inner.queries
+    }
+    pub(crate) fn tokens(&self) -> &Tokens {
+        &self.inner.tokens
+    }
+    /// The origins allowed by CORS (`--cors-origin`); none: no CORS headers at all.
+    pub(crate) fn cors_origins(&self) -> &[HeaderValue] {
+        &self.inner.cors_origins
+    }
+    /// Registers a scenario for `caller`, evicting the least recently used unneeded ones if the
+    /// registry is full (see [`ScenarioRegistry`]).
+    pub(crate) fn register_scenario(
+        &self,
+        scenario: Scenario,
+        source: &'static str,
+        caller: &Caller,
+    ) -> Result<(Arc<cache::StoredScenario>, bool), Error> {
+        self.registry()
+            .register(scenario, source, caller.owner(), || {
+                let mut needed = self.cache().scenario_ids();
+                needed.extend(
+                    self.jobs()
+                        .live()
+                        .into_iter()
+                        .map(|job| job.scenario_id.clone()),
+                );
+                needed
+            })
+    }
+
+    pub(crate) fn cluster(&self) -> Option<&Arc<cluster::Cluster>> {
+        self.inner.cluster.as_ref()
+    }
+
+    pub fn is_ready(&self) -> bool {
+        self.inner.ready.load(Ordering::Relaxed)
+    }
+    pub(crate) fn set_ready(&self, ready: bool) {
+        self.inner.ready.store(ready, Ordering::Relaxed)
+    }
+    pub(crate) fn render_metrics(&self) -> String {
+        self.inner.metrics.render()
+    }
+}
+
+/// Who registers a recorded scenario again: each owner digest it was kept with, or nobody in
+/// particular (authentication was off) when it has none.
+fn registrants(owners: Vec<String>) -> Vec<Caller> {
+    if owners.is_empty() {
+        return vec![Caller::Open];
+    }
+    owners
+        .into_iter()
+        .map(|o| Caller::Owner(identity::Owner::from_digest(o)))
+        .collect()
+}
+
+/// Loads the built-in scenarios, then every `*.json` in `dir` (a missing directory is fine; an
+/// invalid file is an error naming the file and the field).
+pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
+    for (name, text) in BUILTIN {
+        let scenario =
+            Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
+        state
+            .register_scenario(scenario, "builtin", &Caller::Open)
+            .map_err(|e| e.to_string())?;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        tracing::info!(dir = %dir.display(), "no scenarios directory; serving the built-in scenarios");
+        return Ok(());
+    };
+    let mut files: Vec<_> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    files.sort();
+    for path in files {
+        let scenario =
+            Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let (stored, created) = state
+            .register_scenario(scenario, "file", &Caller::Open)
+            .map_err(|e| e.to_string())?;
+        tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
+    }
+    Ok(())
+}
+
+/// With `--data-dir`: registers the API scenarios recorded there (with their owners) and takes
+/// back the finished job records. A record that is damaged, or no longer a valid scenario for
+/// this build, is skipped with a warning. The maps are read from disk on demand, and into
+/// memory by [`warm_from_disk`].
+pub fn restore(state: &App) {
+    let Some(disk) = &state.inner.disk else {
+        return;
+    };
+    let mut scenarios = 0;
+    for (id, record) in disk.load_json::<ScenarioRecord>(store::Kind::Scenario) {
+        let parsed = Scenario::from_json(&record.document.to_string());
+        let scenario = match parsed {
+            Ok(scenario) if scenario.content_hash() == id => scenario,
+            Ok(_) => {
+                tracing::warn!(scenario_id = %id, "recorded scenario has another id in this build; skipped");
+                continue;
+            }
+            Err(e) => {
+                tracing::warn!(scenario_id = %id, error = %e, "recorded scenario is not valid in this build; skipped");
+                continue;
+            }
+        };
+        for owner in registrants(record.owners) {
+            if let Err(e) = state.register_scenario(scenario.clone(), "api", &owner) {
+                tracing::warn!(scenario_id = %id, error = %e, "recorded scenario not registered");
+            }
+        }
+        scenarios += 1;
+    }
+    let jobs = state.jobs().restore();
+    tracing::info!(scenarios, jobs, "restored from the data directory");
+}
+
+/// Loads the data directory's maps into memory, newest first, up to the cache's budget.
+pub async fn warm_from_disk(state: &App) {
+    state.cache().warm(state.limits().cache_bytes).await;
+}

@@ -3,7 +3,7 @@
 //! extractor. The rules (which tokens, which methods need one) live in `app::identity`.
 
 use super::problem::ApiError;
-use crate::AppState;
+use crate::app::App;
 use crate::app::identity::{Caller, Tokens};
 use axum::extract::{FromRequestParts, Request, State};
 use axum::http::{Method, header, request::Parts};
@@ -24,7 +24,7 @@ impl<S: Send + Sync> FromRequestParts<S> for Caller {
 
 /// Middleware: resolves the caller from `Authorization` and refuses unauthenticated writes.
 pub(crate) async fn authenticate(
-    State(state): State<AppState>,
+    State(state): State<App>,
     mut request: Request,
     next: Next,
 ) -> Response {

@@ -1,10 +1,9 @@
 //! The map's exports: `image.png` (with a path drawn on it), `nav2-mask` (a Nav2 keep-out or
 //! cost mask as YAML + PGM in a tar) and `values.npy` (NumPy).
 
-use super::maps::{cached_map, map_and_scenario};
 use super::problem::ApiError;
 use super::{heavy, only_query};
-use crate::AppState;
+use crate::app::App;
 use crate::app::Error;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
@@ -29,7 +28,7 @@ pub(super) fn query_point(
 
 /// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
 pub(super) async fn image(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
@@ -69,7 +68,7 @@ pub(super) async fn image(
                 })
         })
         .transpose()?;
-    let (map, scenario) = map_and_scenario(&state, &map_id).await?;
+    let (map, scenario) = state.map_with_scenario(&map_id).await?;
     // Rendering touches every pixel (up to 4096² of them), so it is always a heavy query.
     let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
         let options = match path_ends {
@@ -107,7 +106,7 @@ pub(super) async fn image(
 /// A Nav2 mask of the map at `threshold` (keep-out by default, or `mask=cost` with an optional
 /// `best`): its YAML and PGM in one tar archive.
 pub(super) async fn nav2_mask(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
@@ -129,7 +128,7 @@ pub(super) async fn nav2_mask(
         })
         .transpose()?
         .unwrap_or_default();
-    let map = cached_map(&state, &map_id).await?;
+    let map = state.map(&map_id).await?;
     let cells = map.grid.cells();
     let archive = heavy(&state, "mask export", cells, move |_| {
         export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
@@ -149,12 +148,12 @@ pub(super) async fn nav2_mask(
 
 /// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).
 pub(super) async fn values_npy(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     only_query(&query, &[])?;
-    let map = cached_map(&state, &map_id).await?;
+    let map = state.map(&map_id).await?;
     let cells = map.grid.cells();
     let bytes = heavy(&state, "values export", cells, move |_| export::npy(&map)).await?;
     let disposition = format!("attachment; filename=\"{map_id}.npy\"");

@@ -17,7 +17,7 @@ mod placements;
 pub(crate) mod problem;
 mod scenarios;
 
-use crate::AppState;
+use crate::app::App;
 use crate::app::Error;
 use crate::jobs::JobView;
 use axum::extract::{DefaultBodyLimit, MatchedPath, State};
@@ -40,11 +40,7 @@ use tower_http::trace::TraceLayer;
 
 /// Every route: path, methods, handler. The router is built from this table and a test checks
 /// it against `openapi.yaml`.
-pub fn route_table() -> Vec<(
-    &'static str,
-    &'static [&'static str],
-    MethodRouter<AppState>,
-)> {
+pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter<App>)> {
     vec![
         ("/", &["get"], get(crate::viewer::index)),
         ("/viewer/viewer.js", &["get"], get(crate::viewer::script)),
@@ -102,7 +98,7 @@ pub fn route_table() -> Vec<(
     ]
 }
 
-pub fn router() -> Router<AppState> {
+pub fn router() -> Router<App> {
     route_table()
         .into_iter()
         .fold(Router::new(), |r, (path, _, handler)| {
@@ -114,10 +110,10 @@ pub fn router() -> Router<AppState> {
 /// configured body limit named in the 413.
 pub(crate) struct Body<T>(pub T);
 
-impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Body<T> {
+impl<T: serde::de::DeserializeOwned> FromRequest<App> for Body<T> {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+    async fn from_request(req: Request, state: &App) -> Result<Self, ApiError> {
         let Some(ct) = req.headers().get(header::CONTENT_TYPE) else {
             return Err(ApiError::unsupported_media_type(
                 "the body must be JSON: send Content-Type: application/json",
@@ -212,23 +208,6 @@ impl Page {
     }
 }
 
-/// Refuses work whose estimated CPU time exceeds the budget (422 naming `field` and the limit
-/// in seconds), before any of it is done.
-fn check_budget(field: &str, what: &str, seconds: f64, budget: f64) -> Result<(), Error> {
-    if seconds <= budget {
-        return Ok(());
-    }
-    Err(Error::limit_exceeded(
-        field,
-        budget.ceil() as u64,
-        format!(
-            "this {what} would take about {seconds:.0} s of CPU, above the server's budget of \
-             {budget:.0} s: use a coarser grid, fewer elements (coherent grouping) or fewer \
-             candidates or draws"
-        ),
-    ))
-}
-
 fn accepted(view: JobView) -> Response {
     let location = view.href.clone();
     (
@@ -251,7 +230,7 @@ const INLINE_WORK_CELLS: usize = 10_000;
 /// Runs `work` inline for small maps and as a heavy query for big ones (see
 /// [`INLINE_WORK_CELLS`]); the work's [`Progress`] is cancelled if the client goes.
 async fn heavy<T: Send + 'static>(
-    state: &AppState,
+    state: &App,
     what: &'static str,
     cells: usize,
     work: impl FnOnce(&Progress) -> T + Send + 'static,
@@ -276,7 +255,7 @@ const MAX_REQUEST_ID_CHARS: usize = 64;
 
 /// The full application: routes, fallbacks, metrics, authentication, the request timeout,
 /// request ids, tracing, CORS (only when origins are configured) and the body limit.
-pub(crate) fn app(state: AppState) -> axum::Router {
+pub(crate) fn app(state: App) -> axum::Router {
     let max_body = state.limits().max_body_bytes;
     let cors = (!state.cors_origins().is_empty()).then(|| {
         CorsLayer::new()
@@ -336,7 +315,7 @@ async fn clean_request_id(mut req: Request, next: Next) -> Response {
 
 /// Answers 503 when a request takes longer than the request timeout (the handler's future is
 /// dropped, which cancels its heavy query, see `queries`).
-async fn request_timeout(State(state): State<AppState>, req: Request, next: Next) -> Response {
+async fn request_timeout(State(state): State<App>, req: Request, next: Next) -> Response {
     let limit = state.limits().request_timeout;
     match tokio::time::timeout(limit, next.run(req)).await {
         Ok(response) => response,
@@ -347,7 +326,7 @@ async fn request_timeout(State(state): State<AppState>, req: Request, next: Next
     }
 }
 
-async fn route_not_found(State(_): State<AppState>, req: Request) -> Response {
+async fn route_not_found(State(_): State<App>, req: Request) -> Response {
     metrics::counter!("http_requests_total", "route" => "unmatched", "method" => req.method().to_string(), "status" => "404").increment(1);
     ApiError::route_not_found(req.uri().path()).into_response()
 }

@@ -2,8 +2,7 @@
 //! in a cluster the shared store reachable), `/version` and `/metrics` (Prometheus text).
 
 use super::problem::ApiError;
-use crate::AppState;
-use crate::app::Error;
+use crate::app::App;
 use axum::Json;
 use axum::extract::State;
 use axum::http::header;
@@ -26,13 +25,11 @@ pub(super) struct Readiness {
     scenarios: usize,
 }
 
-pub(super) async fn readyz(State(state): State<AppState>) -> Result<Json<Readiness>, ApiError> {
+pub(super) async fn readyz(State(state): State<App>) -> Result<Json<Readiness>, ApiError> {
     if !state.is_ready() {
         return Err(ApiError::not_ready());
     }
-    if let Some(reason) = state.cluster().and_then(|c| c.unavailable()) {
-        return Err(Error::unavailable(reason).into());
-    }
+    state.store_available()?;
     Ok(Json(Readiness {
         status: "ready",
         scenarios: state.registry().len(),
@@ -54,7 +51,7 @@ pub(super) async fn version() -> Json<Version> {
     })
 }
 
-pub(super) async fn metrics_text(State(state): State<AppState>) -> Response {
+pub(super) async fn metrics_text(State(state): State<App>) -> Response {
     state.cache().record_size();
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],

@@ -2,13 +2,14 @@
 //! (a path at a threshold, a sweep of thresholds, the covered share of the floor).
 
 use super::json::serialize_sized;
-use super::maps::{MapRequest, cached_map, fetch_scenario, map_and_scenario, obtain, resolve};
+use super::maps::MapRequest;
 use super::problem::ApiError;
-use super::{Body, check_budget, heavy, only_query};
-use crate::AppState;
+use super::{Body, accepted, heavy, only_query};
 use crate::answers::{OpenAnswer, PathQuery};
+use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
+use crate::app::maps::{Obtained, check_budget};
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::response::{IntoResponse, Response};
@@ -37,7 +38,7 @@ pub(super) struct Coverage {
 }
 
 pub(super) async fn coverage(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(map_id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
@@ -46,7 +47,7 @@ pub(super) async fn coverage(
         .get("threshold")
         .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
     let threshold = parse_finite(threshold).map_err(|e| Error::invalid("threshold", e))?;
-    let map = cached_map(&state, &map_id).await?;
+    let map = state.map(&map_id).await?;
     let eta = map.coverage(threshold);
     let free = map.free_cells();
     Ok(Json(Coverage {
@@ -88,20 +89,19 @@ pub(super) struct PathRequest {
 
 /// The map a path or sweep query names, or the 202 answer while it is built.
 pub(super) async fn map_for_query(
-    state: &AppState,
+    state: &App,
     caller: &Caller,
     map_id: Option<String>,
     map: Option<MapRequest>,
 ) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, Error> {
     match (map_id, map) {
-        (Some(id), None) => Ok(Ok(map_and_scenario(state, &id).await?)),
-        (None, Some(request)) => {
-            fetch_scenario(state, request.scenario_id.as_deref()).await?;
-            let (scenario, key) = resolve(state, caller, request, "map.")?;
-            Ok(obtain(state, caller, scenario.clone(), key)
-                .await?
-                .map(|m| (m, scenario)))
-        }
+        (Some(id), None) => Ok(Ok(state.map_with_scenario(&id).await?)),
+        (None, Some(request)) => Ok(
+            match state.request_map(caller, request.spec(), "map.").await? {
+                Obtained::Ready { map, scenario } => Ok((map, scenario)),
+                Obtained::Building(job) => Err(accepted(*job)),
+            },
+        ),
         _ => Err(Error::invalid(
             "map_id",
             "give exactly one of map_id and map",
@@ -118,7 +118,7 @@ pub(super) fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], 
 }
 
 pub(super) async fn plan_path(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Body(request): Body<PathRequest>,
 ) -> Result<Response, ApiError> {
@@ -232,7 +232,7 @@ pub(super) struct SweepRequest {
 }
 
 pub(super) async fn sweep(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Body(request): Body<SweepRequest>,
 ) -> Result<Response, ApiError> {

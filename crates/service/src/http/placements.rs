@@ -1,12 +1,13 @@
 //! `/v1/placements`: a placement search for an IRS or an access point (answered at once when
 //! small, else as a job), and its answer once the job is done.
 
-use super::maps::{fetch_scenario, scenario_of};
 use super::problem::ApiError;
-use super::{Body, accepted, check_budget};
-use crate::AppState;
+use super::{Body, accepted};
+use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
+use crate::app::maps::check_budget;
+use crate::app::scenarios::{Named, ScenarioRef};
 use crate::jobs::{Job, PlacementOutcome, PlacementSearch, Work};
 use axum::Json;
 use axum::extract::{Path, State};
@@ -71,7 +72,7 @@ pub(super) fn placement_body<'a>(job: &'a Job, outcome: &'a PlacementOutcome) ->
 }
 
 pub(super) async fn place(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Body(request): Body<PlacementRequest>,
 ) -> Result<Response, ApiError> {
@@ -85,8 +86,13 @@ pub(super) async fn place(
         )
         .into());
     }
-    fetch_scenario(&state, request.scenario_id.as_deref()).await?;
-    let (_, scenario, inline) = scenario_of(&state, request.scenario_id, request.scenario, "")?;
+    let reference = ScenarioRef {
+        id: request.scenario_id,
+        document: request.scenario,
+    };
+    let Named {
+        scenario, inline, ..
+    } = state.named_scenario(reference, "").await?;
     let search = Search {
         what: request.what,
         index: request.index,
@@ -146,7 +152,7 @@ pub(super) async fn place(
 }
 
 pub(super) async fn get_placement(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(placement_id): Path<String>,
 ) -> Result<Response, ApiError> {
     let job = state

@@ -3,9 +3,10 @@
 
 use super::problem::ApiError;
 use super::{Body, Page};
-use crate::AppState;
+use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
+use crate::app::scenarios::parse_scenario;
 use crate::cache::ScenarioSummary;
 use axum::Json;
 use axum::extract::{Path, Query, State};
@@ -25,7 +26,7 @@ pub(super) struct ScenarioList {
 /// The scenarios the caller may see (the server's own and, with authentication on, the
 /// caller's), by id, a page at a time.
 pub(super) async fn list_scenarios(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<ScenarioList>, ApiError> {
@@ -46,19 +47,13 @@ pub(super) struct ScenarioDocument {
     scenario: Scenario,
 }
 
-/// A scenario document embedded in a request at `prefix` (e.g. `"map.scenario."`).
-pub(super) fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, Error> {
-    Scenario::from_value(value).map_err(|e| Error::InvalidScenario(e.within(prefix)))
-}
-
 pub(super) async fn register_scenario(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Body(value): Body<serde_json::Value>,
 ) -> Result<Response, ApiError> {
     let scenario = parse_scenario(value, "")?;
-    let (stored, created) = state.register_scenario(scenario, "api", &caller)?;
-    state.share_scenario(&stored, true).await?;
+    let (stored, created) = state.add_scenario(scenario, &caller).await?;
     let status = if created {
         StatusCode::CREATED
     } else {
@@ -74,11 +69,11 @@ pub(super) async fn register_scenario(
 }
 
 pub(super) async fn get_scenario(
-    State(state): State<AppState>,
+    State(state): State<App>,
     Path(id): Path<String>,
 ) -> Result<Json<ScenarioDocument>, ApiError> {
     let stored = state
-        .shared_scenario(&id)
+        .scenario(&id)
         .await?
         .ok_or_else(|| Error::not_found("scenario", &id))?;
     Ok(Json(ScenarioDocument {
@@ -91,28 +86,10 @@ pub(super) async fn get_scenario(
 /// scenario goes, and the cached maps built from it. A scenario that a queued or running job
 /// needs is kept (409 with the job).
 pub(super) async fn delete_scenario(
-    State(state): State<AppState>,
+    State(state): State<App>,
     caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    if let Some(job) = state
-        .jobs()
-        .live()
-        .into_iter()
-        .find(|j| j.scenario_id == id)
-    {
-        return Err(Error::ScenarioInUse {
-            id,
-            job_id: job.id.clone(),
-        }
-        .into());
-    }
-    if state.registry().delete(&id, &caller)? {
-        state.cache().remove_scenario_maps(&id).await;
-        if let Some(cluster) = state.cluster() {
-            cluster.delete_scenario(&id).await?;
-        }
-        tracing::info!(scenario_id = %id, "scenario deleted");
-    }
+    state.delete_scenario(&id, &caller).await?;
     Ok(StatusCode::NO_CONTENT)
 }

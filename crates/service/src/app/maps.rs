@@ -1,0 +1,321 @@
+//! Maps, wherever they are: this replica's cache (memory, then its data directory), a build
+//! in flight here, or (in a cluster) the shared store and the builds queued there. Handlers
+//! ask [`App::map`], [`App::map_with_scenario`] or [`App::request_map`] and never choose
+//! between the cache, the disk and Redis themselves.
+
+use super::identity::Caller;
+use super::scenarios::{Named, ScenarioRef};
+use super::{App, Error};
+use crate::cluster::Cluster;
+use crate::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
+use irs_model::phases::PhaseMode;
+use irs_model::radiomap::{MapKey, MapKind, RadioMap, cost};
+use irs_model::rate::Access;
+use irs_model::scenario::Scenario;
+use irs_model::solver::SolverKind;
+use std::sync::Arc;
+
+/// What defines a map: a scenario (registered id or inline document) and the map parameters.
+pub(crate) struct MapSpec {
+    pub scenario: ScenarioRef,
+    pub kind: MapKind,
+    pub phases: Option<PhaseMode>,
+    pub access: Option<Access>,
+    pub solver: Option<SolverKind>,
+}
+
+/// A requested map: ready (with the scenario it was built from), or being built by a job too
+/// long to wait for (its view, for a 202).
+pub(crate) enum Obtained {
+    Ready {
+        map: Arc<RadioMap>,
+        scenario: Arc<Scenario>,
+    },
+    Building(Box<JobView>),
+}
+
+/// How often a request waiting for another replica's build reads its record: a gain map of
+/// the sizes built inline takes tens of milliseconds, so the wait adds at most this.
+const SHARED_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+
+/// Refuses work whose estimated CPU time exceeds the budget (422 naming `field` and the limit
+/// in seconds), before any of it is done.
+pub(crate) fn check_budget(
+    field: &str,
+    what: &str,
+    seconds: f64,
+    budget: f64,
+) -> Result<(), Error> {
+    if seconds <= budget {
+        return Ok(());
+    }
+    Err(Error::limit_exceeded(
+        field,
+        budget.ceil() as u64,
+        format!(
+            "this {what} would take about {seconds:.0} s of CPU, above the server's budget of \
+             {budget:.0} s: use a coarser grid, fewer elements (coherent grouping) or fewer \
+             candidates or draws"
+        ),
+    ))
+}
+
+impl App {
+    /// A built map by id, from wherever it is; not ready (with its job) while a build of it
+    /// runs here or anywhere in the cluster, else not found.
+    pub(crate) async fn map(&self, map_id: &str) -> Result<Arc<RadioMap>, Error> {
+        if let Some(map) = self.shared_map(map_id).await? {
+            return Ok(map);
+        }
+        if let Some(job) = self.jobs().building(map_id).await {
+            return Err(Error::MapNotReady {
+                map_id: map_id.to_string(),
+                job_id: job.id.clone(),
+            });
+        }
+        if let Some(cluster) = self.cluster()
+            && let Some(job_id) = cluster.building(map_id).await?
+        {
+            return Err(Error::MapNotReady {
+                map_id: map_id.to_string(),
+                job_id,
+            });
+        }
+        Err(Error::not_found("map", map_id))
+    }
+
+    /// A built map and the scenario it was built from.
+    pub(crate) async fn map_with_scenario(
+        &self,
+        map_id: &str,
+    ) -> Result<(Arc<RadioMap>, Arc<Scenario>), Error> {
+        let map = self.map(map_id).await?;
+        let stored = self
+            .scenario(&map.key.scenario_id)
+            .await?
+            .ok_or_else(|| Error::not_found("scenario", &map.key.scenario_id))?;
+        Ok((map, stored.scenario.clone()))
+    }
+
+    /// The map `spec` defines (its fields named under `prefix`): validated and budgeted, then
+    /// taken from wherever it is built, or built (here, or in a cluster by whichever replica has
+    /// a free worker). A cheap build is waited for; a long one answers with its job.
+    pub(crate) async fn request_map(
+        &self,
+        caller: &Caller,
+        spec: MapSpec,
+        prefix: &str,
+    ) -> Result<Obtained, Error> {
+        let (scenario, key) = self.resolve(caller, spec, prefix).await?;
+        let cheap =
+            key.kind == MapKind::Gain && scenario.grid().cells() <= self.limits().sync_cells;
+        let found = match self.cluster() {
+            Some(cluster) => self.obtain_shared(cluster, caller, key, cheap).await?,
+            None => self.obtain(caller, scenario.clone(), key, cheap).await?,
+        };
+        Ok(match found {
+            Ok(map) => Obtained::Ready { map, scenario },
+            Err(job) => Obtained::Building(Box::new(job)),
+        })
+    }
+
+    /// Drops a built map here and from the shared store (the next request for it builds it
+    /// again). A map being built here is not ready: cancel its job instead.
+    pub(crate) async fn delete_map(&self, map_id: &str) -> Result<(), Error> {
+        if let Some(job) = self.jobs().building(map_id).await {
+            return Err(Error::MapNotReady {
+                map_id: map_id.to_string(),
+                job_id: job.id.clone(),
+            });
+        }
+        let mut removed = self.cache().remove(map_id).await;
+        if let Some(cluster) = self.cluster() {
+            removed |= cluster.delete_map(map_id).await?;
+        }
+        if !removed {
+            return Err(Error::not_found("map", map_id));
+        }
+        tracing::info!(map_id = %map_id, "map deleted");
+        Ok(())
+    }
+
+    /// Resolves a map request to a scenario and a normalised key, and checks the build's
+    /// estimated cost against the budget. An inline scenario is registered (for `caller`) only
+    /// once the whole request has been validated, so a rejected request leaves no trace.
+    async fn resolve(
+        &self,
+        caller: &Caller,
+        spec: MapSpec,
+        prefix: &str,
+    ) -> Result<(Arc<Scenario>, MapKey), Error> {
+        let Named {
+            id,
+            scenario,
+            inline,
+        } = self.named_scenario(spec.scenario, prefix).await?;
+        let key = MapKey::new(
+            &id,
+            &scenario,
+            spec.kind,
+            spec.phases,
+            spec.access,
+            spec.solver,
+        )
+        .map_err(|e| e.within(prefix))?;
+        let cells = scenario.grid().cells();
+        let limit = self.limits().max_rate_cells;
+        if key.kind == MapKind::Rate && cells > limit {
+            return Err(Error::limit_exceeded(
+                format!("{prefix}kind"),
+                limit as u64,
+                format!("rate maps are limited to {limit} cells; this grid has {cells}"),
+            ));
+        }
+        check_budget(
+            &format!("{prefix}kind"),
+            "map build",
+            cost::build_seconds(&scenario, &key),
+            self.limits().max_build_cpu_s,
+        )?;
+        // A map the cache could never hold would be built, handed out once and dropped: refuse
+        // it.
+        let (bytes, budget) = (cost::map_bytes(&scenario, &key), self.limits().cache_bytes);
+        if bytes > budget as f64 {
+            return Err(Error::limit_exceeded(
+                format!("{prefix}kind"),
+                budget,
+                format!(
+                    "this map would take about {:.0} MiB, more than the map cache's whole budget of \
+                     {} MiB (--cache-mb): use a coarser grid or fewer elements",
+                    bytes / 1048576.0,
+                    budget / 1048576
+                ),
+            ));
+        }
+        if inline {
+            let (stored, _) = self.register_scenario((*scenario).clone(), "api", caller)?;
+            return Ok((stored.scenario.clone(), key));
+        }
+        Ok((scenario, key))
+    }
+
+    /// The map from this replica's cache or build, waiting for cheap builds; `Err` is the job
+    /// building a long one.
+    async fn obtain(
+        &self,
+        caller: &Caller,
+        scenario: Arc<Scenario>,
+        key: MapKey,
+        cheap: bool,
+    ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
+        let outcome = self
+            .jobs()
+            .request(self.cache(), scenario, key, caller.owner())
+            .await?;
+        match outcome {
+            MapRequestOutcome::Ready(map) => Ok(Ok(map)),
+            MapRequestOutcome::Building(job) if cheap => {
+                // The job hands its map over itself, whatever the cache has done with it since.
+                match job.wait_for_map().await {
+                    Some(map) => Ok(Ok(map)),
+                    None => Err(Error::BuildFailed(job.view().error.unwrap_or_else(|| {
+                        format!("job {} ended {} without a map", job.id, job.state().label())
+                    }))),
+                }
+            }
+            MapRequestOutcome::Building(job) => Ok(Err(job.view())),
+        }
+    }
+
+    /// [`App::obtain`] in a cluster: the map from any replica's build. The build is queued in
+    /// the shared stream (once for the whole cluster) and runs on whichever replica has a free
+    /// worker; a cheap one is waited for by polling its record.
+    async fn obtain_shared(
+        &self,
+        cluster: &Cluster,
+        caller: &Caller,
+        key: MapKey,
+        cheap: bool,
+    ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
+        let map_id = key.id();
+        if let Some(map) = self.shared_map(&map_id).await? {
+            return Ok(Ok(map));
+        }
+        // The replica that builds it reads the scenario from the shared store.
+        let stored = self
+            .scenario(&key.scenario_id)
+            .await?
+            .ok_or_else(|| Error::not_found("scenario", &key.scenario_id))?;
+        self.share_scenario(&stored, false).await?;
+        let queued = JobRecord::queued(&key, caller.owner().as_ref());
+        let (job_id, _) = cluster
+            .enqueue(&map_id, &key, queued, self.limits().cluster_queue)
+            .await?;
+        let record = |r: Option<JobRecord>| {
+            r.unwrap_or_else(|| {
+                let mut r = JobRecord::queued(&key, None);
+                r.job_id = job_id.clone();
+                r
+            })
+        };
+        if !cheap {
+            return Ok(Err(record(cluster.job(&job_id).await?).view()));
+        }
+        loop {
+            let current = record(cluster.job(&job_id).await?);
+            match current.state {
+                JobState::Done => {
+                    return match self.shared_map(&map_id).await? {
+                        Some(map) => Ok(Ok(map)),
+                        None => Err(Error::BuildFailed(format!(
+                            "job {job_id} is done but its map is in no store"
+                        ))),
+                    };
+                }
+                s if s.is_terminal() => {
+                    return Err(Error::BuildFailed(current.error.unwrap_or_else(|| {
+                        format!("job {job_id} ended {} without a map", s.label())
+                    })));
+                }
+                _ => tokio::time::sleep(SHARED_POLL).await,
+            }
+        }
+    }
+
+    /// A built map by id: in this replica's cache (or data directory), else (in a cluster) in
+    /// the shared store, decoded against its scenario and cached here.
+    async fn shared_map(
+        &self,
+        map_id: &str,
+    ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, Error> {
+        if let Some(map) = self.cache().get(map_id).await {
+            return Ok(Some(map));
+        }
+        let Some(cluster) = self.cluster() else {
+            return Ok(None);
+        };
+        let Some(encoded) = cluster.map(map_id).await? else {
+            return Ok(None);
+        };
+        let key = irs_model::radiomap::encoding::peek_key(&encoded)
+            .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
+        let Some(stored) = self.scenario(&key.scenario_id).await? else {
+            return Ok(None);
+        };
+        let scenario = stored.scenario.clone();
+        let map = tokio::task::spawn_blocking(move || {
+            irs_model::radiomap::encoding::decode(&encoded, &scenario)
+        })
+        .await
+        .map_err(|e| Error::internal(e.to_string()))?
+        .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
+        if map.id != map_id {
+            return Err(Error::internal(format!(
+                "shared map {map_id} holds another map"
+            )));
+        }
+        let map = Arc::new(map);
+        self.cache().insert(map_id.to_string(), map.clone()).await;
+        Ok(Some(map))
+    }
+}

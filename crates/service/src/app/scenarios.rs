@@ -1,0 +1,143 @@
+//! Scenarios, wherever they are registered: this replica's registry first, then (in a
+//! cluster) the shared store, whose scenarios are registered here on first use with their
+//! owners. Handlers ask [`App::scenario`] or [`App::named_scenario`] and never look in the
+//! registry and the store themselves, so no request can miss a scenario another replica holds
+//! by asking in the wrong order.
+
+use super::identity::Caller;
+use super::{App, Error, registrants};
+use crate::cache::StoredScenario;
+use irs_model::scenario::Scenario;
+use std::sync::Arc;
+
+/// A scenario as a request names it: a registered one by id, or an inline document.
+pub(crate) struct ScenarioRef {
+    pub id: Option<String>,
+    pub document: Option<serde_json::Map<String, serde_json::Value>>,
+}
+
+/// The scenario a request named, found: its id, the scenario, and whether it came inline (it
+/// is then registered only once the whole request has been validated).
+pub(crate) struct Named {
+    pub id: String,
+    pub scenario: Arc<Scenario>,
+    pub inline: bool,
+}
+
+/// A scenario document embedded in a request at `prefix` (e.g. `"map.scenario."`).
+pub(crate) fn parse_scenario(value: serde_json::Value, prefix: &str) -> Result<Scenario, Error> {
+    Scenario::from_value(value).map_err(|e| Error::InvalidScenario(e.within(prefix)))
+}
+
+impl App {
+    /// A scenario by id: registered here, or (in a cluster) registered on another replica,
+    /// which registers it here too with its owners. `Ok(None)`: nowhere; unavailable while the
+    /// shared store is down and the scenario is not here.
+    pub(crate) async fn scenario(&self, id: &str) -> Result<Option<Arc<StoredScenario>>, Error> {
+        if let Some(stored) = self.registry().get(id) {
+            return Ok(Some(stored));
+        }
+        let Some(cluster) = self.cluster() else {
+            return Ok(None);
+        };
+        let Some(record) = cluster.scenario(id).await? else {
+            return Ok(None);
+        };
+        let scenario = Scenario::from_json(&record.document.to_string())
+            .map_err(|e| Error::internal(format!("shared scenario {id}: {e}")))?;
+        if scenario.content_hash() != id {
+            return Err(Error::internal(format!(
+                "shared scenario {id} has another id in this build"
+            )));
+        }
+        let mut stored = None;
+        for owner in registrants(record.owners) {
+            stored = Some(self.register_scenario(scenario.clone(), "api", &owner)?.0);
+        }
+        Ok(stored)
+    }
+
+    /// The scenario a request names at `prefix`: a registered one by id (here or on another
+    /// replica; an unknown id is "not found", as an unknown map id is, naming the field) or
+    /// an inline document (parsed, not registered yet).
+    pub(crate) async fn named_scenario(
+        &self,
+        reference: ScenarioRef,
+        prefix: &str,
+    ) -> Result<Named, Error> {
+        match (reference.id, reference.document) {
+            (Some(id), None) => {
+                let stored = self.scenario(&id).await?.ok_or_else(|| {
+                    Error::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
+                })?;
+                Ok(Named {
+                    id,
+                    scenario: stored.scenario.clone(),
+                    inline: false,
+                })
+            }
+            (None, Some(doc)) => {
+                let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
+                Ok(Named {
+                    id: scenario.content_hash(),
+                    scenario: Arc::new(scenario),
+                    inline: true,
+                })
+            }
+            _ => Err(Error::invalid(
+                format!("{prefix}scenario_id"),
+                "give exactly one of scenario_id (a registered scenario) and scenario (an inline document)",
+            )),
+        }
+    }
+
+    /// Registers a scenario sent to the API for `caller` and, in a cluster, publishes it (its
+    /// document and owners) for the other replicas. Returns it and whether it was new.
+    pub(crate) async fn add_scenario(
+        &self,
+        scenario: Scenario,
+        caller: &Caller,
+    ) -> Result<(Arc<StoredScenario>, bool), Error> {
+        let (stored, created) = self.register_scenario(scenario, "api", caller)?;
+        self.share_scenario(&stored, true).await?;
+        Ok((stored, created))
+    }
+
+    /// In a cluster: publishes an API scenario (document and owners) for the other replicas;
+    /// `replace` false leaves a record already there as it is (see
+    /// [`crate::cluster::Cluster::put_scenario`]).
+    pub(super) async fn share_scenario(
+        &self,
+        stored: &StoredScenario,
+        replace: bool,
+    ) -> Result<(), Error> {
+        match self.cluster() {
+            Some(cluster) if stored.source == "api" => {
+                cluster
+                    .put_scenario(&stored.id, &stored.record(), replace)
+                    .await
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Deletes the caller's registration of an API scenario; with the last registration the
+    /// scenario goes (here and in the shared store), and the cached maps built from it. A
+    /// scenario that a queued or running job needs is kept (in use, with the job).
+    pub(crate) async fn delete_scenario(&self, id: &str, caller: &Caller) -> Result<(), Error> {
+        if let Some(job) = self.jobs().live().into_iter().find(|j| j.scenario_id == id) {
+            return Err(Error::ScenarioInUse {
+                id: id.to_string(),
+                job_id: job.id.clone(),
+            });
+        }
+        if self.registry().delete(id, caller)? {
+            self.cache().remove_scenario_maps(id).await;
+            if let Some(cluster) = self.cluster() {
+                cluster.delete_scenario(id).await?;
+            }
+            tracing::info!(scenario_id = %id, "scenario deleted");
+        }
+        Ok(())
+    }
+}
