@@ -27,7 +27,7 @@ fn main() -> ExitCode {
 }
 
 fn serve(args: ServeArgs) -> Result<(), cli::Failure> {
-    irs_service::run(args).map_err(|e| match e {
+    irs_service::serve(args).map_err(|e| match e {
         irs_service::ServeError::Config(message) => cli::Failure::input(message),
         irs_service::ServeError::Runtime(message) => cli::Failure::runtime(message),
     })

@@ -346,7 +346,7 @@ impl MapCache {
                 let disk = disk.clone();
                 let id = map_id.to_string();
                 // Reading and checking a map of megabytes is blocking work.
-                tokio::task::spawn_blocking(move || {
+                crate::runtime::recorder::spawn_blocking(move || {
                     disk.dir.load_map(&id, |sid| {
                         disk.scenarios.get(sid).map(|s| s.scenario.clone())
                     })
@@ -370,7 +370,8 @@ impl MapCache {
     pub async fn insert(&self, map_id: String, map: Arc<RadioMap>) {
         if let Some(disk) = &self.disk {
             let (dir, id, to_save) = (disk.dir.clone(), map_id.clone(), map.clone());
-            let _ = tokio::task::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
+            let _ =
+                crate::runtime::recorder::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
         }
         self.maps.insert(map_id, map).await;
         self.maps.run_pending_tasks().await;

@@ -477,7 +477,7 @@ pub(crate) async fn run_builder(state: super::App, cluster: std::sync::Arc<Clust
         };
         match cluster.next_build(&mut active).await {
             Ok(Some(build)) => {
-                tokio::spawn(build_entry(state.clone(), cluster.clone(), build));
+                crate::runtime::recorder::spawn(build_entry(state.clone(), cluster.clone(), build));
             }
             Ok(None) => {}
             Err(e) => {
@@ -544,10 +544,11 @@ async fn build_entry(state: super::App, cluster: std::sync::Arc<Cluster>, build:
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
     let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
-        let encoded =
-            tokio::task::spawn_blocking(move || irs_model::radiomap::encoding::encode(&map))
-                .await
-                .map_err(|e| e.to_string())?;
+        let encoded = crate::runtime::recorder::spawn_blocking(move || {
+            irs_model::radiomap::encoding::encode(&map)
+        })
+        .await
+        .map_err(|e| e.to_string())?;
         publisher
             .put_map(&map_id, &encoded)
             .await

@@ -591,7 +591,9 @@ impl Jobs {
             job.hand_over(&map);
             cache.insert(map_id_of(&job), map).await;
         };
-        tokio::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        crate::runtime::recorder::spawn(
+            self.clone().run(job.clone(), work, finish).instrument(span),
+        );
         Ok(MapRequestOutcome::Building(job))
     }
 
@@ -628,7 +630,7 @@ impl Jobs {
         };
         let runner = self.clone();
         let handle = job.clone();
-        tokio::spawn(
+        crate::runtime::recorder::spawn(
             async move {
                 let in_flight = handle.map_id().unwrap_or_default().to_string();
                 runner
@@ -721,7 +723,9 @@ impl Jobs {
                 }));
             }
         };
-        tokio::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        crate::runtime::recorder::spawn(
+            self.clone().run(job.clone(), work, finish).instrument(span),
+        );
         Ok(job)
     }
 
@@ -807,7 +811,7 @@ impl Jobs {
         let waited = queued_at.elapsed().as_secs_f64();
         tracing::info!(queued_s = waited, "job started");
         let started = Instant::now();
-        let result = tokio::task::spawn_blocking(|| {
+        let result = crate::runtime::recorder::spawn_blocking(|| {
             // The job's own sequential parts yield to the runtime as the pools' threads do. The
             // blocking pool runs nothing latency-bound (builds, map encoding, disk writes), so
             // a thread that stays lowered for its next task costs nothing.
@@ -856,8 +860,10 @@ impl Jobs {
         if let Some(disk) = self.disk.clone() {
             let (id, record) = (job.id.clone(), job.record());
             // A small file, but flushed to disk: off the async threads.
-            let _ =
-                tokio::task::spawn_blocking(move || disk.save_json(Kind::Job, &id, &record)).await;
+            let _ = crate::runtime::recorder::spawn_blocking(move || {
+                disk.save_json(Kind::Job, &id, &record)
+            })
+            .await;
         }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());

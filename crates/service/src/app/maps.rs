@@ -303,7 +303,7 @@ impl App {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
-        let map = tokio::task::spawn_blocking(move || {
+        let map = crate::runtime::recorder::spawn_blocking(move || {
             irs_model::radiomap::encoding::decode(&encoded, &scenario)
         })
         .await

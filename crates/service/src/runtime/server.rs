@@ -3,7 +3,7 @@
 //!
 //! axum's own `serve` sets none of these limits, so the accept loop is ours; hyper and
 //! hyper-util do the protocol work. Three timeouts guard a connection here (the body and
-//! whole-request timeouts are layers of the app, `super::app`):
+//! whole-request timeouts are layers of the app, `crate::http::app`):
 //! - **headers**: hyper's `header_read_timeout`, counted from the first byte a request is
 //!   awaited, so a slow-loris client dribbling a header is cut off;
 //! - **idle keep-alive**: a watchdog closes a connection with no request in flight and no
@@ -95,7 +95,7 @@ pub(crate) async fn serve(
         let _ = stream.set_nodelay(true);
         metrics::counter!("irs_connections_total").increment(1);
         let (builder, app, closing) = (builder.clone(), app.clone(), closing.subscribe());
-        tokio::spawn(async move {
+        crate::runtime::recorder::spawn(async move {
             connection(&builder, stream, app, limits.idle_timeout, closing).await;
             tracing::debug!(%peer, "connection closed");
             drop(permit);
@@ -125,11 +125,12 @@ async fn connection(
     let service = tower::service_fn(move |request| {
         let in_flight = InFlight::new(counted.clone());
         let answer = app.clone().oneshot(request);
-        async move {
+        // Recorded: an HTTP/2 stream's future runs in a task hyper spawns, not in this one.
+        crate::runtime::recorder::recorded(async move {
             let response = answer.await;
             drop(in_flight);
             response
-        }
+        })
     });
     let conn = builder.serve_connection_with_upgrades(io, TowerToHyperService::new(service));
     tokio::pin!(conn);

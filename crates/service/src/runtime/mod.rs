@@ -1,0 +1,231 @@
+//! Running the service: [`run`] serves one [`App`] on a listener until a shutdown future
+//! resolves, then drains. It installs nothing process-wide: the metrics registry is the
+//! server's own ([`recorder`]), and no tracing subscriber or rayon pool is set up inside it, so
+//! tests start servers in-process, several per process. [`serve`] is the process's entry
+//! (`irs-planner serve`): it installs the tracing subscriber and the build pool, binds, and
+//! runs until SIGINT/SIGTERM. [`server`] is the accept loop and its timeouts.
+
+pub mod recorder;
+pub(crate) mod server;
+
+use crate::app::{self, App};
+use crate::config::{LogFormat, ServeArgs};
+use crate::{http, priority};
+use recorder::Metrics;
+use std::future::Future;
+use std::time::{Duration, Instant};
+use tokio::net::TcpListener;
+
+fn init_tracing(format: LogFormat) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new("info,tower_http=info"));
+    // Colour codes only on a terminal: log files and collectors get plain text.
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Text => builder.try_init(),
+        LogFormat::Json => builder.json().flatten_event(true).try_init(),
+    };
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = terminate => {},
+    }
+}
+
+/// After the accept loop stopped: waits up to `grace` for running jobs and open requests, then
+/// cancels the jobs still running and gives connections two more seconds.
+async fn drain(state: &App, connections: &server::OpenConnections, grace: Duration) {
+    let started = Instant::now();
+    let deadline = started + grace;
+    let live = state.jobs().live().len();
+    tracing::info!(
+        live_jobs = live,
+        connections = connections.count(),
+        grace_s = grace.as_secs_f64(),
+        "shutdown: no longer accepting; waiting for running work"
+    );
+    while !state.jobs().live().is_empty() && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let cancelled = state.jobs().cancel_all();
+    if cancelled.is_empty() {
+        tracing::info!(
+            waited_s = started.elapsed().as_secs_f64(),
+            "shutdown: no job left running"
+        );
+    } else {
+        tracing::warn!(
+            cancelled = cancelled.len(),
+            job_ids = %cancelled.join(","),
+            "shutdown: grace period over; cancelled the jobs still queued or running"
+        );
+    }
+    // Jobs check their flag once per grid row, so they end within a fraction of a second;
+    // requests waiting on them are then answered and their connections close.
+    let open = connections
+        .drain(Instant::now().max(deadline) + Duration::from_secs(2))
+        .await;
+    if open > 0 {
+        tracing::warn!(
+            connections = open,
+            "shutdown: closing connections still open"
+        );
+    }
+    tracing::info!(
+        total_s = started.elapsed().as_secs_f64(),
+        "shutdown complete"
+    );
+}
+
+/// Why `serve` stopped with an error.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ServeError {
+    /// What the operator gave is wrong: a scenario file in the scenarios directory is invalid.
+    #[error("{0}")]
+    Config(String),
+    /// The service could not run: the address is taken, the runtime or the metrics registry
+    /// could not start, or serving failed.
+    #[error("{0}")]
+    Runtime(String),
+}
+
+/// Cancels the jobs still live when [`run`]'s future is dropped before it drained (a test's
+/// runtime going away): builds stop at their next row instead of holding the blocking pool.
+struct CancelJobsOnDrop(App);
+
+impl Drop for CancelJobsOnDrop {
+    fn drop(&mut self) {
+        self.0.jobs().cancel_all();
+    }
+}
+
+/// Serves the service configured by `args` on `listener` until `shutdown` resolves, then stops
+/// accepting, waits up to `--shutdown-grace-s` for running jobs and requests, cancels the
+/// rest and returns. Prints `listening on http://ADDR` on stdout once it serves. Dropping the
+/// future before then cancels the server's jobs.
+pub async fn run(
+    listener: TcpListener,
+    args: ServeArgs,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), ServeError> {
+    let metrics = Metrics::new().map_err(ServeError::Runtime)?;
+    metrics
+        .clone()
+        .scope(serve_app(listener, args, metrics, shutdown))
+        .await
+}
+
+async fn serve_app(
+    listener: TcpListener,
+    args: ServeArgs,
+    metrics: Metrics,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), ServeError> {
+    let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
+    let grace = Duration::from_secs(args.shutdown_grace_s);
+    let state = App::new(&args, metrics.handle()).map_err(ServeError::Config)?;
+    let _cancel = CancelJobsOnDrop(state.clone());
+    app::preload(&state, &args.scenarios).map_err(ServeError::Config)?;
+    app::restore(&state);
+    let addr = listener.local_addr().map_err(|e| runtime_error(&e))?;
+    state.set_ready(true);
+    tracing::info!(
+        %addr,
+        workers = args.workers(),
+        queue = args.queue,
+        query_workers = args.query_workers(),
+        cache_mb = args.cache_mb,
+        authentication = state.tokens().enabled(),
+        tokens = state.tokens().count(),
+        "irs-planner listening"
+    );
+    println!("listening on http://{addr}");
+    let limits = server::ConnectionLimits {
+        max_connections: args.max_connections,
+        header_timeout: Duration::from_secs(args.header_timeout_s.max(1)),
+        idle_timeout: Duration::from_secs(args.idle_timeout_s.max(1)),
+    };
+    let warming = state.clone();
+    let mut background = vec![recorder::spawn(async move {
+        app::warm_from_disk(&warming).await
+    })];
+    // The registry's histograms are drained into their buckets now and then, as the
+    // process-wide exporter's upkeep thread would.
+    let upkeep = metrics.handle();
+    background.push(recorder::spawn(async move {
+        loop {
+            tokio::time::sleep(Duration::from_secs(5)).await;
+            upkeep.run_upkeep();
+        }
+    }));
+    if let Some(cluster) = state.cluster().cloned() {
+        let health = cluster.clone();
+        background.push(recorder::spawn(async move { health.watch_health().await }));
+        background.push(recorder::spawn(crate::cluster::run_builder(
+            state.clone(),
+            cluster.clone(),
+        )));
+        tracing::info!(replica = %cluster.replica, "sharing scenarios, maps and jobs through Redis");
+    }
+    let stopping = state.clone();
+    let connections = server::serve(listener, http::app(state.clone()), limits, async move {
+        shutdown.await;
+        stopping.set_ready(false);
+    })
+    .await;
+    drain(&state, &connections, grace).await;
+    for task in background {
+        task.abort();
+    }
+    Ok(())
+}
+
+/// `irs-planner serve`: the process's entry. Installs the tracing subscriber and the build
+/// pool, starts the runtime, binds `--bind` and [`run`]s until SIGINT/SIGTERM.
+pub fn serve(args: ServeArgs) -> Result<(), ServeError> {
+    let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
+    init_tracing(args.log_format);
+    // Map builds' parallel loops run on rayon's global pool: built here so that its threads
+    // start at the workers' lower priority (see `priority`).
+    if let Err(e) = rayon::ThreadPoolBuilder::new()
+        .thread_name(|k| format!("irs-build-{k}"))
+        .start_handler(|_| priority::lower_this_thread())
+        .build_global()
+    {
+        tracing::warn!(error = %e, "the build pool was already started: builds keep the default priority");
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| runtime_error(&e))?;
+    let outcome = runtime.block_on(async move {
+        let listener = TcpListener::bind(args.bind)
+            .await
+            .map_err(|e| runtime_error(&format!("--bind {}: {e}", args.bind)))?;
+        run(listener, args, shutdown_signal()).await
+    });
+    // Blocking tasks still running (a build between two cancellation checks) are not waited
+    // for beyond this: the process must exit within the grace period plus two seconds.
+    runtime.shutdown_timeout(Duration::from_millis(500));
+    outcome
+}
