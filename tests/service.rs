@@ -1,8 +1,11 @@
-//! The real server, started from the built binary on an ephemeral loopback port and driven over
-//! HTTP: the contract (openapi.yaml ↔ routes), the paper flow (register, build, plan — checked
-//! byte for byte against the CLI), jobs (progress, cancellation, single flight, queue limit) and
-//! every error path.
+//! The real server driven over HTTP on an ephemeral loopback port: started in this process
+//! through `irs_service::run` (the in-process runtime the binary runs too), or from the built
+//! binary where the process itself is under test (SIGTERM, a SIGKILL with `--data-dir`). The
+//! contract (openapi.yaml ↔ routes), the paper flow (register, build, plan — checked byte for
+//! byte against the CLI), jobs (progress, cancellation, single flight, queue limit) and every
+//! error path.
 
+use clap::Parser;
 use reqwest::{Client, StatusCode};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader};
@@ -10,15 +13,27 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 struct Server {
-    child: Child,
+    running: Running,
     base: String,
     client: Client,
 }
 
+/// How a test server runs: a task of the test's runtime, or a child process.
+enum Running {
+    InProcess(tokio::task::JoinHandle<Result<(), irs_service::ServeError>>),
+    Binary(Child),
+}
+
 impl Drop for Server {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        match &mut self.running {
+            // Dropping `run`'s future cancels the server's jobs.
+            Running::InProcess(task) => task.abort(),
+            Running::Binary(child) => {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+        }
     }
 }
 
@@ -26,18 +41,58 @@ fn root() -> &'static str {
     env!("CARGO_MANIFEST_DIR")
 }
 
-/// Starts `irs-planner serve --bind 127.0.0.1:0` with extra flags and waits for its address.
-fn start(extra: &[&str]) -> Server {
+/// An empty directory for `--scenarios`: the servers serve the built-in scenarios only.
+fn empty_scenarios() -> String {
     let empty = std::env::temp_dir().join(format!("irs-empty-{}", std::process::id()));
     std::fs::create_dir_all(&empty).unwrap();
+    empty.to_str().unwrap().to_string()
+}
+
+fn client() -> Client {
+    Client::builder()
+        .timeout(Duration::from_secs(60))
+        .build()
+        .unwrap()
+}
+
+/// `serve`'s flags, parsed as the binary parses them.
+#[derive(Parser)]
+struct Flags {
+    #[command(flatten)]
+    serve: irs_service::config::ServeArgs,
+}
+
+/// Starts the service in this process (`serve --bind 127.0.0.1:0` with extra flags) through
+/// [`irs_service::run`], on the test's runtime.
+fn start(extra: &[&str]) -> Server {
+    let scenarios = empty_scenarios();
+    let flags = Flags::try_parse_from(
+        ["serve", "--bind", "127.0.0.1:0", "--scenarios", &scenarios]
+            .into_iter()
+            .chain(extra.iter().copied()),
+    )
+    .expect("valid flags");
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    listener.set_nonblocking(true).unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    let listener = tokio::net::TcpListener::from_std(listener).unwrap();
+    let task = tokio::spawn(irs_service::run(
+        listener,
+        flags.serve,
+        std::future::pending(),
+    ));
+    Server {
+        running: Running::InProcess(task),
+        base,
+        client: client(),
+    }
+}
+
+/// Starts `irs-planner serve --bind 127.0.0.1:0` with extra flags and waits for its address.
+fn start_binary(extra: &[&str]) -> Server {
+    let scenarios = empty_scenarios();
     let mut child = Command::new(env!("CARGO_BIN_EXE_irs-planner"))
-        .args([
-            "serve",
-            "--bind",
-            "127.0.0.1:0",
-            "--scenarios",
-            empty.to_str().unwrap(),
-        ])
+        .args(["serve", "--bind", "127.0.0.1:0", "--scenarios", &scenarios])
         .args(extra)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
@@ -54,16 +109,20 @@ fn start(extra: &[&str]) -> Server {
         .expect("the server prints its address")
         .to_string();
     Server {
-        child,
+        running: Running::Binary(child),
         base,
-        client: Client::builder()
-            .timeout(Duration::from_secs(60))
-            .build()
-            .unwrap(),
+        client: client(),
     }
 }
 
 impl Server {
+    /// The process of a server started by [`start_binary`].
+    fn child(&mut self) -> &mut Child {
+        match &mut self.running {
+            Running::Binary(child) => child,
+            Running::InProcess(_) => panic!("an in-process server has no process"),
+        }
+    }
     async fn send(&self, method: &str, path: &str, body: Option<Value>) -> (StatusCode, Value) {
         self.send_as(None, method, path, body).await
     }
@@ -1077,7 +1136,7 @@ async fn operations_endpoints() {
 
 #[tokio::test]
 async fn sigterm_shuts_down_gracefully() {
-    let mut server = start(&["--shutdown-grace-s", "1"]);
+    let mut server = start_binary(&["--shutdown-grace-s", "1"]);
     assert_eq!(server.get("/healthz").await.0, StatusCode::OK);
     // A build that outlasts the grace period is cancelled, and the process exits within the
     // grace period plus two seconds.
@@ -1089,7 +1148,7 @@ async fn sigterm_shuts_down_gracefully() {
         .await;
     assert_eq!(s, StatusCode::ACCEPTED, "{job}");
     let signalled = Instant::now();
-    let pid = server.child.id().to_string();
+    let pid = server.child().id().to_string();
     assert!(
         Command::new("kill")
             .args(["-TERM", &pid])
@@ -1099,7 +1158,7 @@ async fn sigterm_shuts_down_gracefully() {
     );
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
-        if let Some(status) = server.child.try_wait().unwrap() {
+        if let Some(status) = server.child().try_wait().unwrap() {
             assert!(status.success(), "exit status {status}");
             assert!(
                 signalled.elapsed() < Duration::from_secs(4),
@@ -1682,7 +1741,7 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
     let (alice, bob) = ("alice-token-0123456789", "bob-token-0123456789ab");
     let tokens = format!("{alice},{bob}");
     let flags = ["--data-dir", dir.to_str().unwrap(), "--api-tokens", &tokens];
-    let server = start(&flags);
+    let server = start_binary(&flags);
     let doc = scenario("small-test.json", |v| v["name"] = "persisted".into());
     let (s, created) = server
         .send_as(Some(alice), "POST", "/v1/scenarios", Some(doc))
@@ -1725,7 +1784,7 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
     let bytes = std::fs::read(&torn).unwrap();
     std::fs::write(&torn, &bytes[..bytes.len() / 2]).unwrap();
 
-    let server = start(&flags);
+    let server = start_binary(&flags);
     let (_, mine) = server
         .send_as(Some(alice), "GET", "/v1/scenarios", None)
         .await;
