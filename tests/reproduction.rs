@@ -4,6 +4,7 @@
 mod common;
 
 use common::{Q_F, Q_I, build};
+use irs_answers::scenario::ScenarioDocument;
 
 use irs_model::channel::{C64, ChannelModel};
 use irs_model::phases::PhaseMode;
@@ -142,7 +143,7 @@ fn noma_dominates_oma_and_gains_more_from_the_irs() {
 #[test]
 fn noma_map_is_certified_within_the_targets() {
     let map = rate_map(Access::Noma, PhaseMode::Continuous);
-    let body = irs_answers::map::body(&map);
+    let body = irs_answers::map::body(map);
     let cert = body.certificate.expect("rate maps carry a certificate");
     assert_eq!(cert.cells, map.stats().valued_cells);
     for (k, v) in map.values.iter().enumerate() {

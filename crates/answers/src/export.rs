@@ -13,7 +13,8 @@
 //! Importing a keep-out mask as a floor plan of the same room and resolution marks exactly the
 //! mask's cells occupied (tested).
 
-use irs_model::floorplan::{self, EncodedMap, MapMode};
+use crate::mapfile::{self, EncodedMap};
+use irs_model::floorplan::MapMode;
 use irs_model::input::FieldError;
 use irs_model::radiomap::RadioMap;
 
@@ -147,7 +148,7 @@ pub fn nav2_mask(
         MaskKind::Keepout => MapMode::Trinary,
         MaskKind::Cost => MapMode::Scale,
     };
-    let files = floorplan::encode_map(
+    let files = mapfile::encode_map(
         &values,
         g.nx,
         g.resolution_m,
@@ -179,9 +180,11 @@ pub fn npy(map: &RadioMap) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::map::build;
+    use crate::scenario::ScenarioDocument;
     use base64::Engine;
     use irs_model::phases::PhaseMode;
-    use irs_model::radiomap::{MapKey, Progress, build};
+    use irs_model::radiomap::{MapKey, Progress};
     use irs_model::scenario::Scenario;
 
     fn small_map() -> (Scenario, RadioMap) {

@@ -491,9 +491,10 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::ScenarioDocument;
     use irs_model::phases::PhaseMode;
     use irs_model::planner::{self, Threshold};
-    use irs_model::radiomap::{self, MapKey, Progress};
+    use irs_model::radiomap::{MapKey, Progress};
 
     fn decode(bytes: Vec<u8>) -> (usize, usize, Vec<u8>) {
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
@@ -507,7 +508,7 @@ mod tests {
     fn picture_shows_obstacles_path_endpoints_devices_and_colour_bar() {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
         let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
         let options = RenderOptions::for_path(&map, &answer);
         let layout = Layout::new(&map, None).unwrap();
@@ -555,7 +556,7 @@ mod tests {
     fn infeasible_ends_are_still_marked_and_sizes_are_bounded() {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
         let answer =
             planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Value(1e9), 1.0).unwrap();
         assert!(!answer.feasible);

@@ -523,14 +523,24 @@ fn shared(
     Shared { field, tau }
 }
 
+/// How an answer names scenarios and maps. Ids are hashes of documents, which the model does
+/// not write: the answers crate does (`irs_answers::map::ContentIds`).
+pub trait Naming: Sync {
+    /// The id of a scenario.
+    fn scenario_id(&self, scenario: &Scenario) -> String;
+    /// The id of the map a key defines.
+    fn map_id(&self, key: &MapKey) -> String;
+}
+
 /// Checks a search, scores every candidate and ranks them (see [`candidates`] and
 /// [`rank_candidates`]).
 pub fn place(
     base: &Scenario,
     search: &Search,
+    naming: &dyn Naming,
     progress: &Progress,
 ) -> Result<Placement, WorkError> {
-    rank_candidates(base, search, candidates(base, search)?, progress)
+    rank_candidates(base, search, candidates(base, search)?, naming, progress)
 }
 
 /// Scores the candidates [`candidates`] listed for `search` and ranks them. `progress` counts
@@ -539,6 +549,7 @@ pub fn rank_candidates(
     base: &Scenario,
     search: &Search,
     candidates: Vec<Candidate>,
+    naming: &dyn Naming,
     progress: &Progress,
 ) -> Result<Placement, WorkError> {
     let mode = search.phases.unwrap_or(PhaseMode::Continuous);
@@ -609,7 +620,8 @@ pub fn rank_candidates(
                         return Err(Cancelled.into());
                     }
                     let key = MapKey::gain("placement", scenario, mode)?;
-                    let map = radiomap::build(scenario, &key, &Progress::default())?;
+                    let map =
+                        radiomap::build(scenario, &key, naming.map_id(&key), &Progress::default())?;
                     progress.advance(grid.cells() * aps);
                     Ok((
                         k,
@@ -629,8 +641,8 @@ pub fn rank_candidates(
             .scenario
             .as_ref()
             .expect("only valid candidates are scored");
-        let scenario_id = scenario.content_hash();
-        let map_id = MapKey::gain(&scenario_id, scenario, mode)?.id();
+        let scenario_id = naming.scenario_id(scenario);
+        let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario, mode)?);
         ranked.push(Ranked {
             rank: rank + 1,
             center: c.center,
@@ -653,7 +665,7 @@ pub fn rank_candidates(
         .collect();
     Ok(Placement {
         answer: PlacementAnswer {
-            scenario_id: base.content_hash(),
+            scenario_id: naming.scenario_id(base),
             what: search.what,
             index: search.index,
             map_kind: "gain",

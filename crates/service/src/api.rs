@@ -20,6 +20,7 @@ use irs_answers::export::{self, MaskKind};
 use irs_answers::path::{self, CheckedPath};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
+use irs_answers::scenario::ScenarioDocument as _;
 use irs_answers::timing::Timed;
 use irs_model::input::{FieldError, parse_finite, parse_point, present};
 use irs_model::montecarlo;
@@ -549,7 +550,7 @@ async fn obtain_shared(
     key: MapKey,
     cheap: bool,
 ) -> Result<Result<Arc<RadioMap>, Response>, ApiError> {
-    let map_id = key.id();
+    let map_id = irs_answers::map::map_id(&key);
     if let Some(map) = state.shared_map(&map_id).await? {
         return Ok(Ok(map));
     }

@@ -38,7 +38,9 @@ use axum::response::{IntoResponse, Response};
 use cache::{MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use config::{LogFormat, ServeArgs};
 use errors::ApiError;
-use irs_model::scenario::{BUILTIN, Scenario};
+use irs_answers::scenario::BUILTIN;
+use irs_answers::scenario::ScenarioDocument;
+use irs_model::scenario::Scenario;
 use jobs::Jobs;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 use queries::QueryPool;
@@ -284,18 +286,17 @@ impl AppState {
         let Some(encoded) = cluster.map(map_id).await? else {
             return Ok(None);
         };
-        let key = irs_model::radiomap::encoding::peek_key(&encoded)
+        let key = irs_answers::encoding::peek_key(&encoded)
             .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
         let Some(stored) = self.shared_scenario(&key.scenario_id).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
-        let map = tokio::task::spawn_blocking(move || {
-            irs_model::radiomap::encoding::decode(&encoded, &scenario)
-        })
-        .await
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
+        let map =
+            tokio::task::spawn_blocking(move || irs_answers::encoding::decode(&encoded, &scenario))
+                .await
+                .map_err(|e| ApiError::internal(e.to_string()))?
+                .map_err(|e| ApiError::internal(format!("shared map {map_id}: {e}")))?;
         if map.id != map_id {
             return Err(ApiError::internal(format!(
                 "shared map {map_id} holds another map"

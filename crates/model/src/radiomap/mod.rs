@@ -11,13 +11,14 @@
 
 pub mod body;
 pub mod cost;
-pub mod encoding;
 pub mod gain;
 pub mod key;
+mod parts;
 pub mod rate_cells;
 
 pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
+pub use parts::StoredCells;
 pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
@@ -115,8 +116,9 @@ pub struct CellConfig<P = SurfaceRadians> {
 #[derive(Debug, Clone)]
 pub struct RadioMap {
     pub key: MapKey,
-    /// The map id, `key.id()` (a hash of the key's canonical JSON), computed once: every path
-    /// answer names it, and hashing the key was 3 % of a repeated path query's time.
+    /// The map id (`irs_answers::map::map_id`: a hash of the key's document), given to
+    /// [`build`] and kept: every path answer names it, and hashing the key was 3 % of a repeated
+    /// path query's time.
     pub id: String,
     pub grid: Grid,
     /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
@@ -223,11 +225,12 @@ pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
     occupied
 }
 
-/// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress
-/// advances and cancellation is checked once per row.
+/// Builds the map a key defines, named `id`. Cells are spread over rayon's pool by rows of the
+/// grid; progress advances and cancellation is checked once per row.
 pub fn build(
     scenario: &Scenario,
     key: &MapKey,
+    id: String,
     progress: &Progress,
 ) -> Result<RadioMap, Cancelled> {
     let started = std::time::Instant::now();
@@ -259,7 +262,7 @@ pub fn build(
     };
     Ok(RadioMap {
         key: key.clone(),
-        id: key.id(),
+        id,
         grid,
         values,
         occupied,
