@@ -1,425 +1,12 @@
-//! The scenario: one JSON document describing a floor, its obstacles, the AP, the optional IRS,
-//! the mobile robot (MRU) and the static robots (SRUs) — docs/model.md §1.
-//!
-//! Parsing is strict (unknown fields are an error) and every check names the offending field by
-//! its JSON path, so a fleet manager can fix a document without reading code. Defaults the spec
-//! fixes (`sub_pitch_m = λ/2`, `grouping = coherent`, `rician_k_db = 3`) are resolved at parse
-//! time, so the canonical form — and therefore the content hash — is the same whether a default
-//! was written out or omitted.
+//! A scenario's checks: defaults resolved, then every field, in the document's order, one
+//! concern per function, each error naming the field's JSON path.
 
-use crate::floorplan::{self, FloorPlan};
-use crate::geometry::{Aabb, Obstructions, Raster, Wall};
-use crate::input::{FieldError, present};
-use serde::{Deserialize, Serialize};
-use std::sync::Arc;
-
-/// Reads a floor plan's image file from the text a document carries in `floor_plan.image`
-/// (base64, decoded by the answers crate), or says why it cannot.
-pub type ImageFile<'a> = &'a dyn Fn(&str) -> Result<Vec<u8>, String>;
-
-/// The [`ImageFile`] of a scenario derived from a validated one, which keeps its decoded floor
-/// plan (and of documents without one): never asked for a file.
-fn kept_raster(_: &str) -> Result<Vec<u8>, String> {
-    Err("a derived scenario keeps its decoded floor plan".into())
-}
-
-/// Speed of light (m/s), for λ = c / f_c.
-pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
-/// Largest grid a scenario may define: a 1001 × 1001 map (≈ 8 MB of values).
-pub const MAX_GRID_CELLS: usize = 1001 * 1001;
-/// Largest number of IRS sub-surfaces N (phase vector length), all surfaces together.
-pub const MAX_SUBSURFACES: usize = 1024;
-/// Largest number of IRS elements M = N · N̄, all surfaces together.
-pub const MAX_ELEMENTS: usize = 200_000;
-/// Largest number of access points on one floor: a gain map evaluates every cell once per AP.
-pub const MAX_APS: usize = 8;
-/// Largest number of IRSs on one floor: each adds a blockage test and a path-loss evaluation
-/// per cell; 16 covers a hall with a surface on every pillar face we have seen planned.
-pub const MAX_SURFACES: usize = 16;
-/// Largest number of static robots K; NOMA searches all (K+1)! decoding orders.
-pub const MAX_SRUS: usize = 4;
-/// Largest number of obstacles (boxes); each is tested against every link.
-pub const MAX_OBSTACLES: usize = 1000;
-/// Largest number of walls; each is tested against every link, like a box.
-pub const MAX_WALLS: usize = 1000;
-/// Longest scenario name, in characters: a label for listings, not a document store.
-pub const MAX_NAME_CHARS: usize = 200;
-/// Most cells along one axis of the grid: a 1 km corridor at 0.1 m. Together with
-/// [`MAX_GRID_CELLS`] it keeps absurd aspect ratios (a 10⁶ × 1 grid) out, which would otherwise
-/// give pictures and masks a side no image format holds.
-pub const MAX_GRID_SIDE: usize = 10_001;
-/// Largest |coordinate| (m) of the room, and so of everything inside it: a floor is far smaller,
-/// and beyond ~10⁵ m squared distances lose the millimetre precision blockage tests rely on.
-pub const MAX_COORDINATE_M: f64 = 100_000.0;
-/// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit":
-/// loose enough for spans and normals typed with six significant digits.
-const TOL: f64 = 1e-6;
-
-/// How far (m) a point may sit from a wall or an obstacle face and still count as on it: well
-/// below any grid resolution, above the rounding of coordinates typed to the millimetre.
-const WALL_TOL_M: f64 = 1e-3;
-
-/// How far (m) behind and in front of an IRS on a wall or a floor-plan edge the mount check
-/// looks for something solid and for free space: twice [`WALL_TOL_M`], so a centre within that
-/// tolerance of the surface still finds it, far thinner than any wall or pixel.
-const MOUNT_PROBE_M: f64 = 2.0 * WALL_TOL_M;
-
-/// A scenario that has passed [`Scenario::validated`]: every field finite and consistent. Its
-/// JSON document (parsing, canonical form, id) is the answers crate's (`irs_answers::scenario`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Scenario {
-    /// Free-text label; part of the document (and so of its hash).
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    pub name: Option<String>,
-    pub room: Room,
-    pub grid: GridSpec,
-    #[serde(default)]
-    pub obstacles: Vec<Obstacle>,
-    /// Straight walls at any angle (what a CAD plan gives). Left out of the canonical form when
-    /// empty, so scenarios written before walls existed keep their ids.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub walls: Vec<WallSpec>,
-    /// A ROS occupancy-grid map of the floor (see [`crate::floorplan`]).
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    pub floor_plan: Option<FloorPlan>,
-    /// The decoded floor plan, made once at validation and shared by every map built from it.
-    #[serde(skip)]
-    raster: Option<Arc<Raster>>,
-    /// The access point (the paper's set-up) …
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    ap: Option<AccessPoint>,
-    /// … or several, each on its own channel (docs/model.md §3). As with the IRSs, one AP is
-    /// kept and written as `ap`, so a one-AP scenario has the same id whichever way it was
-    /// written. Read them with [`Scenario::access_points`].
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    aps: Vec<AccessPoint>,
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    irs: Option<Irs>,
-    /// Several IRSs, each with its own pose, sub-surfaces and grouping (docs/model.md §2). One
-    /// surface is kept (and written in the canonical form) as `irs`, two or more as `irss`, so
-    /// a one-IRS scenario has the same id whichever way it was written. Read them with
-    /// [`Scenario::surfaces`].
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    irss: Vec<Irs>,
-    pub mru: Mru,
-    #[serde(default)]
-    pub srus: Vec<Sru>,
-    #[serde(default)]
-    pub channel: ChannelSpec,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Room {
-    pub x_min: f64,
-    pub x_max: f64,
-    pub y_min: f64,
-    pub y_max: f64,
-    pub ceiling_m: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct GridSpec {
-    /// Δ = Δx = Δy (m).
-    pub resolution_m: f64,
-}
-
-/// An axis-aligned box standing on the floor.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Obstacle {
-    pub center: [f64; 2],
-    pub size: [f64; 2],
-    pub height_m: f64,
-}
-
-/// A straight wall from `from` to `to` (its centre line), standing on the floor.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WallSpec {
-    pub from: [f64; 2],
-    pub to: [f64; 2],
-    pub thickness_m: f64,
-    pub height_m: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AccessPoint {
-    pub position: [f64; 3],
-    /// P_max (dBm).
-    pub tx_power_dbm: f64,
-    /// σ², the receiver noise power of every robot (dBm).
-    pub noise_dbm: f64,
-    /// f_c (GHz).
-    pub carrier_ghz: f64,
-}
-
-/// How the N̄ elements of a sub-surface combine (docs/model.md §2).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Grouping {
-    /// w̃_n = N̄ × the cascaded LoS coefficient at the sub-surface centre.
-    #[default]
-    Coherent,
-    /// Each element at its own position; w̃_n sums the N̄ element coefficients.
-    Elements,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Irs {
-    pub center: [f64; 3],
-    /// Unit vector pointing into the room.
-    pub normal: [f64; 3],
-    /// Sub-surfaces along the wall's horizontal axis.
-    pub nx_sub: usize,
-    /// Sub-surfaces along the wall's vertical axis.
-    pub nz_sub: usize,
-    /// N̄, elements per sub-surface (M = N·N̄).
-    pub elements_per_sub: usize,
-    /// Centre-to-centre spacing of sub-surfaces (m); default λ/2.
-    #[serde(default, deserialize_with = "present")]
-    pub sub_pitch_m: Option<f64>,
-    #[serde(default)]
-    pub grouping: Grouping,
-    /// Spacing of the elements of one sub-surface, laid out in a row along the wall's horizontal
-    /// axis (`elements` grouping only); default `sub_pitch_m / N̄`, so the row tiles the
-    /// sub-surface.
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    pub element_pitch_m: Option<f64>,
-}
-
-impl Irs {
-    /// N, the number of independently phased sub-surfaces.
-    pub fn subsurfaces(&self) -> usize {
-        self.nx_sub * self.nz_sub
-    }
-    /// M = N · N̄, the number of reflecting elements.
-    pub fn elements(&self) -> usize {
-        self.subsurfaces() * self.elements_per_sub
-    }
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Mru {
-    /// H_0 (m).
-    pub antenna_height_m: f64,
-    /// V_max (m/s).
-    pub v_max_mps: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Sru {
-    pub position: [f64; 3],
-    /// r̄_s (bit/s/Hz).
-    pub min_rate_bps_hz: f64,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub enum PathLossModel {
-    /// 3GPP TR 38.901 indoor factory, sparse clutter, high BS (paper Section IV).
-    #[default]
-    #[serde(rename = "3gpp_inf_sh")]
-    ThreeGppInfSh,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ChannelSpec {
-    /// κ (dB), the Rician factor of every LoS link.
-    #[serde(default = "default_rician_k_db")]
-    pub rician_k_db: f64,
-    #[serde(default)]
-    pub path_loss: PathLossModel,
-}
-
-fn default_rician_k_db() -> f64 {
-    3.0
-}
-
-impl Default for ChannelSpec {
-    fn default() -> Self {
-        ChannelSpec {
-            rician_k_db: default_rician_k_db(),
-            path_loss: PathLossModel::default(),
-        }
-    }
-}
-
-/// The cell lattice (docs/model.md §1): centres at `x_min + i·Δ`, both walls included.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Grid {
-    pub nx: usize,
-    pub ny: usize,
-    pub x_min: f64,
-    pub y_min: f64,
-    pub resolution_m: f64,
-}
-
-impl Grid {
-    pub fn cells(&self) -> usize {
-        self.nx * self.ny
-    }
-    /// Flat index of cell (i, j); i runs along x, j along y (the paper's C_{i,j}).
-    #[inline]
-    pub fn index(&self, i: usize, j: usize) -> usize {
-        i * self.ny + j
-    }
-    #[inline]
-    pub fn cell_of(&self, index: usize) -> (usize, usize) {
-        (index / self.ny, index % self.ny)
-    }
-    /// q^Δ_{i,j}, the horizontal centre of cell (i, j) (paper eq. 8).
-    #[inline]
-    pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
-        [
-            self.x_min + i as f64 * self.resolution_m,
-            self.y_min + j as f64 * self.resolution_m,
-        ]
-    }
-    fn x_max(&self) -> f64 {
-        self.x_min + (self.nx - 1) as f64 * self.resolution_m
-    }
-    fn y_max(&self) -> f64 {
-        self.y_min + (self.ny - 1) as f64 * self.resolution_m
-    }
-    /// The cell whose centre is nearest to (x, y), or `None` outside the room.
-    pub fn snap(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let slack = 1e-9 * self.resolution_m.max(1.0);
-        if !x.is_finite() || !y.is_finite() {
-            return None;
-        }
-        if x < self.x_min - slack || x > self.x_max() + slack {
-            return None;
-        }
-        if y < self.y_min - slack || y > self.y_max() + slack {
-            return None;
-        }
-        let i = ((x - self.x_min) / self.resolution_m).round() as usize;
-        let j = ((y - self.y_min) / self.resolution_m).round() as usize;
-        Some((i.min(self.nx - 1), j.min(self.ny - 1)))
-    }
-}
+use super::*;
+use crate::floorplan;
+use crate::geometry::Obstructions;
 
 impl Scenario {
-    /// Validates a scenario as its document was read: resolves defaults, checks every field,
-    /// decodes the floor plan (its image file's bytes from `image`, which reads the text of
-    /// `floor_plan.image`: the answers crate decodes the document's base64) and keeps a
-    /// one-element `irss` or `aps` as `irs` or `ap` (the canonical form). Every way to make a
-    /// scenario ends here; a scenario derived from a validated one keeps its decoded raster, so
-    /// `image` is not called again.
-    pub fn validated(mut self, image: ImageFile) -> Result<Scenario, FieldError> {
-        self.resolve_defaults();
-        self.validate(image)?;
-        if self.irss.len() == 1 {
-            self.irs = self.irss.pop();
-        }
-        if self.aps.len() == 1 {
-            self.ap = self.aps.pop();
-        }
-        Ok(self)
-    }
-
-    /// The IRSs, in scenario order (empty without one); their phase vectors are concatenated
-    /// in this order (docs/model.md §2).
-    pub fn surfaces(&self) -> &[Irs] {
-        match &self.irs {
-            Some(one) => std::slice::from_ref(one),
-            None => &self.irss,
-        }
-    }
-
-    /// The access points, in scenario order (at least one).
-    pub fn access_points(&self) -> &[AccessPoint] {
-        match &self.ap {
-            Some(one) => std::slice::from_ref(one),
-            None => &self.aps,
-        }
-    }
-
-    /// The first access point: its carrier sets λ for the IRS's default pitch, and it is the
-    /// AP of rate maps (which take one AP).
-    pub fn ap(&self) -> &AccessPoint {
-        &self.access_points()[0]
-    }
-
-    /// The same scenario with other access points, validated again (a derived scenario keeps
-    /// its decoded floor plan).
-    pub fn with_access_points(&self, mut aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
-        // One AP as `ap`, so errors name `ap.…` as they would in a document.
-        let ap = (aps.len() == 1).then(|| aps.remove(0));
-        Scenario {
-            ap,
-            aps,
-            ..self.clone()
-        }
-        .validated(&kept_raster)
-    }
-
-    /// The same scenario with other surfaces, validated again.
-    pub fn with_surfaces(&self, mut surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
-        let irs = (surfaces.len() == 1).then(|| surfaces.remove(0));
-        Scenario {
-            irs,
-            irss: surfaces,
-            ..self.clone()
-        }
-        .validated(&kept_raster)
-    }
-
-    /// The same scenario with surface `index` replaced by `irs`, validated again (a placement
-    /// candidate).
-    pub fn with_surface(&self, index: usize, irs: Irs) -> Result<Scenario, FieldError> {
-        let mut surfaces = self.surfaces().to_vec();
-        *surfaces
-            .get_mut(index)
-            .ok_or_else(|| FieldError::new("index", "the scenario has no IRS of that index"))? =
-            irs;
-        self.with_surfaces(surfaces)
-    }
-
-    /// The same scenario with access point `index` moved to `position`, validated again.
-    pub fn with_ap_at(&self, index: usize, position: [f64; 3]) -> Result<Scenario, FieldError> {
-        let mut aps = self.access_points().to_vec();
-        aps.get_mut(index)
-            .ok_or_else(|| FieldError::new("index", "the scenario has no AP of that index"))?
-            .position = position;
-        self.with_access_points(aps)
-    }
-
-    /// λ = c / f_c (m) of the first AP's carrier.
-    pub fn wavelength_m(&self) -> f64 {
-        self.access_points()
-            .first()
-            .map_or(f64::NAN, |ap| SPEED_OF_LIGHT / (ap.carrier_ghz * 1e9))
-    }
-
-    fn resolve_defaults(&mut self) {
+    pub(super) fn resolve_defaults(&mut self) {
         if let Some(plan) = &mut self.floor_plan
             && plan.obstacle_height_m.is_none()
         {
@@ -438,49 +25,23 @@ impl Scenario {
         }
     }
 
-    /// The cell lattice; valid only on a validated scenario.
-    pub fn grid(&self) -> Grid {
-        let r = &self.room;
-        let d = self.grid.resolution_m;
-        Grid {
-            nx: ((r.x_max - r.x_min) / d).round() as usize + 1,
-            ny: ((r.y_max - r.y_min) / d).round() as usize + 1,
-            x_min: r.x_min,
-            y_min: r.y_min,
-            resolution_m: d,
-        }
+    /// Checks every field, in the document's order, each concern in a function of its own;
+    /// decodes the floor plan with `image`. The first error found is returned.
+    pub(super) fn validate(&mut self, image: ImageFile) -> Result<(), FieldError> {
+        self.validate_room_and_grid()?;
+        self.validate_obstacles()?;
+        self.validate_walls()?;
+        self.decode_floor_plan(image)?;
+        let obstructions = self.obstructions();
+        self.validate_access_points(&obstructions)?;
+        self.validate_surfaces(&obstructions)?;
+        self.validate_robots(&obstructions)?;
+        self.validate_channel()
     }
 
-    /// Everything standing on the floor (boxes, walls, the floor plan's occupied pixels), for
-    /// blockage and occupancy (docs/model.md §1).
-    pub fn obstructions(&self) -> Obstructions {
-        Obstructions {
-            boxes: self
-                .obstacles
-                .iter()
-                .map(|o| Aabb {
-                    lo: [
-                        o.center[0] - o.size[0] / 2.0,
-                        o.center[1] - o.size[1] / 2.0,
-                        0.0,
-                    ],
-                    hi: [
-                        o.center[0] + o.size[0] / 2.0,
-                        o.center[1] + o.size[1] / 2.0,
-                        o.height_m,
-                    ],
-                })
-                .collect(),
-            walls: self
-                .walls
-                .iter()
-                .map(|w| Wall::new(w.from, w.to, w.thickness_m, w.height_m))
-                .collect(),
-            raster: self.raster.clone(),
-        }
-    }
-
-    fn validate(&mut self, image: ImageFile) -> Result<(), FieldError> {
+    /// The room's bounds, the name, and a grid whose far walls are cell centres (within the cell
+    /// limits).
+    fn validate_room_and_grid(&self) -> Result<(), FieldError> {
         let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         let r = &self.room;
         for (field, v) in [
@@ -560,7 +121,12 @@ impl Scenario {
                 ),
             ));
         }
+        Ok(())
+    }
 
+    /// The boxes: finite, positive, inside the room.
+    fn validate_obstacles(&self) -> Result<(), FieldError> {
+        let r = &self.room;
         if self.obstacles.len() > MAX_OBSTACLES {
             return Err(FieldError::new(
                 "obstacles",
@@ -597,9 +163,13 @@ impl Scenario {
                 ));
             }
         }
+        Ok(())
+    }
 
-        self.validate_walls()?;
-        // A scenario derived from a validated one (`with_surface`) keeps its decoded raster.
+    /// Decodes the floor plan's image (read by `image`) into the raster the channel model walks;
+    /// the map must cover the room. A scenario derived from a validated one keeps its raster.
+    fn decode_floor_plan(&mut self, image: ImageFile) -> Result<(), FieldError> {
+        let r = &self.room;
         if let Some(plan) = self.floor_plan.as_ref().filter(|_| self.raster.is_none()) {
             floorplan::check_fields(plan)?;
             let file = image(&plan.image).map_err(|e| FieldError::new("floor_plan.image", e))?;
@@ -620,8 +190,13 @@ impl Scenario {
             }
             self.raster = Some(Arc::new(raster));
         }
-        let obstructions = self.obstructions();
+        Ok(())
+    }
 
+    /// The access points, given as `ap` or `aps`: finite, in range, inside the room and outside
+    /// every obstacle.
+    fn validate_access_points(&self, obstructions: &Obstructions) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         let access_points: Vec<(String, &AccessPoint)> = match (&self.ap, self.aps.as_slice()) {
             (Some(_), [_, ..]) => {
                 return err(
@@ -665,7 +240,12 @@ impl Scenario {
                 return err(&f("position"), "lies inside an obstacle");
             }
         }
+        Ok(())
+    }
 
+    /// The IRSs, given as `irs` or `irss`, one by one and within the limits on N and M together.
+    fn validate_surfaces(&self, obstructions: &Obstructions) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         if self.irs.is_some() && !self.irss.is_empty() {
             return err(
                 "irss",
@@ -689,7 +269,7 @@ impl Scenario {
         }
         let (mut total_n, mut total_m) = (0usize, 0usize);
         for (at, irs) in &surfaces {
-            self.validate_irs(irs, at, &obstructions)?;
+            self.validate_irs(irs, at, obstructions)?;
             // Each surface's own products are checked (and so cannot wrap); the sums of at most
             // a few such bounded terms cannot wrap either.
             total_n += irs.subsurfaces();
@@ -711,7 +291,14 @@ impl Scenario {
                 ),
             ));
         }
+        Ok(())
+    }
 
+    /// The mobile robot's antenna and speed, and the static robots: inside the room, outside every
+    /// obstacle, with a rate requirement in range.
+    fn validate_robots(&self, obstructions: &Obstructions) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
+        let r = &self.room;
         finite("mru.antenna_height_m", self.mru.antenna_height_m)?;
         finite("mru.v_max_mps", self.mru.v_max_mps)?;
         if !(self.mru.antenna_height_m > 0.0 && self.mru.antenna_height_m < r.ceiling_m) {
@@ -748,7 +335,12 @@ impl Scenario {
                 ));
             }
         }
+        Ok(())
+    }
 
+    /// The channel's Rician factor.
+    fn validate_channel(&self) -> Result<(), FieldError> {
+        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
         finite("channel.rician_k_db", self.channel.rician_k_db)?;
         if self.channel.rician_k_db.abs() > 60.0 {
             return err("channel.rician_k_db", "must lie in [-60, 60] dB");
@@ -997,13 +589,6 @@ impl Scenario {
         }
         Ok(())
     }
-
-    /// Bytes of the decoded floor plan (one per pixel), which a registry weighs besides the
-    /// canonical document (numbers and the floor plan's base64 take about as much parsed as
-    /// written).
-    pub fn raster_bytes(&self) -> usize {
-        self.raster.as_ref().map_or(0, |r| r.occupied.capacity())
-    }
 }
 
 fn finite(field: &str, v: f64) -> Result<(), FieldError> {
@@ -1016,57 +601,4 @@ fn finite(field: &str, v: f64) -> Result<(), FieldError> {
 
 fn finite_all(field: &str, v: &[f64]) -> Result<(), FieldError> {
     v.iter().try_for_each(|&x| finite(field, x))
-}
-
-#[cfg(test)]
-impl Scenario {
-    /// A built-in scenario by name, for the model's own tests (the public way to read one is
-    /// `irs_answers::scenario`).
-    pub(crate) fn builtin(name: &str) -> Option<Scenario> {
-        Scenario::builtin_with(name, |_| {}).map(|s| s.expect("built-in scenarios are valid"))
-    }
-
-    /// A variant of a built-in scenario: `edit` changes its JSON document first.
-    pub(crate) fn builtin_with(
-        name: &str,
-        edit: impl FnOnce(&mut serde_json::Value),
-    ) -> Option<Result<Scenario, FieldError>> {
-        let text = match name {
-            "paper-single-user" => include_str!("../../../scenarios/paper-single-user.json"),
-            "paper-multi-user" => include_str!("../../../scenarios/paper-multi-user.json"),
-            "small-test" => include_str!("../../../scenarios/small-test.json"),
-            _ => return None,
-        };
-        let mut document: serde_json::Value = serde_json::from_str(text).expect("JSON");
-        edit(&mut document);
-        let scenario: Scenario = match serde_json::from_value(document) {
-            Ok(s) => s,
-            Err(e) => return Some(Err(FieldError::new("$", e))),
-        };
-        Some(scenario.validated(&kept_raster))
-    }
-
-    /// The built-in small floor with a second IRS on its east wall (a test fixture).
-    pub(crate) fn small_test_two_surfaces(grouping: Grouping) -> Scenario {
-        let name = serde_json::to_value(grouping).expect("groupings serialise");
-        Scenario::builtin_with("small-test", |v| {
-            let mut first = v.as_object_mut().unwrap().remove("irs").unwrap();
-            first["grouping"] = name.clone();
-            let second = serde_json::json!({
-                "center": [6.0, 2.0, 1.8], "normal": [-1.0, 0.0, 0.0],
-                "nx_sub": 3, "nz_sub": 1, "elements_per_sub": 2, "grouping": name,
-            });
-            v["irss"] = serde_json::json!([first, second]);
-        })
-        .expect("built in")
-        .expect("a valid two-surface variant")
-    }
-
-    /// The built-in small floor with its IRS's elements grouped as given (a test fixture).
-    pub(crate) fn small_test_grouped(grouping: Grouping) -> Scenario {
-        let name = serde_json::to_value(grouping).expect("groupings serialise");
-        Scenario::builtin_with("small-test", |v| v["irs"]["grouping"] = name)
-            .expect("built in")
-            .expect("a valid grouping variant")
-    }
 }
