@@ -38,10 +38,16 @@ struct Stored {
 /// Why stored bytes are not a map of the given scenario.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DecodeError {
+    /// The bytes do not parse as a stored map (truncated, another layout, or a bad key).
     #[error("not a stored map: {0}")]
     Malformed(String),
+    /// Stored in another [`FORMAT_VERSION`]: the map is rebuilt rather than decoded.
     #[error("stored in format version {found}, this build reads version {FORMAT_VERSION}")]
-    Version { found: u32 },
+    Version {
+        /// The format version the bytes were written in.
+        found: u32,
+    },
+    /// A well-formed map of another scenario, or whose lengths do not fit this scenario's grid.
     #[error("{0}")]
     Mismatch(String),
 }

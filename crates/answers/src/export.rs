@@ -22,8 +22,11 @@ use irs_model::radiomap::RadioMap;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MaskKind {
+    /// Keep-out: occupied or below γ → 100, else 0 (`trinary`, for Nav2's keepout filter).
     #[default]
     Keepout,
+    /// Cost: occupied or below γ → 100, else 99 at γ down to 0 at `best` (`scale`, speed-filter
+    /// style).
     Cost,
 }
 
@@ -47,14 +50,18 @@ impl MaskKind {
 /// A mask as files: `{stem}.yaml` naming `{stem}.pgm`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Nav2Mask {
+    /// Which mask; names its files.
     pub kind: MaskKind,
+    /// The YAML and the PGM it names.
     pub files: EncodedMap,
 }
 
 impl Nav2Mask {
+    /// `keepout.yaml` or `cost.yaml`.
     pub fn yaml_name(&self) -> String {
         format!("{}.yaml", self.kind.stem())
     }
+    /// `keepout.pgm` or `cost.pgm`, the image the YAML names.
     pub fn pgm_name(&self) -> String {
         format!("{}.pgm", self.kind.stem())
     }

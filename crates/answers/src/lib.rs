@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! What the CLI and the HTTP service of irs-planner share: each use case as one function both
 //! front doors call, and the formats a result leaves the model in (phase text and codes, PNG
 //! pictures, Nav2 masks, `.npy` values, export archives, `took_ms`).

@@ -12,10 +12,15 @@ use serde::Serialize;
 /// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MapBody {
+    /// The map's id ([`map_id`] of `key`).
     pub map_id: String,
+    /// What defines the map.
     pub key: MapKey,
+    /// The unit of `values`: `dB` (gain maps) or `bit/s/Hz` (rate maps).
     pub unit: &'static str,
+    /// The grid `values` are laid on (room bounds, Δ, nx × ny).
     pub grid: Grid,
+    /// Cell counts and the values' min, max, mean and median.
     pub stats: MapStats,
     /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
     /// maps, where no configuration serves every SRU).

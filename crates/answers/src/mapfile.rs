@@ -124,7 +124,9 @@ pub fn resolve_map_reference(
 /// A grid of Nav2 cell values written as a map: the PGM image and the YAML naming it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EncodedMap {
+    /// The map YAML (image, resolution, origin, negate, thresholds, mode).
     pub yaml: String,
+    /// The binary (P5) PGM image, 8-bit grey, the map's top row first.
     pub pgm: Vec<u8>,
 }
 

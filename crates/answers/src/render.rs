@@ -23,6 +23,7 @@ pub const MAX_SIDE_PX: usize = 4096;
 /// Largest pixels per cell a caller may ask for.
 pub const MAX_CELL_PX: usize = 32;
 
+/// What a picture shows on top of the map (a threshold, a path and its ends) and at what scale.
 #[derive(Debug, Clone, Default)]
 pub struct RenderOptions {
     /// Dim the cells below this value.
@@ -98,10 +99,15 @@ pub struct Layout {
     pub cell_px: usize,
     /// Top-left pixel of the plot area.
     pub left: usize,
+    /// Rows above the plot area (the title and the labels): the y of its top-left pixel.
     pub top: usize,
+    /// Width of the plot area (pixels): nx × `cell_px`.
     pub plot_width: usize,
+    /// Height of the plot area (pixels): ny × `cell_px`.
     pub plot_height: usize,
+    /// Width of the whole picture (pixels), margins, colour bar and title included.
     pub width: usize,
+    /// Height of the whole picture (pixels), margins included.
     pub height: usize,
     /// Text glyphs are 8 × `text_scale` pixels.
     text_scale: usize,

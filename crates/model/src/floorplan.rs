@@ -38,6 +38,7 @@ pub enum UnknownAs {
     /// Unknown space blocks links and cannot be driven (the safe reading of an unexplored map).
     #[default]
     Occupied,
+    /// Unknown space is free: neither blocks links nor keeps the robot out.
     Free,
 }
 
@@ -92,11 +93,16 @@ pub struct FloorPlan {
     pub resolution: f64,
     /// [x, y, yaw] of the lower-left pixel's lower-left corner (m, m, rad); yaw must be 0.
     pub origin: [f64; 3],
+    /// Occupancy = shade when set (white is occupied), else 1 − shade (black is occupied).
     pub negate: Negate,
+    /// Occupancy above which a pixel is occupied (100), in (0, 1]; above `free_thresh`.
     pub occupied_thresh: f64,
+    /// Occupancy below which a pixel is free (0), in [0, 1); below `occupied_thresh`.
     pub free_thresh: f64,
+    /// How occupancy becomes a cell value; default `trinary`, as in Nav2.
     #[serde(default)]
     pub mode: MapMode,
+    /// What an unknown (−1) pixel is for radio and driving; default `occupied`.
     #[serde(default)]
     pub unknown_as: UnknownAs,
     /// How high the occupied pixels stand (m); default: the ceiling (walls).
@@ -122,7 +128,9 @@ pub fn nav2_value(pixel: u8, plan: &FloorPlan) -> i8 {
 
 /// An 8-bit grey image, rows from the top.
 pub struct GreyImage {
+    /// Columns (pixels).
     pub width: usize,
+    /// Rows (pixels).
     pub height: usize,
     /// Row-major from the image's top row.
     pub pixels: Vec<u8>,

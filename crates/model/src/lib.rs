@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! irs-planner: radio maps and communication-aware robot paths for an indoor floor served by an
 //! access point and an intelligent reflecting surface (IRS), after "IRS Enhanced Indoor Robot
 //! Path Planning: A Radio Map based Approach". The model the code implements is written down in

@@ -14,6 +14,7 @@ pub const MAX_PHASE_BITS: u8 = 16;
 /// How the IRS phases are chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PhaseMode {
+    /// Any phase in [0, 2π): eq. 11's θ* exactly, the gain in closed form (eq. 12).
     Continuous,
     /// b-bit phase shifters: L = 2^b levels {0, 2π/L, …}.
     Bits(u8),

@@ -45,8 +45,11 @@ pub const MODEL_VERSION: u32 = 1;
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MapKey {
+    /// The id of the scenario the map is of (a hash of its canonical document).
     pub scenario_id: String,
+    /// Gain map (dB) or rate map (bit/s/Hz).
     pub kind: MapKind,
+    /// How the IRS phases are chosen; `none` for a scenario without an IRS.
     pub phases: PhaseMode,
     /// Rate maps only (default `noma`).
     pub access: Option<Access>,

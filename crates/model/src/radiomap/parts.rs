@@ -14,13 +14,20 @@ use std::sync::Arc;
 /// power split and the decoding order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum StoredCells {
+    /// A gain map: its phases are recomputed from the scenario, so only the serving AP is kept.
     Gain {
+        /// The AP serving each cell (flat index i·ny + j); empty with one AP.
         serving: Vec<u8>,
     },
+    /// A rate map: the solver's argmax and the certificate of every cell.
     Rate {
+        /// Per cell: the SDR upper bound on the MRU's rate (bit/s/Hz, §5).
         upper_bound: Vec<f64>,
+        /// N 16-bit phase codes per cell, θ = 2π·c/2¹⁶ (none for phases `none`).
         phases: Vec<u16>,
+        /// K + 1 transmit powers per cell (W), MRU first, then the SRUs in scenario order.
         power_w: Vec<f64>,
+        /// Per cell: the decoding order's index into [`RateModel::orders`] (0 for OMA).
         order: Vec<u8>,
     },
 }
