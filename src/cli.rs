@@ -226,7 +226,7 @@ pub struct MapArgs {
     /// Also draw the map (and, for `plan`, the path) as a PNG into this file.
     #[arg(long, value_name = "FILE")]
     pub png: Option<PathBuf>,
-    /// Pixels per grid cell in the PNG (1–32; default: the longer side fits in 1024 px).
+    /// Pixels per grid cell in the PNG (1–32; default: the longer side fits in 768 px).
     #[arg(long, value_name = "PX", requires = "png", value_parser = clap::value_parser!(u16).range(1..=render::MAX_CELL_PX as i64))]
     pub cell_px: Option<u16>,
 }

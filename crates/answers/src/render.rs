@@ -32,7 +32,8 @@ pub struct RenderOptions {
     pub path: Vec<usize>,
     /// The start and goal cells to mark (flat indices), feasible or not.
     pub ends: Option<(usize, usize)>,
-    /// Pixels per cell; default: the longer side of the plot fits in 1024 px.
+    /// Pixels per cell; default: the longer side of the plot fits in 768 px
+    /// ([`default_cell_px`]).
     pub cell_px: Option<usize>,
 }
 

@@ -163,6 +163,13 @@ pub fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
         other => format!("cannot be decoded: {other}"),
     })?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
+    // A header may declare a side of 0 pixels, which decodes to no pixels at all: a map of
+    // nothing, refused here rather than divided by later.
+    if width == 0 || height == 0 {
+        return Err(format!(
+            "is {width} × {height} pixels: a map needs at least one"
+        ));
+    }
     match decoded {
         image::DynamicImage::ImageLuma8(grey) => Ok(GreyImage {
             width,
@@ -327,12 +334,14 @@ mod tests {
     #[test]
     fn bad_images_are_rejected_with_a_reason() {
         let reason = |bytes: &[u8]| decode(&plan(), bytes, 2.0).unwrap_err();
-        let cases: [(&[u8], &str); 5] = [
+        let cases: [(&[u8], &str); 7] = [
             (b"P6\n1 1\n255\n\x00\x00\x00", "not a PGM"),
             (b"P5\n3 2\n255\n\x00\xfe", "cannot be decoded"),
             (b"P5\n1 1\n65535\n\x00\x00", "16-bit"),
             (b"GIF89a", "not a PGM"),
             (b"P5\n5000 1\n255\n", "larger than 4096"),
+            (b"P5\n0 3\n255\n", "at least one"),
+            (b"P5\n3 0\n255\n", "at least one"),
         ];
         for (bytes, expected) in cases {
             let e = reason(bytes);

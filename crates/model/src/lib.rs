@@ -20,13 +20,15 @@
 //!   [`phases`]: continuous, b-bit and no-IRS phase modes.
 //! * [`rate`]: NOMA/OMA expected rates and the closed-form power split.
 //! * [`solver`]: per-cell rate maximisation (`fast`, `sdr-sca`) and the SDR certificate.
-//! * [`radiomap`]: map keys, gain maps, rate maps, the map body, and the cost estimates a service
-//!   checks against its budgets before a build.
+//! * [`radiomap`]: map keys, gain maps, rate maps, their statistics and stored parts, and the
+//!   cost estimates a service checks against its budgets before a build.
 //! * [`planner`]: the feasible-map graph, shortest and widest paths, path and sweep answers.
-//! * [`montecarlo`] and [`render`]: a Monte Carlo check of a path; PNG pictures.
-//! * [`service`] (HTTP, axum) and [`cli`] (`serve`, `map`, `plan`; both behind the default
-//!   `server` feature): the two front doors, which
-//!   translate between users and the modules above and hold no physics.
+//! * [`placement`]: where to mount an IRS or an AP, ranked by an objective.
+//! * [`montecarlo`]: a Monte Carlo check of a path.
+//!
+//! The two front doors (`irs-service`, HTTP; the `irs-planner` binary's CLI) and the formats
+//! they share (`irs-answers`) translate between users and these modules and hold no physics
+//! (docs/architecture.md).
 
 pub mod channel;
 pub mod floorplan;

@@ -5,7 +5,7 @@
 //! * [`gain`]: the channel power gain map C (eqs. 9 and 12), in dB.
 //! * [`rate_cells`]: the communication rate map U (eqs. 26 and 37), in bit/s/Hz, solved per cell
 //!   by [`crate::solver`].
-//! * [`body`]: statistics, coverage and the JSON body of a built map.
+//! * [`body`]: statistics, coverage and the certificate summary of a built map.
 //!
 //! Occupied cells hold NaN (JSON null, the paper's −∞).
 
