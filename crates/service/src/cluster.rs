@@ -87,7 +87,7 @@ impl BuildEntry {
         let map_id: String = entry.get("map_id")?;
         let key: String = entry.get("key")?;
         let key: MapKey = serde_json::from_str(&key).ok()?;
-        (key.id() == map_id).then(|| BuildEntry {
+        (irs_answers::map::map_id(&key) == map_id).then(|| BuildEntry {
             stream_id: entry.id.clone(),
             job_id,
             map_id,
@@ -544,11 +544,10 @@ async fn build_entry(state: super::App, cluster: std::sync::Arc<Cluster>, build:
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
     let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
-        let encoded = crate::runtime::recorder::spawn_blocking(move || {
-            irs_model::radiomap::encoding::encode(&map)
-        })
-        .await
-        .map_err(|e| e.to_string())?;
+        let encoded =
+            crate::runtime::recorder::spawn_blocking(move || irs_answers::encoding::encode(&map))
+                .await
+                .map_err(|e| e.to_string())?;
         publisher
             .put_map(&map_id, &encoded)
             .await
@@ -590,6 +589,7 @@ async fn build_entry(state: super::App, cluster: std::sync::Arc<Cluster>, build:
 #[cfg(test)]
 mod tests {
     use super::*;
+    use irs_answers::scenario::ScenarioDocument;
     use irs_model::radiomap::MapKind;
     use irs_model::scenario::Scenario;
 
@@ -624,7 +624,7 @@ mod tests {
         )
         .unwrap();
         let json = serde_json::to_string(&key).unwrap();
-        let id = key.id();
+        let id = irs_answers::map::map_id(&key);
         let good = BuildEntry::of(&entry(&[("job_id", "j1"), ("map_id", &id), ("key", &json)]))
             .expect("a well-formed entry");
         assert_eq!((good.job_id.as_str(), good.key), ("j1", key));
