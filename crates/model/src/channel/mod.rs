@@ -14,7 +14,7 @@
 //! Paths via two surfaces (IRS → IRS) are not modelled: each is a product of two path gains
 //! over the already weak single-bounce ones.
 //!
-//! Choices the paper leaves open (also in the README):
+//! Choices the paper leaves open (also in docs/model.md):
 //! * Path losses L_AI and L_IM use the distance to each IRS's centre, as the paper's scalar
 //!   L_AI, L_IM(q) do; LoS *phases* use exact (spherical) distances to each sub-surface centre
 //!   (`coherent`) or each element (`elements`).
@@ -24,11 +24,14 @@
 //! * The IRS reflects only into its front half-space: a user on or behind the surface's plane
 //!   gets no IRS term at all (neither w̃ nor the scattered part of τ).
 
-use crate::geometry::{Obstructions, RowOfUsers, SightLines};
+mod fading;
+mod rows;
+
+pub use rows::ClosedFormRow;
+
+use crate::geometry::{Obstructions, SightLines};
 use crate::scenario::{Grouping, Irs, SPEED_OF_LIGHT, Scenario};
 use nalgebra::{Complex, Vector3};
-use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
 use std::f64::consts::TAU;
 
 /// Complex baseband coefficient.
@@ -78,25 +81,6 @@ fn path_loss_db_at(log10_d: f64, f: f64, los: bool) -> f64 {
         pl_los
     } else {
         pl_los.max(32.4 + 23.0 * log10_d + 20.0 * f)
-    }
-}
-
-/// `out[k] = √L` = 10^(−PL/20) of links of squared length `d2[k]` (m², clamped to ≥ 1 m as
-/// [`path_loss_db`] does, the InF-SH law of eqs. 41–42 in docs/model.md §2) and line of sight
-/// `los[k]`, f = log₁₀ f_c: a whole row of a gain map
-/// at once, vectorised (crate::vecmath). √L rather than L because the LoS amplitude is √L times
-/// a constant and L = (√L)², so one exponential serves both.
-#[multiversion::multiversion(targets(
-    "x86_64+avx512f+avx512dq+avx512vl",
-    "x86_64+avx2+fma",
-    "aarch64+neon"
-))]
-fn root_path_gains(d2: &[f64], los: &[bool], f: f64, out: &mut [f64]) {
-    let half_log10_e = 0.5 * std::f64::consts::LOG10_E;
-    for ((root_gain, &d2), &los) in out.iter_mut().zip(d2).zip(los) {
-        let log10_d = crate::vecmath::ln(d2.max(1.0)) * half_log10_e;
-        let pl = path_loss_db_at(log10_d, f, los);
-        *root_gain = crate::vecmath::exp(pl * (-std::f64::consts::LN_10 / 20.0));
     }
 }
 
@@ -167,47 +151,6 @@ pub struct ClosedFormTerms {
     pub tau: f64,
     /// ‖w̃‖₁ over every surface.
     pub l1: f64,
-}
-
-/// A row of a map's cells in the continuous closed form ([`ChannelModel::closed_form_row`]),
-/// with the working arrays it needs: kept by a map's worker between rows, so a row allocates
-/// nothing.
-#[derive(Debug, Default)]
-pub struct ClosedFormRow {
-    /// |h̃| + ‖w̃‖₁ per cell.
-    pub amplitude: Vec<f64>,
-    /// τ per cell.
-    pub tau: Vec<f64>,
-    /// The cells whose link is evaluated: the free ones for the direct link, those in front of
-    /// the surface for a surface's.
-    served: Vec<bool>,
-    /// The cells' y (x is the row's).
-    ys: Vec<f64>,
-    links: RowLinks,
-}
-
-/// One source's links to a row of users.
-#[derive(Debug, Default)]
-struct RowLinks {
-    /// Squared lengths (m²).
-    d2: Vec<f64>,
-    los: Vec<bool>,
-    /// √L, the square root of each link's path gain.
-    root_gain: Vec<f64>,
-    /// Scratch of the blockage test (a wall's users in its frame).
-    targets: Vec<[f64; 2]>,
-}
-
-impl ClosedFormRow {
-    fn resize(&mut self, cells: usize) {
-        self.amplitude.resize(cells, 0.0);
-        self.tau.resize(cells, 0.0);
-        self.served.resize(cells, false);
-        self.ys.resize(cells, 0.0);
-        self.links.d2.resize(cells, 0.0);
-        self.links.los.resize(cells, false);
-        self.links.root_gain.resize(cells, 0.0);
-    }
 }
 
 impl ChannelModel {
@@ -414,103 +357,6 @@ impl ChannelModel {
         terms
     }
 
-    /// True when [`Self::closed_form_row`] applies: every surface groups its elements
-    /// `coherent`ly, so each surface's ‖w̃_s‖₁ is one link budget.
-    pub fn closed_form_by_rows(&self) -> bool {
-        self.surfaces.iter().all(|irs| irs.per_sub == 1)
-    }
-
-    /// [`Self::closed_form_terms`] for a whole row of a map at once: the users (x, y_min + j·Δ,
-    /// height) for j < `skip.len()`, leaving cells where `skip[j]` holds (occupied) with
-    /// unspecified values. Fills `row.amplitude[j]` = |h̃| + ‖w̃‖₁ and `row.tau[j]` = τ, so
-    /// max_θ λ = amplitude² + τ (eq. 12). Only for models where [`Self::closed_form_by_rows`]
-    /// holds. The links' path gains are evaluated for the whole row in one vectorised pass
-    /// (crate::vecmath); the values equal the per-cell ones to rounding (a few ulp).
-    pub fn closed_form_row(
-        &self,
-        x: f64,
-        y_min: f64,
-        step: f64,
-        height: f64,
-        skip: &[bool],
-        row: &mut ClosedFormRow,
-    ) {
-        debug_assert!(self.closed_form_by_rows());
-        row.resize(skip.len());
-        let ClosedFormRow {
-            amplitude,
-            tau,
-            served,
-            ys,
-            links,
-        } = row;
-        for (j, y) in ys.iter_mut().enumerate() {
-            *y = y_min + j as f64 * step; // as Grid::centre
-        }
-        let users = RowOfUsers { x, ys, z: height };
-        // √(K/(K+1)): a LoS link's amplitude over √L (a NLoS link has K = 0: none).
-        let los_share = (self.kappa / (self.kappa + 1.0)).sqrt();
-
-        for (served, &skipped) in served.iter_mut().zip(skip) {
-            *served = !skipped;
-        }
-        self.links_from(&self.ap, users, served, links);
-        let direct_scattered = [1.0, 1.0 / (self.kappa + 1.0)]; // L/(K+1) over L, NLoS and LoS
-        for (j, (a, t)) in amplitude.iter_mut().zip(tau.iter_mut()).enumerate() {
-            let (root_gain, los) = (links.root_gain[j], links.los[j]);
-            *a = if los { root_gain * los_share } else { 0.0 };
-            *t = root_gain * root_gain * direct_scattered[usize::from(los)];
-        }
-
-        for irs in self.surfaces.iter().filter(|irs| irs.faces_ap) {
-            // A user on or behind the surface's plane is not served: no link to evaluate.
-            for (j, served) in served.iter_mut().enumerate() {
-                let user = P3::new(x, users.ys[j], height);
-                *served = !skip[j] && (user - irs.centre).dot(&irs.normal) > 0.0;
-            }
-            self.links_from(&irs.centre, users, served, links);
-            // ‖w̃_s‖₁ over √L_IM for a LoS user link (eq. 12, all N_s sub-surfaces alike), and
-            // Lemma 1's scattered power over L_IM for a NLoS and a LoS user link.
-            let reflected =
-                irs.subsurfaces as f64 * irs.weight * irs.ap_link.los_amplitude() * los_share;
-            let per_unit_gain = |los: bool| LinkBudget {
-                los,
-                path_gain: 1.0,
-                rician_k: if los { self.kappa } else { 0.0 },
-            };
-            let scattered =
-                [false, true].map(|los| Self::surface_scattered_power(irs, &per_unit_gain(los)));
-            for j in (0..served.len()).filter(|&j| served[j]) {
-                let (root_gain, los) = (links.root_gain[j], links.los[j]);
-                if los {
-                    amplitude[j] += reflected * root_gain;
-                }
-                tau[j] += root_gain * root_gain * scattered[usize::from(los)];
-            }
-        }
-    }
-
-    /// The links from `source` to the users of a row: squared lengths, line of sight
-    /// (blockage tested where `wanted[j]` holds, a row at a time; elsewhere NLoS, untested)
-    /// and √L of each.
-    fn links_from(&self, source: &P3, users: RowOfUsers, wanted: &[bool], links: &mut RowLinks) {
-        for (d2, &y) in links.d2.iter_mut().zip(users.ys) {
-            *d2 = (P3::new(users.x, y, users.z) - source).norm_squared();
-        }
-        let RowLinks {
-            los,
-            targets,
-            d2,
-            root_gain,
-        } = links;
-        self.obstructions
-            .blocks_row(source, users, wanted, targets, los);
-        for (los, &wanted) in los.iter_mut().zip(wanted) {
-            *los = wanted && !*los;
-        }
-        root_path_gains(d2, los, self.carrier_log10, root_gain);
-    }
-
     /// Lemma 1 for one surface: E|x3|² + E|x4|² + E|x5|² = L_AI L_IM (K_IM + K_AI + 1) M /
     /// ((K_AI+1)(K_IM+1)), the power its scattered paths add at a user it serves.
     fn surface_scattered_power(irs: &IrsModel, user_link: &LinkBudget) -> f64 {
@@ -602,118 +448,6 @@ impl ChannelModel {
                 if sum.norm() > 0.0 { sum.arg() } else { 0.0 }
             };
             *theta = wrap_angle(h_angle - w_angle);
-        }
-    }
-
-    /// Draws instantaneous channels c_u = h_u + Σ_s Σ_e θ_{n(e)} r_{u,e} g_e for several users
-    /// at once from the per-element Rician model (paper eqs. 1–4), independent of the closed
-    /// form above: the Monte Carlo reference for Lemma 1 and for the exact expected rates
-    /// (paper Fig. 10). Each surface's AP–IRS channel g is common to all users of a draw, as it
-    /// is physically. `theta` is the concatenated phase vector (length N) or `None` for the
-    /// no-IRS benchmark; `visit` is called once per draw with one coefficient per user.
-    pub fn sample_channels<R: Rng + ?Sized>(
-        &self,
-        users: &[[f64; 3]],
-        theta: Option<&[f64]>,
-        draws: usize,
-        rng: &mut R,
-        mut visit: impl FnMut(&[C64]),
-    ) {
-        /// One reflecting element: its surface, its sub-surface in the concatenated θ, and the
-        /// scattering point carrying its LoS phase (every element of a coherent sub-surface
-        /// sits at the sub-surface centre).
-        struct Element {
-            surface: usize,
-            sub: usize,
-            point: usize,
-        }
-        struct UserStats {
-            h_los: C64,
-            h_scatter: f64,
-            /// Per element: LoS IRS→user coefficient √(L K/(K+1)) e^{−j2π d/λ} (zero for the
-            /// elements of surfaces the user is not in front of).
-            r_los: Vec<C64>,
-            /// Per surface: the scattered amplitude, or `None` when the user is behind it.
-            r_scatter: Vec<Option<f64>>,
-        }
-        let surfaces: &[IrsModel] = if theta.is_some() { &self.surfaces } else { &[] };
-        let rot: Vec<C64> = theta.map_or(Vec::new(), |t| {
-            t.iter().map(|&p| C64::from_polar(1.0, p)).collect()
-        });
-        let elements: Vec<Element> = surfaces
-            .iter()
-            .enumerate()
-            .flat_map(|(s, irs)| {
-                let n_bar = irs.elements / irs.subsurfaces;
-                (0..irs.elements).map(move |e| Element {
-                    surface: s,
-                    sub: irs.offset + e / n_bar,
-                    point: if irs.per_sub == 1 { e / n_bar } else { e },
-                })
-            })
-            .collect();
-        let stats: Vec<UserStats> = users
-            .iter()
-            .map(|u| {
-                let q = P3::from(*u);
-                let direct = self.link_seen(&self.ap_sight, &q);
-                let links: Vec<Option<LinkBudget>> = surfaces
-                    .iter()
-                    .map(|irs| self.irs_user_link(irs, &q))
-                    .collect();
-                UserStats {
-                    h_los: self.los_phase((q - self.ap).norm()) * direct.los_amplitude(),
-                    h_scatter: direct.scattered_power().sqrt(),
-                    r_los: elements
-                        .iter()
-                        .map(|el| {
-                            links[el.surface].map_or(C64::new(0.0, 0.0), |link| {
-                                let p = surfaces[el.surface].points[el.point];
-                                self.los_phase((q - p).norm()) * link.los_amplitude()
-                            })
-                        })
-                        .collect(),
-                    r_scatter: links
-                        .iter()
-                        .map(|l| l.map(|l| l.scattered_power().sqrt()))
-                        .collect(),
-                }
-            })
-            .collect();
-        let g_los: Vec<C64> = elements
-            .iter()
-            .map(|el| {
-                let irs = &surfaces[el.surface];
-                self.los_phase(irs.ap_distance[el.point]) * irs.ap_link.los_amplitude()
-            })
-            .collect();
-        let g_scatter: Vec<f64> = surfaces
-            .iter()
-            .map(|irs| irs.ap_link.scattered_power().sqrt())
-            .collect();
-        let cn = |rng: &mut R| -> C64 {
-            let re: f64 = StandardNormal.sample(rng);
-            let im: f64 = StandardNormal.sample(rng);
-            C64::new(re, im) * std::f64::consts::FRAC_1_SQRT_2
-        };
-        let mut g = vec![C64::new(0.0, 0.0); g_los.len()];
-        let mut c = vec![C64::new(0.0, 0.0); users.len()];
-        for _ in 0..draws {
-            for ((ge, gl), el) in g.iter_mut().zip(&g_los).zip(&elements) {
-                *ge = gl + cn(rng) * g_scatter[el.surface];
-            }
-            for (cu, s) in c.iter_mut().zip(&stats) {
-                *cu = s.h_los + cn(rng) * s.h_scatter;
-                let mut reflected = C64::new(0.0, 0.0);
-                for ((el, ge), rl) in elements.iter().zip(&g).zip(&s.r_los) {
-                    if let Some(scatter) = s.r_scatter[el.surface] {
-                        let r = rl + cn(rng) * scatter;
-                        reflected += rot[el.sub] * r * ge;
-                    }
-                }
-                *cu += reflected;
-            }
-            visit(&c);
         }
     }
 }
