@@ -11,9 +11,9 @@
 //! [`irs_model::radiomap::build`] checks once per grid row.
 
 use super::cache::MapCache;
-use super::store::{DataDir, Kind};
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::store::{DataDir, Kind};
 use irs_model::placement::{self, Candidate, Placement, Search};
 use irs_model::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
@@ -591,9 +591,7 @@ impl Jobs {
             job.hand_over(&map);
             cache.insert(map_id_of(&job), map).await;
         };
-        crate::runtime::recorder::spawn(
-            self.clone().run(job.clone(), work, finish).instrument(span),
-        );
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(MapRequestOutcome::Building(job))
     }
 
@@ -630,7 +628,7 @@ impl Jobs {
         };
         let runner = self.clone();
         let handle = job.clone();
-        crate::runtime::recorder::spawn(
+        crate::tasks::spawn(
             async move {
                 let in_flight = handle.map_id().unwrap_or_default().to_string();
                 runner
@@ -723,9 +721,7 @@ impl Jobs {
                 }));
             }
         };
-        crate::runtime::recorder::spawn(
-            self.clone().run(job.clone(), work, finish).instrument(span),
-        );
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(job)
     }
 
@@ -811,7 +807,7 @@ impl Jobs {
         let waited = queued_at.elapsed().as_secs_f64();
         tracing::info!(queued_s = waited, "job started");
         let started = Instant::now();
-        let result = crate::runtime::recorder::spawn_blocking(|| {
+        let result = crate::tasks::spawn_blocking(|| {
             // The job's own sequential parts yield to the runtime as the pools' threads do. The
             // blocking pool runs nothing latency-bound (builds, map encoding, disk writes), so
             // a thread that stays lowered for its next task costs nothing.
@@ -860,10 +856,8 @@ impl Jobs {
         if let Some(disk) = self.disk.clone() {
             let (id, record) = (job.id.clone(), job.record());
             // A small file, but flushed to disk: off the async threads.
-            let _ = crate::runtime::recorder::spawn_blocking(move || {
-                disk.save_json(Kind::Job, &id, &record)
-            })
-            .await;
+            let _ =
+                crate::tasks::spawn_blocking(move || disk.save_json(Kind::Job, &id, &record)).await;
         }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());

@@ -1,7 +1,7 @@
-//! The metrics registry of one server, injected rather than installed process-wide: every task
-//! the server spawns, every request it answers and every blocking call it makes runs with the
-//! server's recorder set as the `metrics` crate's local recorder, so the `metrics::counter!`
-//! and friends throughout the service record into it. Two servers in one process (tests) keep
+//! A server's metrics registry, injected rather than installed process-wide, and the spawning
+//! of tasks that keep it: every task the server spawns, every request it answers and every
+//! blocking call it makes runs with the server's recorder set as the `metrics` crate's local
+//! recorder, so the `metrics::counter!` and friends throughout the service record into it. Two servers in one process (tests) keep
 //! separate metrics, and a process that installs no global recorder loses none.
 
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle, PrometheusRecorder};
