@@ -93,15 +93,24 @@ where
     tokio::spawn(recorded(future))
 }
 
+/// `work`, recording into the calling server's registry wherever it later runs (a blocking
+/// thread, the query pool).
+pub(crate) fn bind<F, R>(work: F) -> impl FnOnce() -> R + Send + 'static
+where
+    F: FnOnce() -> R + Send + 'static,
+{
+    let recorder = CURRENT.with(|c| c.borrow().clone());
+    move || match recorder {
+        Some(recorder) => metrics::with_local_recorder(&*recorder, work),
+        None => work(),
+    }
+}
+
 /// `tokio::task::spawn_blocking`, the work recording into the calling server's registry.
 pub(crate) fn spawn_blocking<F, R>(work: F) -> tokio::task::JoinHandle<R>
 where
     F: FnOnce() -> R + Send + 'static,
     R: Send + 'static,
 {
-    let recorder = CURRENT.with(|c| c.borrow().clone());
-    tokio::task::spawn_blocking(move || match recorder {
-        Some(recorder) => metrics::with_local_recorder(&*recorder, work),
-        None => work(),
-    })
+    tokio::task::spawn_blocking(bind(work))
 }
