@@ -9,10 +9,11 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision, write_phases};
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, CellGraph, Threshold};
-use irs_model::radiomap::{self, MapKey, Progress};
+use irs_model::radiomap::{MapKey, Progress};
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;
 use irs_model::solver::{self, certificate, fast};
@@ -30,7 +31,7 @@ fn gain_maps(c: &mut Criterion) {
         });
         let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
         c.bench_function(&format!("gain_map_41x41_{grouping}"), |b| {
-            b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+            b.iter(|| irs_answers::map::build(black_box(&s), &key, &Progress::default()).unwrap())
         });
     }
 }
@@ -46,9 +47,9 @@ fn large_grid(c: &mut Criterion) {
         .sample_size(10)
         .measurement_time(Duration::from_secs(20));
     group.bench_function("gain_map_1001x1001", |b| {
-        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+        b.iter(|| irs_answers::map::build(black_box(&s), &key, &Progress::default()).unwrap())
     });
-    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
     let graph = CellGraph {
         grid: &map.grid,
         values: &map.values,
@@ -115,7 +116,7 @@ fn rate_maps(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(30));
     let key = MapKey::rate("bench", &s, PhaseMode::Continuous, Access::Noma).unwrap();
     group.bench_function("noma_map_41x41_n60_fast_with_certificate", |b| {
-        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+        b.iter(|| irs_answers::map::build(black_box(&s), &key, &Progress::default()).unwrap())
     });
     group.finish();
 
@@ -151,7 +152,7 @@ fn warehouse_document(resolution_m: f64) -> serde_json::Value {
     let mut document: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     document["grid"]["resolution_m"] = resolution_m.into();
-    irs_model::floorplan::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
+    irs_answers::mapfile::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
         std::fs::read(p)
     })
     .unwrap();
@@ -172,13 +173,13 @@ fn floors(c: &mut Criterion) {
             b.iter(|| {
                 let s = Scenario::from_value(black_box(document.clone())).unwrap();
                 let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
-                radiomap::build(&s, &key, &Progress::default()).unwrap()
+                irs_answers::map::build(&s, &key, &Progress::default()).unwrap()
             })
         });
     }
     let s = Scenario::from_value(warehouse_document(0.25)).unwrap();
     let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
-    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
     // From an office in the north-west to the south-east corner, through the racks.
     let (start, goal) = ([-27.0, 16.0], [26.0, -16.0]);
     for (name, threshold) in [
@@ -235,7 +236,7 @@ fn factory(c: &mut Criterion) {
     let mut group = c.benchmark_group("factory");
     group.sample_size(10);
     group.bench_function("gain_map_1001x601_40_machines_n256", |b| {
-        b.iter(|| radiomap::build(black_box(&s), &key, &Progress::default()).unwrap())
+        b.iter(|| irs_answers::map::build(black_box(&s), &key, &Progress::default()).unwrap())
     });
     group.finish();
 }
@@ -270,7 +271,15 @@ fn placement(c: &mut Criterion) {
     let mut group = c.benchmark_group("placement");
     group.sample_size(10);
     group.bench_function("paper_walls_164_candidates_max_threshold", |b| {
-        b.iter(|| placement::place(black_box(&base), &search, &Progress::default()).unwrap())
+        b.iter(|| {
+            placement::place(
+                black_box(&base),
+                &search,
+                &irs_answers::map::ContentIds,
+                &Progress::default(),
+            )
+            .unwrap()
+        })
     });
     group.finish();
 }
@@ -281,7 +290,7 @@ fn placement(c: &mut Criterion) {
 fn path_answer(c: &mut Criterion) {
     let s = paper("paper-single-user", |_| {});
     let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
-    let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+    let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
     let index = planner::bottlenecks(&map);
     let plan = || {
         let threshold = Threshold::Value(-62.0);

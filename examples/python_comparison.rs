@@ -13,9 +13,10 @@
 //!
 //! Each prints one JSON line: the median and minimum of the timed runs, and the results to compare.
 
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::phases::PhaseMode;
 use irs_model::planner::CellGraph;
-use irs_model::radiomap::{self, MapKey, Progress, RadioMap};
+use irs_model::radiomap::{MapKey, Progress, RadioMap};
 use irs_model::scenario::Scenario;
 use std::path::Path;
 use std::time::Instant;
@@ -58,7 +59,7 @@ fn paper_floor(edit: impl FnOnce(&mut serde_json::Value)) -> Scenario {
 
 fn build(s: &Scenario) -> RadioMap {
     let key = MapKey::gain("comparison", s, PhaseMode::Continuous).expect("a gain key");
-    radiomap::build(s, &key, &Progress::default()).expect("not cancelled")
+    irs_answers::map::build(s, &key, &Progress::default()).expect("not cancelled")
 }
 
 /// Seconds of `run` over `repeats` runs: (median, minimum).

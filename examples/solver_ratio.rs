@@ -3,6 +3,7 @@
 //!
 //! `cargo run --release --features sdp --example solver_ratio [N_X N_Z]` (default 5 × 2, N = 10).
 
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;

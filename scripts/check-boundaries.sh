@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 front_doors=(tokio axum hyper tower tower-http redis moka clap indicatif tracing-subscriber
   metrics metrics-exporter-prometheus reqwest)
-formats=(font8x8 npyz tar)
+formats=(serde_json base64 postcard serde-saphyr sha2 font8x8 npyz tar)
 status=0
 check() {
   local crate=$1; shift

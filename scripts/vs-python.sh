@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # This crate against vectorised NumPy and SciPy on the same two workloads, in one run: the
 # paper floor's continuous gain map at 2 cm (1001 × 1001 cells) and the shortest path through
-# a 19-wall serpentine maze on the same grid (issue 14's comparisons). Each side checks that the
+# a 19-wall serpentine maze on the same grid. Each side checks that the
 # other computed the same thing (map values to 1e-9 dB, path length to 1e-9 m) before any time
 # is printed.
 #   scripts/vs-python.sh [REPEATS=7]

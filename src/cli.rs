@@ -10,13 +10,14 @@ use irs_answers::export::{self, MaskKind};
 use irs_answers::path::{self, CheckedPath};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
+use irs_answers::scenario::ScenarioDocument;
 use irs_answers::timing::Timed;
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap, WorkError};
+use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, WorkError};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
@@ -225,7 +226,7 @@ pub struct MapArgs {
     /// Also draw the map (and, for `plan`, the path) as a PNG into this file.
     #[arg(long, value_name = "FILE")]
     pub png: Option<PathBuf>,
-    /// Pixels per grid cell in the PNG (1–32; default: the longer side fits in 1024 px).
+    /// Pixels per grid cell in the PNG (1–32; default: the longer side fits in 768 px).
     #[arg(long, value_name = "PX", requires = "png", value_parser = clap::value_parser!(u16).range(1..=render::MAX_CELL_PX as i64))]
     pub cell_px: Option<u16>,
 }
@@ -310,7 +311,7 @@ pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
     let fail =
         |e: &dyn std::fmt::Display| Failure::input(format!("--scenario {}: {e}", path.display()));
     let text = std::fs::read_to_string(path).map_err(|e| fail(&e))?;
-    let mut document = irs_model::scenario::document(&text).map_err(|e| fail(&e))?;
+    let mut document = irs_answers::scenario::document(&text).map_err(|e| fail(&e))?;
     if let Some(map_yaml) = &source.floor_plan {
         let absolute = std::path::absolute(map_yaml)
             .map_err(|e| Failure::input(format!("--floor-plan {}: {e}", map_yaml.display())))?;
@@ -345,7 +346,7 @@ fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
     .map_err(|e| Failure::input(format!("--{}", e)))?;
     let progress = Progress::default();
     let result = with_progress_bar(&progress, args.quiet, "map", "cells", || {
-        radiomap::build(scenario, &key, &progress)
+        irs_answers::map::build(scenario, &key, &progress)
     });
     result.map_err(|e| Failure::runtime(e.to_string()))
 }
@@ -553,7 +554,7 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
     let started = Instant::now();
     let progress = Progress::default();
     let placement = with_progress_bar(&progress, args.quiet, "placement", "cells", || {
-        placement::place(&scenario, &search, &progress)
+        placement::place(&scenario, &search, &irs_answers::map::ContentIds, &progress)
     })
     .map_err(|e| match e {
         WorkError::Invalid(e) => Failure::input(flag(&e)),
@@ -562,7 +563,7 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
     if let (Some(file), Some(best)) = (&args.png, placement.scenarios.first()) {
         let key = MapKey::gain(&best.content_hash(), best, placement.answer.phases)
             .map_err(|e| Failure::input(flag(&e)))?;
-        let map = radiomap::build(best, &key, &Progress::default())
+        let map = irs_answers::map::build(best, &key, &Progress::default())
             .map_err(|e| Failure::runtime(e.to_string()))?;
         let options = match placement.answer.objective {
             Objective::MaxThreshold { start, goal } | Objective::Distance { start, goal, .. } => {

@@ -5,7 +5,8 @@ mod common;
 
 use base64::Engine;
 use common::gain_map;
-use irs_model::floorplan::{self, MapMode};
+use irs_answers::scenario::ScenarioDocument;
+use irs_model::floorplan::MapMode;
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, Threshold};
 use irs_model::radiomap::RadioMap;
@@ -30,7 +31,7 @@ fn paper_as_raster() -> Scenario {
             }
         }
     }
-    let map = floorplan::encode_map(
+    let map = irs_answers::mapfile::encode_map(
         &values,
         side,
         res,

@@ -4,11 +4,12 @@
 mod common;
 
 use common::{Q_F, Q_I};
+use irs_answers::scenario::ScenarioDocument;
 
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Search, Segment, What};
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, Progress};
+use irs_model::radiomap::{MapKey, Progress};
 use irs_model::scenario::Scenario;
 
 fn walls(segments: &[([f64; 2], [f64; 2])], step: f64) -> Candidates {
@@ -29,7 +30,7 @@ fn walls(segments: &[([f64; 2], [f64; 2])], step: f64) -> Candidates {
 fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> Option<f64> {
     let fresh = Scenario::from_json(&s.canonical_json()).unwrap();
     let key = MapKey::gain(&fresh.content_hash(), &fresh, phases).unwrap();
-    let map = radiomap::build(&fresh, &key, &Progress::default()).unwrap();
+    let map = irs_answers::map::build(&fresh, &key, &Progress::default()).unwrap();
     match *objective {
         Objective::Coverage { threshold } => Some(map.coverage(threshold)),
         Objective::MaxThreshold { start, goal } => {
@@ -50,7 +51,13 @@ fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> O
 }
 
 fn check_against_exhaustive(base: &Scenario, search: &Search) -> placement::PlacementAnswer {
-    let found = placement::place(base, search, &Progress::default()).unwrap();
+    let found = placement::place(
+        base,
+        search,
+        &irs_answers::map::ContentIds,
+        &Progress::default(),
+    )
+    .unwrap();
     let answer = found.answer;
     let phases = search.phases.unwrap_or(PhaseMode::Continuous);
     let lower_is_better = matches!(search.objective, Objective::Distance { .. });

@@ -4,6 +4,7 @@
 mod common;
 
 use common::{Q_F, Q_I, build};
+use irs_answers::scenario::ScenarioDocument;
 
 use irs_model::channel::{C64, ChannelModel};
 use irs_model::phases::PhaseMode;

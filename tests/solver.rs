@@ -2,11 +2,12 @@
 //! Monte Carlo check against the Jensen bound, and (feature `sdp`) the certificate and `fast`
 //! against Clarabel's SDR and the paper's SDR+SCA.
 
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::{C64, ChannelModel};
 use irs_model::montecarlo;
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, MapKind, Progress};
+use irs_model::radiomap::{MapKey, MapKind, Progress};
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
@@ -144,7 +145,7 @@ fn monte_carlo_means_respect_the_jensen_bound() {
         (MapKind::Gain, None),
     ] {
         let key = MapKey::new("t", &s, kind, None, access, None).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
         let path = planner::plan(&map, [0.5, 0.5], [5.5, 3.0], Threshold::Max, 1.0).unwrap();
         assert!(path.feasible);
         let report =

@@ -4,6 +4,7 @@
 mod common;
 
 use common::gain_map;
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;
 use irs_model::radiomap::{self, MapKey, Progress};
@@ -218,7 +219,7 @@ fn rate_maps_solve_and_certify_the_concatenated_vector() {
         irs_model::rate::Access::Noma,
     )
     .unwrap();
-    let map = radiomap::build(&two, &key, &Progress::default()).unwrap();
+    let map = irs_answers::map::build(&two, &key, &Progress::default()).unwrap();
     let radiomap::CellSolutions::Rate(cells) = &map.cells else {
         panic!("a rate map")
     };

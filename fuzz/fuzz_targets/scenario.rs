@@ -6,9 +6,10 @@
 
 #![no_main]
 
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{self, MapKey, MapKind, Progress, cost};
+use irs_model::radiomap::{MapKey, MapKind, Progress, cost};
 use irs_model::scenario::Scenario;
 use libfuzzer_sys::fuzz_target;
 
@@ -34,7 +35,8 @@ fuzz_target!(|data: &[u8]| {
         if cost::build_seconds(&scenario, &key) > MAX_BUILD_S {
             return;
         }
-        let map = radiomap::build(&scenario, &key, &Progress::default()).expect("not cancelled");
+        let map =
+            irs_answers::map::build(&scenario, &key, &Progress::default()).expect("not cancelled");
         for (value, occupied) in map.values.iter().zip(&map.occupied) {
             assert!(*occupied || !value.is_nan(), "a free cell without a value");
         }

@@ -4,8 +4,9 @@
 //! Each test file is its own crate and uses only some of these, hence `dead_code` allowed.
 #![allow(dead_code)]
 
+use irs_answers::scenario::ScenarioDocument;
 use irs_model::phases::PhaseMode;
-use irs_model::radiomap::{self, MapKey, MapKind, Progress, RadioMap};
+use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 
@@ -21,5 +22,5 @@ pub fn gain_map(s: &Scenario, phases: PhaseMode) -> RadioMap {
 /// A map of `s` of any kind, built as the service builds it (`access` for rate maps).
 pub fn build(s: &Scenario, kind: MapKind, phases: PhaseMode, access: Option<Access>) -> RadioMap {
     let key = MapKey::new(&s.content_hash(), s, kind, Some(phases), access, None).unwrap();
-    radiomap::build(s, &key, &Progress::default()).unwrap()
+    irs_answers::map::build(s, &key, &Progress::default()).unwrap()
 }

@@ -13,7 +13,8 @@
 //! Importing a keep-out mask as a floor plan of the same room and resolution marks exactly the
 //! mask's cells occupied (tested).
 
-use irs_model::floorplan::{self, EncodedMap, MapMode};
+use crate::mapfile::{self, EncodedMap};
+use irs_model::floorplan::MapMode;
 use irs_model::input::FieldError;
 use irs_model::radiomap::RadioMap;
 
@@ -21,8 +22,11 @@ use irs_model::radiomap::RadioMap;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MaskKind {
+    /// Keep-out: occupied or below γ → 100, else 0 (`trinary`, for Nav2's keepout filter).
     #[default]
     Keepout,
+    /// Cost: occupied or below γ → 100, else 99 at γ down to 0 at `best` (`scale`, speed-filter
+    /// style).
     Cost,
 }
 
@@ -46,14 +50,18 @@ impl MaskKind {
 /// A mask as files: `{stem}.yaml` naming `{stem}.pgm`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Nav2Mask {
+    /// Which mask; names its files.
     pub kind: MaskKind,
+    /// The YAML and the PGM it names.
     pub files: EncodedMap,
 }
 
 impl Nav2Mask {
+    /// `keepout.yaml` or `cost.yaml`.
     pub fn yaml_name(&self) -> String {
         format!("{}.yaml", self.kind.stem())
     }
+    /// `keepout.pgm` or `cost.pgm`, the image the YAML names.
     pub fn pgm_name(&self) -> String {
         format!("{}.pgm", self.kind.stem())
     }
@@ -147,7 +155,7 @@ pub fn nav2_mask(
         MaskKind::Keepout => MapMode::Trinary,
         MaskKind::Cost => MapMode::Scale,
     };
-    let files = floorplan::encode_map(
+    let files = mapfile::encode_map(
         &values,
         g.nx,
         g.resolution_m,
@@ -179,9 +187,11 @@ pub fn npy(map: &RadioMap) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::map::build;
+    use crate::scenario::ScenarioDocument;
     use base64::Engine;
     use irs_model::phases::PhaseMode;
-    use irs_model::radiomap::{MapKey, Progress, build};
+    use irs_model::radiomap::{MapKey, Progress};
     use irs_model::scenario::Scenario;
 
     fn small_map() -> (Scenario, RadioMap) {

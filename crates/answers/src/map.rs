@@ -1,17 +1,26 @@
-//! The map use case's answer: the body that `irs-planner map` prints and
-//! `GET /v1/maps/{id}` returns.
+//! The map use case: maps built under their ids ([`map_id`], [`build`]) and the body that
+//! `irs-planner map` prints and `GET /v1/maps/{id}` returns.
 
-use irs_model::radiomap::{CertificateSummary, MapKey, MapStats, RadioMap};
-use irs_model::scenario::Grid;
+use crate::scenario::{ScenarioDocument, hash_hex};
+use irs_model::placement::Naming;
+use irs_model::radiomap::{
+    self, Cancelled, CertificateSummary, MapKey, MapStats, Progress, RadioMap,
+};
+use irs_model::scenario::{Grid, Scenario};
 use serde::Serialize;
 
 /// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MapBody {
+    /// The map's id ([`map_id`] of `key`).
     pub map_id: String,
+    /// What defines the map.
     pub key: MapKey,
+    /// The unit of `values`: `dB` (gain maps) or `bit/s/Hz` (rate maps).
     pub unit: &'static str,
+    /// The grid `values` are laid on (room bounds, Δ, nx × ny).
     pub grid: Grid,
+    /// Cell counts and the values' min, max, mean and median.
     pub stats: MapStats,
     /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
     /// maps, where no configuration serves every SRU).
@@ -43,4 +52,36 @@ fn rows(map: &RadioMap, data: &[f64]) -> Vec<Vec<Option<f64>>> {
     data.chunks(map.grid.ny)
         .map(|row| row.iter().map(|v| v.is_finite().then_some(*v)).collect())
         .collect()
+}
+
+/// The map id of a key: the first 128 bits of SHA-256 over the key's JSON, in hex (the key's
+/// fields in declaration order; the model version left out at 1).
+pub fn map_id(key: &MapKey) -> String {
+    hash_hex(
+        serde_json::to_string(key)
+            .expect("keys serialise")
+            .as_bytes(),
+    )
+}
+
+/// Builds the map a key defines, named by its id ([`map_id`]).
+pub fn build(
+    scenario: &Scenario,
+    key: &MapKey,
+    progress: &Progress,
+) -> Result<RadioMap, Cancelled> {
+    radiomap::build(scenario, key, map_id(key), progress)
+}
+
+/// The ids every answer uses: scenario ids and map ids as content hashes of their documents.
+pub struct ContentIds;
+
+impl Naming for ContentIds {
+    fn scenario_id(&self, scenario: &Scenario) -> String {
+        scenario.content_hash()
+    }
+
+    fn map_id(&self, key: &MapKey) -> String {
+        map_id(key)
+    }
 }

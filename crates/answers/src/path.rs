@@ -18,8 +18,10 @@ pub use crate::phase_text::write_phases;
 /// `POST /v1/paths`.
 #[derive(Debug, Clone, Serialize)]
 pub struct CheckedPath {
+    /// The planner's answer, phases written as asked; flattened into the body.
     #[serde(flatten)]
     pub path: PathAnswer<SurfacePhases>,
+    /// The Monte Carlo check of the phases as sent (docs/model.md §8), when asked for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<MonteCarloReport>,
 }

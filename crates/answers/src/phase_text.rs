@@ -212,8 +212,11 @@ impl FromStr for PhasePrecision {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PhaseFormat {
+    /// Decimals in radians (`irs_phases_rad`), rounded to the [`PhasePrecision`]; the default.
     #[default]
     Radians,
+    /// 16-bit codes c, θ = 2π·c/2¹⁶: one base64 string of little-endian codes a surface
+    /// (`irs_phase_codes`).
     Codes,
 }
 

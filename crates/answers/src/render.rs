@@ -23,6 +23,7 @@ pub const MAX_SIDE_PX: usize = 4096;
 /// Largest pixels per cell a caller may ask for.
 pub const MAX_CELL_PX: usize = 32;
 
+/// What a picture shows on top of the map (a threshold, a path and its ends) and at what scale.
 #[derive(Debug, Clone, Default)]
 pub struct RenderOptions {
     /// Dim the cells below this value.
@@ -31,7 +32,8 @@ pub struct RenderOptions {
     pub path: Vec<usize>,
     /// The start and goal cells to mark (flat indices), feasible or not.
     pub ends: Option<(usize, usize)>,
-    /// Pixels per cell; default: the longer side of the plot fits in 1024 px.
+    /// Pixels per cell; default: the longer side of the plot fits in 768 px
+    /// ([`default_cell_px`]).
     pub cell_px: Option<usize>,
 }
 
@@ -98,10 +100,15 @@ pub struct Layout {
     pub cell_px: usize,
     /// Top-left pixel of the plot area.
     pub left: usize,
+    /// Rows above the plot area (the title and the labels): the y of its top-left pixel.
     pub top: usize,
+    /// Width of the plot area (pixels): nx × `cell_px`.
     pub plot_width: usize,
+    /// Height of the plot area (pixels): ny × `cell_px`.
     pub plot_height: usize,
+    /// Width of the whole picture (pixels), margins, colour bar and title included.
     pub width: usize,
+    /// Height of the whole picture (pixels), margins included.
     pub height: usize,
     /// Text glyphs are 8 × `text_scale` pixels.
     text_scale: usize,
@@ -491,9 +498,10 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::ScenarioDocument;
     use irs_model::phases::PhaseMode;
     use irs_model::planner::{self, Threshold};
-    use irs_model::radiomap::{self, MapKey, Progress};
+    use irs_model::radiomap::{MapKey, Progress};
 
     fn decode(bytes: Vec<u8>) -> (usize, usize, Vec<u8>) {
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
@@ -507,7 +515,7 @@ mod tests {
     fn picture_shows_obstacles_path_endpoints_devices_and_colour_bar() {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
         let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
         let options = RenderOptions::for_path(&map, &answer);
         let layout = Layout::new(&map, None).unwrap();
@@ -555,7 +563,7 @@ mod tests {
     fn infeasible_ends_are_still_marked_and_sizes_are_bounded() {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
-        let map = radiomap::build(&s, &key, &Progress::default()).unwrap();
+        let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
         let answer =
             planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Value(1e9), 1.0).unwrap();
         assert!(!answer.feasible);

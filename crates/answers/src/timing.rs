@@ -8,6 +8,7 @@ use std::time::Instant;
 /// An answer body with its computing time appended as `took_ms`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Timed<T> {
+    /// The answer itself, its fields flattened into the body.
     #[serde(flatten)]
     pub answer: T,
     /// Milliseconds spent computing the answer (not sending it), to the microsecond.

@@ -38,8 +38,11 @@ type P3 = Vector3<f64>;
 /// Large-scale parameters of one link: path gain L (linear, < 1) and Rician factor K (0 if NLoS).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkBudget {
+    /// Whether the link is line of sight (no obstruction's interior on its segment, §2).
     pub los: bool,
+    /// L = 10^(−PL/10), linear, from the InF-SH path loss PL of [`path_loss_db`] (eqs. 41–42).
     pub path_gain: f64,
+    /// K, linear: the scenario's κ on a LoS link, 0 on a NLoS one (no deterministic component).
     pub rician_k: f64,
 }
 

@@ -7,18 +7,12 @@
 //!   `free_thresh` to a cell value in {−1, 0…100}; image row 0 is the *top* of the map. A cell
 //!   value of 100 (Nav2's "occupied", the costmap static layer's default lethal threshold)
 //!   blocks, −1 (unknown) is what `unknown_as` says, anything else is free.
-//! * Files: in a scenario file, `"floor_plan": {"map": "warehouse.yaml", …}` names a map YAML
-//!   relative to the scenario file, its `image:` relative to the YAML (as Nav2 resolves it);
-//!   [`resolve_map_reference`] turns that into the inline form, so a scenario id hashes the
-//!   pixels and the fields, never a file name.
-//! * Out: [`encode_map`] writes a grid of Nav2 cell values as a PGM and its YAML, so that Nav2
-//!   (and [`decode`]) read back exactly those values.
+//! * Files (map YAML references, base64, maps written out for Nav2) are the answers crate's
+//!   (`irs_answers::mapfile`): the model takes the image file's bytes.
 
 use crate::geometry::Raster;
 use crate::input::FieldError;
-use base64::Engine;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
-use std::path::Path;
 
 /// Largest floor-plan image side (pixels): 4096 px is 205 m at 0.05 m, larger than any single
 /// floor we know of; it bounds the decoded raster at 16.8 Mpx (16.8 MB of flags).
@@ -44,6 +38,7 @@ pub enum UnknownAs {
     /// Unknown space blocks links and cannot be driven (the safe reading of an unexplored map).
     #[default]
     Occupied,
+    /// Unknown space is free: neither blocks links nor keeps the robot out.
     Free,
 }
 
@@ -89,37 +84,30 @@ impl<'de> Deserialize<'de> for Negate {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FloorPlan {
-    /// The image file (PGM P2/P5 or PNG, 8-bit grey), base64. Shared, because scenarios derived
-    /// from this one (placement candidates) clone it.
+    /// The image file (PGM P2/P5 or PNG, 8-bit grey) as the scenario document carries it, in
+    /// base64: kept as text for the document's canonical form, decoded by the answers crate
+    /// (the model takes the file's bytes, [`decode`]). Shared, because scenarios derived from
+    /// this one (placement candidates) clone it.
     pub image: std::sync::Arc<str>,
     /// Pixel side (m).
     pub resolution: f64,
     /// [x, y, yaw] of the lower-left pixel's lower-left corner (m, m, rad); yaw must be 0.
     pub origin: [f64; 3],
+    /// Occupancy = shade when set (white is occupied), else 1 − shade (black is occupied).
     pub negate: Negate,
+    /// Occupancy above which a pixel is occupied (100), in (0, 1]; above `free_thresh`.
     pub occupied_thresh: f64,
+    /// Occupancy below which a pixel is free (0), in [0, 1); below `occupied_thresh`.
     pub free_thresh: f64,
+    /// How occupancy becomes a cell value; default `trinary`, as in Nav2.
     #[serde(default)]
     pub mode: MapMode,
+    /// What an unknown (−1) pixel is for radio and driving; default `occupied`.
     #[serde(default)]
     pub unknown_as: UnknownAs,
     /// How high the occupied pixels stand (m); default: the ceiling (walls).
     #[serde(default, deserialize_with = "crate::input::present")]
     pub obstacle_height_m: Option<f64>,
-}
-
-/// The map YAML as Nav2 reads it: `image`, `resolution`, `origin`, `negate`, `occupied_thresh`
-/// and `free_thresh` required, `mode` optional (trinary); other keys are ignored, as Nav2 does.
-#[derive(Debug, Deserialize, Serialize)]
-struct MapYaml {
-    image: String,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    mode: Option<MapMode>,
-    resolution: f64,
-    origin: Vec<f64>,
-    negate: Negate,
-    occupied_thresh: f64,
-    free_thresh: f64,
 }
 
 /// Nav2's cell value of one 8-bit grey pixel (`nav2_map_server::loadMapFromFile`): 100
@@ -139,14 +127,17 @@ pub fn nav2_value(pixel: u8, plan: &FloorPlan) -> i8 {
 }
 
 /// An 8-bit grey image, rows from the top.
-struct GreyImage {
-    width: usize,
-    height: usize,
-    pixels: Vec<u8>,
+pub struct GreyImage {
+    /// Columns (pixels).
+    pub width: usize,
+    /// Rows (pixels).
+    pub height: usize,
+    /// Row-major from the image's top row.
+    pub pixels: Vec<u8>,
 }
 
 /// Decodes a PGM (P2 or P5) or PNG file holding 8-bit grey pixels.
-fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
+pub fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
     let pgm = bytes.starts_with(b"P2") || bytes.starts_with(b"P5");
     let png = bytes.starts_with(b"\x89PNG\r\n\x1a\n");
     if !pgm && !png {
@@ -172,6 +163,13 @@ fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
         other => format!("cannot be decoded: {other}"),
     })?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
+    // A header may declare a side of 0 pixels, which decodes to no pixels at all: a map of
+    // nothing, refused here rather than divided by later.
+    if width == 0 || height == 0 {
+        return Err(format!(
+            "is {width} × {height} pixels: a map needs at least one"
+        ));
+    }
     match decoded {
         image::DynamicImage::ImageLuma8(grey) => Ok(GreyImage {
             width,
@@ -188,13 +186,11 @@ fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
     }
 }
 
-/// Decodes a floor plan into the raster the channel model walks. `ceiling_m` is the default
-/// obstacle height. Errors name the `floor_plan` field at fault.
-pub fn decode(plan: &FloorPlan, ceiling_m: f64) -> Result<Raster, FieldError> {
-    let bytes = base64::engine::general_purpose::STANDARD
-        .decode(plan.image.as_bytes())
-        .map_err(|e| FieldError::new("floor_plan.image", format!("not valid base64: {e}")))?;
-    let image = decode_grey(&bytes).map_err(|e| FieldError::new("floor_plan.image", e))?;
+/// Decodes a floor plan's image file (`file`: the bytes of the PGM or PNG that `plan.image`
+/// carries) into the raster the channel model walks. `ceiling_m` is the default obstacle
+/// height. Errors name the `floor_plan` field at fault.
+pub fn decode(plan: &FloorPlan, file: &[u8], ceiling_m: f64) -> Result<Raster, FieldError> {
+    let image = decode_grey(file).map_err(|e| FieldError::new("floor_plan.image", e))?;
     let (w, h) = (image.width, image.height);
     let mut occupied = vec![false; w * h];
     for (y, row) in image.pixels.chunks_exact(w).enumerate() {
@@ -257,177 +253,13 @@ pub fn check_fields(plan: &FloorPlan) -> Result<(), FieldError> {
     Ok(())
 }
 
-/// Rejects a file reference left in a document that was not read from a file (an HTTP body):
-/// the server reads no files on a client's behalf.
-pub fn reject_map_reference(document: &serde_json::Value) -> Result<(), FieldError> {
-    match document.get("floor_plan").and_then(|p| p.get("map")) {
-        Some(_) => Err(FieldError::new(
-            "floor_plan.map",
-            "a map file is read only where files are: in a scenario file given to the CLI or \
-             found by `serve` at start-up; over HTTP send the map's fields and its image inline \
-             (`irs-planner scenario --scenario FILE` prints that form)",
-        )),
-        None => Ok(()),
-    }
-}
-
-/// Reads a file for [`resolve_map_reference`].
-pub type ReadFile<'a> = &'a dyn Fn(&Path) -> std::io::Result<Vec<u8>>;
-
-/// Replaces a file reference `floor_plan.map` in a scenario document by the map's fields and
-/// image, read with `read`: the map YAML relative to `base` (the scenario file's folder), its
-/// image relative to the YAML. A document without a reference is left as it is.
-pub fn resolve_map_reference(
-    document: &mut serde_json::Value,
-    base: &Path,
-    read: ReadFile,
-) -> Result<(), FieldError> {
-    let Some(plan) = document
-        .get_mut("floor_plan")
-        .and_then(|p| p.as_object_mut())
-    else {
-        return Ok(());
-    };
-    let Some(reference) = plan.get("map") else {
-        return Ok(());
-    };
-    let field = |reason: String| FieldError::new("floor_plan.map", reason);
-    let name = reference
-        .as_str()
-        .ok_or_else(|| field("must be the path of a map YAML file".into()))?;
-    for key in [
-        "image",
-        "resolution",
-        "origin",
-        "negate",
-        "occupied_thresh",
-        "free_thresh",
-        "mode",
-    ] {
-        if plan.contains_key(key) {
-            return Err(FieldError::new(
-                format!("floor_plan.{key}"),
-                "comes from the map file named in floor_plan.map; give one or the other",
-            ));
-        }
-    }
-    let yaml_path = base.join(name);
-    let text = read(&yaml_path).map_err(|e| field(format!("{}: {e}", yaml_path.display())))?;
-    let text = String::from_utf8(text)
-        .map_err(|_| field(format!("{}: not UTF-8 text", yaml_path.display())))?;
-    let yaml: MapYaml = serde_saphyr::from_str(&text)
-        .map_err(|e| field(format!("{}: {e}", yaml_path.display())))?;
-    let origin: [f64; 3] = yaml.origin.as_slice().try_into().map_err(|_| {
-        field(format!(
-            "{}: origin must have 3 elements [x, y, yaw], not {}",
-            yaml_path.display(),
-            yaml.origin.len()
-        ))
-    })?;
-    let image_path = yaml_path
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join(&yaml.image);
-    let image = read(&image_path).map_err(|e| {
-        field(format!(
-            "{} (the image named by {}): {e}",
-            image_path.display(),
-            yaml_path.display()
-        ))
-    })?;
-    plan.remove("map");
-    let fields = serde_json::json!({
-        "image": base64::engine::general_purpose::STANDARD.encode(image),
-        "resolution": yaml.resolution,
-        "origin": origin,
-        "negate": yaml.negate,
-        "occupied_thresh": yaml.occupied_thresh,
-        "free_thresh": yaml.free_thresh,
-        "mode": yaml.mode.unwrap_or_default(),
-    });
-    plan.extend(fields.as_object().expect("an object").clone());
-    Ok(())
-}
-
-/// A grid of Nav2 cell values written as a map: the PGM image and the YAML naming it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EncodedMap {
-    pub yaml: String,
-    pub pgm: Vec<u8>,
-}
-
-/// Writes `values` (Nav2 cell values, row-major from the *bottom* row, `width` per row) as a PGM
-/// and its YAML (`image: {image_name}`), with the map's resolution and origin. `trinary` maps
-/// (values 0, 100 and −1) use map_saver's pixels (254 free, 0 occupied, 205 unknown) with
-/// thresholds 0.65 / 0.196: ROS's map_saver pair, under which 205 (occ 50/255 = 0.19608) reads
-/// back as unknown — with Nav2's default free_thresh 0.25 it would read back as free; `scale` maps (values 0…100, a cost or speed mask) use `free_thresh 0, occupied_thresh
-/// 1` as Nav2's speed-filter masks do, with the pixel 255 − 2.55·v rounded, which Nav2's
-/// `rint(occ·100)` maps back to v exactly.
-pub fn encode_map(
-    values: &[i8],
-    width: usize,
-    resolution: f64,
-    origin: [f64; 2],
-    mode: MapMode,
-    image_name: &str,
-) -> EncodedMap {
-    let height = values.len() / width.max(1);
-    let mut pixels = vec![0u8; values.len()];
-    for (r, row) in values.chunks_exact(width).enumerate() {
-        let out = &mut pixels[(height - 1 - r) * width..(height - r) * width];
-        for (p, &v) in out.iter_mut().zip(row) {
-            *p = match mode {
-                MapMode::Trinary => match v {
-                    100 => 0,
-                    0 => 254,
-                    _ => 205,
-                },
-                MapMode::Scale => (255.0 - 2.55 * f64::from(v.clamp(0, 100))).round() as u8,
-                MapMode::Raw => v.clamp(0, 100) as u8,
-            };
-        }
-    }
-    let mut pgm = Vec::with_capacity(pixels.len() + 32);
-    image::codecs::pnm::PnmEncoder::new(&mut pgm)
-        .with_subtype(image::codecs::pnm::PnmSubtype::Graymap(
-            image::codecs::pnm::SampleEncoding::Binary,
-        ))
-        .encode(
-            pixels.as_slice(),
-            width as u32,
-            height as u32,
-            image::ExtendedColorType::L8,
-        )
-        .expect("encoding into memory cannot fail");
-    let (occupied_thresh, free_thresh) = match mode {
-        MapMode::Scale => (1.0, 0.0),
-        _ => (0.65, 0.196),
-    };
-    let yaml = serde_saphyr::to_string(&MapYaml {
-        image: image_name.to_string(),
-        mode: Some(mode),
-        resolution,
-        origin: vec![origin[0], origin[1], 0.0],
-        negate: Negate(false),
-        occupied_thresh,
-        free_thresh,
-    })
-    .expect("a map YAML always serialises");
-    EncodedMap { yaml, pgm }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::collections::HashMap;
 
-    fn b64(bytes: &[u8]) -> String {
-        base64::engine::general_purpose::STANDARD.encode(bytes)
-    }
-
-    fn plan(image: &[u8]) -> FloorPlan {
+    fn plan() -> FloorPlan {
         FloorPlan {
-            image: b64(image).into(),
+            image: "(the file's base64)".into(),
             resolution: 0.5,
             origin: [-1.0, -2.0, 0.0],
             negate: Negate(false),
@@ -444,7 +276,7 @@ mod tests {
 
     #[test]
     fn pixels_decode_as_nav2_does() {
-        let mut p = plan(P5);
+        let mut p = plan();
         // Trinary: black occupied, white free; 205 → occ 0.196 < 0.25 → free.
         let cells: Vec<i8> = [0u8, 254, 205, 128]
             .iter()
@@ -467,16 +299,16 @@ mod tests {
 
     #[test]
     fn image_rows_are_flipped_and_unknown_follows_unknown_as() {
-        let mut p = plan(P5);
+        let mut p = plan();
         p.mode = MapMode::Trinary;
-        p.image = b64(b"P2\n3 2\n255\n0 254 128\n254 254 0\n").into();
-        let r = decode(&p, 3.0).unwrap();
+        const IMAGE: &[u8] = b"P2\n3 2\n255\n0 254 128\n254 254 0\n";
+        let r = decode(&p, IMAGE, 3.0).unwrap();
         assert_eq!((r.width, r.height, r.obstacle_height), (3, 2, 3.0));
         // Map row 0 is the image's bottom row.
         assert_eq!(r.occupied, [false, false, true, true, false, true]);
         p.unknown_as = UnknownAs::Free;
         p.obstacle_height_m = Some(1.25);
-        let r = decode(&p, 3.0).unwrap();
+        let r = decode(&p, IMAGE, 3.0).unwrap();
         assert_eq!(r.occupied, [false, false, true, true, false, false]);
         assert_eq!(r.obstacle_height, 1.25);
         assert_eq!(r.extent(), [[-1.0, 0.5], [-2.0, -1.0]]);
@@ -494,37 +326,36 @@ mod tests {
             )
             .unwrap();
         use image::ImageEncoder;
-        let a = decode(&plan(P5), 2.0).unwrap();
-        let b = decode(&plan(&png), 2.0).unwrap();
+        let a = decode(&plan(), P5, 2.0).unwrap();
+        let b = decode(&plan(), &png, 2.0).unwrap();
         assert_eq!(a, b);
     }
 
     #[test]
     fn bad_images_are_rejected_with_a_reason() {
-        let reason = |bytes: &[u8]| decode(&plan(bytes), 2.0).unwrap_err();
-        let cases: [(&[u8], &str); 5] = [
+        let reason = |bytes: &[u8]| decode(&plan(), bytes, 2.0).unwrap_err();
+        let cases: [(&[u8], &str); 7] = [
             (b"P6\n1 1\n255\n\x00\x00\x00", "not a PGM"),
             (b"P5\n3 2\n255\n\x00\xfe", "cannot be decoded"),
             (b"P5\n1 1\n65535\n\x00\x00", "16-bit"),
             (b"GIF89a", "not a PGM"),
             (b"P5\n5000 1\n255\n", "larger than 4096"),
+            (b"P5\n0 3\n255\n", "at least one"),
+            (b"P5\n3 0\n255\n", "at least one"),
         ];
         for (bytes, expected) in cases {
             let e = reason(bytes);
             assert_eq!(e.field, "floor_plan.image");
             assert!(e.reason.contains(expected), "{expected}: {e}");
         }
-        let mut p = plan(P5);
-        p.image = "not base64!".into();
-        assert!(decode(&p, 2.0).unwrap_err().reason.contains("base64"));
     }
 
     #[test]
     fn a_pgm_with_a_smaller_maxval_is_scaled_as_graphicsmagick_does() {
         // maxval 100: 100 is white (shade 1), 0 black, 50 mid-grey (shade 0.5 → unknown).
-        let mut p = plan(b"P2\n3 1\n100\n100 0 50\n");
+        let mut p = plan();
         p.unknown_as = UnknownAs::Free;
-        let r = decode(&p, 2.0).unwrap();
+        let r = decode(&p, b"P2\n3 1\n100\n100 0 50\n", 2.0).unwrap();
         assert_eq!(r.occupied, [false, true, false]);
     }
 
@@ -538,114 +369,9 @@ mod tests {
             (|p| p.occupied_thresh = 1.5, "floor_plan.occupied_thresh"),
         ];
         for (mutate, field) in cases {
-            let mut p = plan(P5);
+            let mut p = plan();
             mutate(&mut p);
             assert_eq!(check_fields(&p).unwrap_err().field, field);
         }
-    }
-
-    fn files(entries: &[(&str, &[u8])]) -> HashMap<std::path::PathBuf, Vec<u8>> {
-        entries
-            .iter()
-            .map(|(k, v)| (std::path::PathBuf::from(k), v.to_vec()))
-            .collect()
-    }
-
-    #[test]
-    fn a_map_reference_resolves_relative_to_the_scenario_and_the_yaml() {
-        let fs = files(&[
-            (
-                "site/maps/floor.yaml",
-                b"image: img/floor.pgm\nresolution: 0.5\norigin: [-1.0, -2.0, 0.0]\n\
-                  negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\nextra_key: ignored\n",
-            ),
-            ("site/maps/img/floor.pgm", P5),
-        ]);
-        let read = |p: &Path| {
-            fs.get(p)
-                .cloned()
-                .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
-        };
-        let mut doc =
-            serde_json::json!({"floor_plan": {"map": "maps/floor.yaml", "obstacle_height_m": 2.5}});
-        resolve_map_reference(&mut doc, Path::new("site"), &read).unwrap();
-        let resolved: FloorPlan = serde_json::from_value(doc["floor_plan"].clone()).unwrap();
-        assert_eq!(
-            resolved,
-            FloorPlan {
-                obstacle_height_m: Some(2.5),
-                ..plan(P5)
-            }
-        );
-        // A missing key or image names the reference.
-        for (yaml, expected) in [
-            (
-                "image: img/floor.pgm\nresolution: 0.5\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
-                "origin",
-            ),
-            (
-                "image: nope.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
-                "nope.pgm",
-            ),
-            (
-                "image: img/floor.pgm\nresolution: 0.5\norigin: [0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
-                "3 elements",
-            ),
-            (
-                "image: img/floor.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 2\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
-                "negate",
-            ),
-        ] {
-            let mut fs = fs.clone();
-            fs.insert("site/maps/floor.yaml".into(), yaml.as_bytes().to_vec());
-            let read = |p: &Path| {
-                fs.get(p)
-                    .cloned()
-                    .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
-            };
-            let mut doc = serde_json::json!({"floor_plan": {"map": "maps/floor.yaml"}});
-            let e = resolve_map_reference(&mut doc, Path::new("site"), &read).unwrap_err();
-            assert_eq!(e.field, "floor_plan.map");
-            assert!(e.reason.contains(expected), "{expected}: {e}");
-        }
-    }
-
-    #[test]
-    fn encoded_maps_decode_to_the_same_values() {
-        let values: Vec<i8> = (0..=100).collect();
-        let width = 101;
-        let scale = encode_map(&values, width, 0.25, [1.0, 2.0], MapMode::Scale, "m.pgm");
-        let yaml: MapYaml = serde_saphyr::from_str(&scale.yaml).unwrap();
-        assert_eq!(yaml.image, "m.pgm");
-        let p = FloorPlan {
-            image: b64(&scale.pgm).into(),
-            resolution: yaml.resolution,
-            origin: [yaml.origin[0], yaml.origin[1], yaml.origin[2]],
-            negate: yaml.negate,
-            occupied_thresh: yaml.occupied_thresh,
-            free_thresh: yaml.free_thresh,
-            mode: yaml.mode.unwrap(),
-            ..plan(P5)
-        };
-        let bytes = base64::engine::general_purpose::STANDARD
-            .decode(p.image.as_bytes())
-            .unwrap();
-        let grey = decode_grey(&bytes).unwrap();
-        let back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
-        assert_eq!(back, values);
-        let keepout: Vec<i8> = (0..12).map(|k| [100, 0, -1][k % 3]).collect();
-        let trinary = encode_map(&keepout, 4, 0.5, [0.0, 0.0], MapMode::Trinary, "k.pgm");
-        let yaml: MapYaml = serde_saphyr::from_str(&trinary.yaml).unwrap();
-        let p = FloorPlan {
-            image: b64(&trinary.pgm).into(),
-            free_thresh: yaml.free_thresh,
-            occupied_thresh: yaml.occupied_thresh,
-            ..plan(P5)
-        };
-        let grey = decode_grey(&trinary.pgm).unwrap();
-        let mut back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
-        // Image rows run from the top: flip them back to map rows.
-        back = back.chunks(4).rev().flatten().copied().collect();
-        assert_eq!(back, keepout, "occupied, free and unknown read back");
     }
 }

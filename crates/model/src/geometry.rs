@@ -89,8 +89,11 @@ fn rectangle_row(
 /// (x, ys[j], z).
 #[derive(Debug, Clone, Copy)]
 pub struct RowOfUsers<'a> {
+    /// The row's x (m), the same for every user.
     pub x: f64,
+    /// Each user's y (m), one per cell of the row.
     pub ys: &'a [f64],
+    /// The users' height (m), the same for every user of the row.
     pub z: f64,
 }
 
@@ -103,7 +106,9 @@ const SNAP_PX: f64 = 1e-9;
 /// An axis-aligned 3D box [lo, hi].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Aabb {
+    /// Lowest corner (x, y, z) (m).
     pub lo: [f64; 3],
+    /// Highest corner (x, y, z) (m); each coordinate ≥ `lo`'s.
     pub hi: [f64; 3],
 }
 
@@ -241,10 +246,15 @@ impl Wall {
 /// image's rows are flipped). An occupied pixel is a column from the floor to `obstacle_height`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Raster {
+    /// Columns (pixels along x).
     pub width: usize,
+    /// Rows (pixels along y).
     pub height: usize,
+    /// Pixel side (m).
     pub resolution: f64,
+    /// Lower-left corner of pixel (0, 0): (x, y) (m).
     pub origin: [f64; 2],
+    /// Height of an occupied pixel's column (m).
     pub obstacle_height: f64,
     /// Row-major from the bottom row: pixel (c, r) is `occupied[r·width + c]`.
     pub occupied: Vec<bool>,
@@ -404,8 +414,11 @@ impl Raster {
 /// cells occupied.
 #[derive(Debug, Clone, Default)]
 pub struct Obstructions {
+    /// The scenario's obstacles, standing on the floor.
     pub boxes: Vec<Aabb>,
+    /// The scenario's walls, at any angle.
     pub walls: Vec<Wall>,
+    /// The decoded floor plan, if any; shared with the scenario's derived copies (placement).
     pub raster: Option<std::sync::Arc<Raster>>,
 }
 

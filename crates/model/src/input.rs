@@ -15,10 +15,12 @@ use std::fmt;
 pub struct FieldError {
     /// JSON path of the field (`$` for the document itself).
     pub field: String,
+    /// Why it was rejected, in words a user can act on.
     pub reason: String,
 }
 
 impl FieldError {
+    /// An error about `field` (its JSON path) for `reason`.
     pub fn new(field: impl Into<String>, reason: impl fmt::Display) -> Self {
         FieldError {
             field: field.into(),

@@ -44,6 +44,7 @@ pub fn check_seconds(scenario: &Scenario, waypoints: usize, draws: usize, rate: 
 /// One user at one waypoint.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct UserCheck {
+    /// Which user: "mru" or "sru{k}" ([`user_label`]).
     pub user: String,
     /// Rate maps: the Jensen-bound rate (bit/s/Hz); gain maps: λ = E|c|² (dB).
     pub bound: f64,
@@ -55,19 +56,27 @@ pub struct UserCheck {
     pub gap: f64,
 }
 
+/// The check of one waypoint of the path.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct WaypointCheck {
+    /// The waypoint's cell index along x.
     pub i: usize,
+    /// The waypoint's cell index along y.
     pub j: usize,
+    /// One entry per user: the MRU alone on a gain map, then the SRUs on a rate map.
     pub users: Vec<UserCheck>,
 }
 
+/// The Monte Carlo check of a path (docs/model.md §8): per waypoint and user, bound vs mean.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MonteCarloReport {
+    /// Channel draws per waypoint.
     pub draws: usize,
+    /// Seed of the generators; waypoint k draws from `seed + k`, so a report is reproducible.
     pub seed: u64,
     /// Largest gap per user over the path.
     pub max_gap: Vec<UserCheck>,
+    /// One entry per waypoint, in path order.
     pub waypoints: Vec<WaypointCheck>,
 }
 

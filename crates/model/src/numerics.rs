@@ -52,6 +52,7 @@ pub struct MeanEstimate {
 }
 
 impl MeanEstimate {
+    /// Adds one sample.
     #[inline]
     pub fn add(&mut self, sample: f64) {
         self.count += 1;
@@ -59,6 +60,7 @@ impl MeanEstimate {
         self.sum_of_squares += sample * sample;
     }
 
+    /// The mean of the samples so far (NaN before the first).
     pub fn mean(&self) -> f64 {
         self.sum / self.count as f64
     }

@@ -14,6 +14,7 @@ pub const MAX_PHASE_BITS: u8 = 16;
 /// How the IRS phases are chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PhaseMode {
+    /// Any phase in [0, 2π): eq. 11's θ* exactly, the gain in closed form (eq. 12).
     Continuous,
     /// b-bit phase shifters: L = 2^b levels {0, 2π/L, …}.
     Bits(u8),
@@ -95,7 +96,8 @@ const CODE_LEVELS: f64 = 65_536.0;
 /// Nearest with ties away from zero, written without libm's `fmod` and `round` (calls on the
 /// baseline target, and most of a path answer's time in codes): θ already in [0, 2π), as
 /// every phase this crate makes is, is its own remainder, and x − ⌊x⌋ is exact for
-/// 0 ≤ x ≤ 2¹⁶.
+/// 0 ≤ x ≤ 2¹⁶. Inlined across crates: the answers crate writes a path's codes in a loop.
+#[inline]
 pub fn encode_phase(theta: f64) -> u16 {
     let theta = if (0.0..TAU).contains(&theta) {
         theta
@@ -114,6 +116,7 @@ pub fn encode_phase(theta: f64) -> u16 {
 }
 
 /// The phase of a code of [`encode_phase`], in [0, 2π).
+#[inline]
 pub fn decode_phase(code: u16) -> f64 {
     f64::from(code) * (TAU / CODE_LEVELS)
 }

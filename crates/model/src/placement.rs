@@ -35,8 +35,10 @@ pub const MAX_WORK_CELLS: usize = 100_000_000;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum What {
+    /// One IRS of the scenario (candidates: poses, or walls); its size and grouping are kept.
     #[default]
     Irs,
+    /// One AP of the scenario (candidates: positions, or walls); its power and carrier are kept.
     Ap,
 }
 
@@ -44,7 +46,9 @@ pub enum What {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Pose {
+    /// Centre of the surface (x, y, z) (m).
     pub center: [f64; 3],
+    /// Unit normal, into the room and not vertical (as a scenario's `irs.normal`).
     pub normal: [f64; 3],
 }
 
@@ -52,7 +56,9 @@ pub struct Pose {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Segment {
+    /// One end (x, y) (m), the first sample.
     pub from: [f64; 2],
+    /// The other end (x, y) (m), a sample when the length is a whole number of steps.
     pub to: [f64; 2],
 }
 
@@ -61,18 +67,24 @@ pub struct Segment {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Candidates {
+    /// IRS candidates given one by one.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub poses: Vec<Pose>,
+    /// AP candidates (x, y, z) (m) given one by one.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub positions: Vec<[f64; 3]>,
+    /// Segments to sample every `step_m`; an IRS sample faces the free side.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub walls: Vec<Segment>,
+    /// Spacing of the samples along `walls` (m, > 0); required with `walls`, refused without.
     #[serde(
         default,
         deserialize_with = "crate::input::present",
         skip_serializing_if = "Option::is_none"
     )]
     pub step_m: Option<f64>,
+    /// Height (m) of the wall samples, default the moving device's; poses and positions carry
+    /// their own.
     #[serde(
         default,
         deserialize_with = "crate::input::present",
@@ -86,13 +98,24 @@ pub struct Candidates {
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Objective {
     /// η(γ), the share of free cells at or above the threshold (higher is better).
-    Coverage { threshold: f64 },
+    Coverage {
+        /// γ (dB) a free cell must reach to count.
+        threshold: f64,
+    },
     /// The largest threshold for which a path joins start and goal (higher is better).
-    MaxThreshold { start: [f64; 2], goal: [f64; 2] },
+    MaxThreshold {
+        /// One end of the path (x, y) (m), snapped to a cell.
+        start: [f64; 2],
+        /// The other end (x, y) (m), snapped to a cell.
+        goal: [f64; 2],
+    },
     /// The shortest path's length at the threshold (shorter is better; infeasible last).
     Distance {
+        /// γ (dB) every cell of the path must reach.
         threshold: f64,
+        /// Where the path starts (x, y) (m), snapped to a cell.
         start: [f64; 2],
+        /// Where the path ends (x, y) (m), snapped to a cell.
         goal: [f64; 2],
     },
 }
@@ -112,12 +135,15 @@ impl Objective {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Search {
+    /// What moves; default an IRS.
     #[serde(default)]
     pub what: What,
     /// Which IRS (or AP) of the scenario moves, in scenario order.
     #[serde(default)]
     pub index: usize,
+    /// Where it may go.
     pub candidates: Candidates,
+    /// What is better.
     pub objective: Objective,
     /// The gain maps' phase mode (continuous or bits; default continuous).
     #[serde(
@@ -131,6 +157,7 @@ pub struct Search {
 /// One candidate, before scoring.
 #[derive(Debug, Clone)]
 pub struct Candidate {
+    /// The IRS centre or AP position to try (x, y, z) (m).
     pub center: [f64; 3],
     /// IRS candidates only.
     pub normal: Option<[f64; 3]>,
@@ -143,11 +170,14 @@ pub struct Candidate {
 pub struct Ranked {
     /// 1 for the best.
     pub rank: usize,
+    /// The IRS centre or AP position (x, y, z) (m).
     pub center: [f64; 3],
+    /// The IRS candidate's normal; absent for an AP.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal: Option<[f64; 3]>,
     /// The objective's value (null when infeasible: no path, or start or goal occupied).
     pub score: Option<f64>,
+    /// The id of the candidate's scenario (the base with the device moved).
     pub scenario_id: String,
     /// The id of the candidate's gain map (with the search's phase mode).
     pub map_id: String,
@@ -156,31 +186,41 @@ pub struct Ranked {
 /// A candidate that is not a valid scenario (e.g. a wall sample on no wall, or facing away).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Rejected {
+    /// The IRS centre or AP position (x, y, z) (m).
     pub center: [f64; 3],
+    /// The IRS candidate's normal; absent for an AP.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub normal: Option<[f64; 3]>,
+    /// Why the moved scenario is invalid: the field error, as text.
     pub reason: String,
 }
 
 /// The answer to a search; the same body from the CLI and the API.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PlacementAnswer {
+    /// The id of the base scenario the search moved a device of.
     pub scenario_id: String,
+    /// What moved.
     pub what: What,
+    /// Which IRS or AP moved, in scenario order.
     pub index: usize,
     /// Candidates are scored on gain maps (the only kind placement uses).
     pub map_kind: &'static str,
+    /// The phase mode the gain maps were built with (continuous unless the search said bits).
     pub phases: PhaseMode,
+    /// The objective, as the search gave it.
     pub objective: Objective,
     /// The score's unit: `fraction`, `dB` or `m`.
     pub unit: &'static str,
     /// Best first; ties keep the candidates' order.
     pub candidates: Vec<Ranked>,
+    /// The candidates that are not valid scenarios, in the candidates' order.
     pub rejected: Vec<Rejected>,
 }
 
 /// The scenarios of the best candidates, to register and build so their map ids answer.
 pub struct Placement {
+    /// The answer's body.
     pub answer: PlacementAnswer,
     /// The ranked candidates' scenarios, best first (as `answer.candidates`).
     pub scenarios: Vec<Scenario>,
@@ -523,14 +563,24 @@ fn shared(
     Shared { field, tau }
 }
 
+/// How an answer names scenarios and maps. Ids are hashes of documents, which the model does
+/// not write: the answers crate does (`irs_answers::map::ContentIds`).
+pub trait Naming: Sync {
+    /// The id of a scenario.
+    fn scenario_id(&self, scenario: &Scenario) -> String;
+    /// The id of the map a key defines.
+    fn map_id(&self, key: &MapKey) -> String;
+}
+
 /// Checks a search, scores every candidate and ranks them (see [`candidates`] and
 /// [`rank_candidates`]).
 pub fn place(
     base: &Scenario,
     search: &Search,
+    naming: &dyn Naming,
     progress: &Progress,
 ) -> Result<Placement, WorkError> {
-    rank_candidates(base, search, candidates(base, search)?, progress)
+    rank_candidates(base, search, candidates(base, search)?, naming, progress)
 }
 
 /// Scores the candidates [`candidates`] listed for `search` and ranks them. `progress` counts
@@ -539,6 +589,7 @@ pub fn rank_candidates(
     base: &Scenario,
     search: &Search,
     candidates: Vec<Candidate>,
+    naming: &dyn Naming,
     progress: &Progress,
 ) -> Result<Placement, WorkError> {
     let mode = search.phases.unwrap_or(PhaseMode::Continuous);
@@ -609,7 +660,8 @@ pub fn rank_candidates(
                         return Err(Cancelled.into());
                     }
                     let key = MapKey::gain("placement", scenario, mode)?;
-                    let map = radiomap::build(scenario, &key, &Progress::default())?;
+                    let map =
+                        radiomap::build(scenario, &key, naming.map_id(&key), &Progress::default())?;
                     progress.advance(grid.cells() * aps);
                     Ok((
                         k,
@@ -629,8 +681,8 @@ pub fn rank_candidates(
             .scenario
             .as_ref()
             .expect("only valid candidates are scored");
-        let scenario_id = scenario.content_hash();
-        let map_id = MapKey::gain(&scenario_id, scenario, mode)?.id();
+        let scenario_id = naming.scenario_id(scenario);
+        let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario, mode)?);
         ranked.push(Ranked {
             rank: rank + 1,
             center: c.center,
@@ -653,7 +705,7 @@ pub fn rank_candidates(
         .collect();
     Ok(Placement {
         answer: PlacementAnswer {
-            scenario_id: base.content_hash(),
+            scenario_id: naming.scenario_id(base),
             what: search.what,
             index: search.index,
             map_kind: "gain",

@@ -67,6 +67,7 @@ pub fn dbm_to_watts(dbm: f64) -> f64 {
 /// The users' fixed data for one map: power budget, noise and the SRUs' targets.
 #[derive(Debug, Clone)]
 pub struct RateModel {
+    /// NOMA or OMA: which rate formula (eq. 22 or 24) and which decoding orders apply.
     pub access: Access,
     /// P_max (W).
     pub p_max_w: f64,
@@ -106,6 +107,8 @@ impl RateModel {
         )
     }
 
+    /// The users' data from P_max and σ² (W) and the SRUs' minimum rates r̄_s (bit/s/Hz), in
+    /// scenario order.
     pub fn new(access: Access, p_max_w: f64, noise_w: f64, sru_targets: &[f64]) -> RateModel {
         let users = sru_targets.len() + 1;
         let mut targets = vec![0.0];

@@ -5,9 +5,11 @@
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
 use crate::store::{DataDir, Kind};
+use irs_answers::scenario::ScenarioDocument as _;
+use irs_answers::scenario::hash_hex;
 use irs_model::planner::{self, Bottlenecks};
 use irs_model::radiomap::RadioMap;
-use irs_model::scenario::{Scenario, hash_hex};
+use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};

@@ -14,8 +14,9 @@ use super::cache::MapCache;
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
 use crate::store::{DataDir, Kind};
+use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::placement::{self, Candidate, Placement, Search};
-use irs_model::radiomap::{self, Cancelled, MapKey, Progress, RadioMap, WorkError};
+use irs_model::radiomap::{Cancelled, MapKey, Progress, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, VecDeque};
@@ -186,7 +187,7 @@ impl JobRecord {
     pub(crate) fn view(&self) -> JobView {
         let (kind, map_id, result_href) = match &self.key {
             Some(key) => {
-                let map_id = key.id();
+                let map_id = irs_answers::map::map_id(key);
                 ("map", Some(map_id.clone()), format!("/v1/maps/{map_id}"))
             }
             None => ("placement", None, format!("/v1/placements/{}", self.job_id)),
@@ -375,7 +376,7 @@ impl Job {
         }
         let work = match (record.key, record.placement) {
             (Some(key), None) => Work::Map {
-                map_id: key.id(),
+                map_id: irs_answers::map::map_id(&key),
                 key,
                 handover: Mutex::new(Handover::default()),
             },
@@ -566,7 +567,7 @@ impl Jobs {
         key: MapKey,
         owner: Option<Owner>,
     ) -> Result<MapRequestOutcome, Error> {
-        let map_id = key.id();
+        let map_id = irs_answers::map::map_id(&key);
         let mut in_flight = self.in_flight.lock().await;
         if let Some(map) = cache.get(&map_id).await {
             return Ok(MapRequestOutcome::Ready(map));
@@ -585,7 +586,8 @@ impl Jobs {
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id_of(&job), scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
         let cache = cache.clone();
-        let work = move || radiomap::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let work =
+            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
             job.hand_over(&map);
@@ -612,12 +614,13 @@ impl Jobs {
         P: FnOnce(Arc<RadioMap>) -> Fut + Send + 'static,
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
-        let map_id = key.id();
+        let map_id = irs_answers::map::map_id(&key);
         let job = self.admit_map(job_id, &key, owner);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
-        let work = move || radiomap::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let work =
+            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
             job.hand_over(&map);
@@ -687,7 +690,13 @@ impl Jobs {
         let span = tracing::info_span!("job", job_id = %job.id, kind = "placement", scenario_id = %job.scenario_id);
         let progress = job.progress.clone();
         let work = move || -> Result<(Placement, Vec<RadioMap>), WorkError> {
-            let placement = placement::rank_candidates(&scenario, &search, candidates, &progress)?;
+            let placement = placement::rank_candidates(
+                &scenario,
+                &search,
+                candidates,
+                &irs_answers::map::ContentIds,
+                &progress,
+            )?;
             let phases = placement.answer.phases;
             // The best candidates' maps, built now so their ids answer at once (gain maps of
             // the search's floor: milliseconds each).
@@ -700,7 +709,7 @@ impl Jobs {
                         return Err(Cancelled.into());
                     }
                     let key = MapKey::gain(&s.content_hash(), s, phases)?;
-                    Ok(radiomap::build(s, &key, &Progress::default())?)
+                    Ok(irs_answers::map::build(s, &key, &Progress::default())?)
                 })
                 .collect::<Result<Vec<_>, WorkError>>()?;
             Ok((placement, maps))
@@ -743,7 +752,7 @@ impl Jobs {
             key.scenario_id.clone(),
             owner,
             Work::Map {
-                map_id: key.id(),
+                map_id: irs_answers::map::map_id(key),
                 key: key.clone(),
                 handover: Mutex::new(Handover::default()),
             },

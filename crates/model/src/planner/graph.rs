@@ -24,17 +24,24 @@ use std::sync::Mutex;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Infeasible {
+    /// The snapped start cell lies in an obstacle.
     StartOccupied,
+    /// The snapped goal cell lies in an obstacle.
     GoalOccupied,
+    /// The start cell's value is below γ (or null on a rate map).
     StartBelowThreshold,
+    /// The goal cell's value is below γ (or null on a rate map).
     GoalBelowThreshold,
+    /// Both ends are feasible, but no chain of feasible cells joins them.
     Disconnected,
 }
 
 /// A shortest path: the visited cells (flat indices, start first) and its length in metres.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Path {
+    /// Flat cell indices (i·ny + j), start first and goal last.
     pub cells: Vec<usize>,
+    /// Length (m): orthogonal steps of Δ, diagonal ones of √2·Δ.
     pub distance_m: f64,
 }
 
@@ -54,8 +61,11 @@ const NEIGHBOURS: [(isize, isize, f64); 8] = [
 /// A map's values seen as a graph: NaN marks an occupied (or unserviceable) cell.
 #[derive(Debug, Clone, Copy)]
 pub struct CellGraph<'a> {
+    /// The grid the cells are laid on.
     pub grid: &'a Grid,
+    /// Per cell (flat index i·ny + j): the map's value (dB or bit/s/Hz), NaN where none.
     pub values: &'a [f64],
+    /// Per cell: true where an obstruction occupies the centre (never a vertex of the graph).
     pub occupied: &'a [bool],
 }
 

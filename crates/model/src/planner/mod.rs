@@ -17,7 +17,9 @@ use std::str::FromStr;
 /// The QoS threshold of a path query: a value in the map's unit, or the largest feasible one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Threshold {
+    /// γ in the map's unit: dB on gain maps, bit/s/Hz on rate maps.
     Value(f64),
+    /// The largest γ for which any path joins start and goal (the widest-path value, §6).
     Max,
 }
 
@@ -64,10 +66,15 @@ impl<'de> Deserialize<'de> for Threshold {
 /// Where a requested point landed on the grid.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Endpoint {
+    /// The point as given (x, y) (m).
     pub requested: [f64; 2],
+    /// x of the cell centre it snapped to (m).
     pub x: f64,
+    /// y of the cell centre it snapped to (m).
     pub y: f64,
+    /// The cell's index along x.
     pub i: usize,
+    /// The cell's index along y.
     pub j: usize,
     /// True when the requested point was not itself a cell centre.
     pub snapped: bool,
@@ -77,12 +84,18 @@ pub struct Endpoint {
 /// [`CellConfig`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Waypoint<P = SurfaceRadians> {
+    /// x of the cell centre (m).
     pub x: f64,
+    /// y of the cell centre (m).
     pub y: f64,
+    /// The cell's index along x.
     pub i: usize,
+    /// The cell's index along y.
     pub j: usize,
     /// The map's value at this cell.
     pub value: f64,
+    /// What to configure here (serving AP, IRS phases; on rate maps the power split and decoding
+    /// order), flattened into the waypoint's JSON.
     #[serde(flatten)]
     pub config: CellConfig<P>,
 }
@@ -91,10 +104,15 @@ pub struct Waypoint<P = SurfaceRadians> {
 /// `waypoint`, at (x, y) — the first waypoint served by `to`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Handover {
+    /// Index of the first waypoint served by `to`.
     pub waypoint: usize,
+    /// x of that waypoint (m).
     pub x: f64,
+    /// y of that waypoint (m).
     pub y: f64,
+    /// The AP serving the waypoint before (an index into the scenario's APs).
     pub from: usize,
+    /// The AP serving from this waypoint on.
     pub to: usize,
 }
 
@@ -102,18 +120,27 @@ pub struct Handover {
 /// written (`P`, see [`CellConfig`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PathAnswer<P = SurfaceRadians> {
+    /// The id of the map the path was planned on.
     pub map_id: String,
+    /// The unit of values and thresholds: `dB` (gain maps) or `bit/s/Hz` (rate maps).
     pub unit: &'static str,
     /// The threshold applied (for `"max"`, the largest feasible one).
     pub threshold: Option<f64>,
+    /// Whether a path was found.
     pub feasible: bool,
+    /// Why there is no path; `None` when feasible.
     pub reason: Option<Infeasible>,
+    /// The path's length (m): orthogonal steps of Δ, diagonal ones of √2·Δ; `None` when infeasible.
     pub distance_m: Option<f64>,
+    /// `distance_m` / V_max (s); `None` when infeasible.
     pub travel_time_s: Option<f64>,
     /// The largest threshold for which any path joins start and goal.
     pub max_feasible_threshold: Option<f64>,
+    /// Where the start landed on the grid.
     pub start: Endpoint,
+    /// Where the goal landed on the grid.
     pub goal: Endpoint,
+    /// The path's cells, start first and goal last (empty when infeasible).
     pub waypoints: Vec<Waypoint<P>>,
     /// The handovers along the path, in order (empty with one AP).
     pub handovers: Vec<Handover>,
@@ -122,20 +149,33 @@ pub struct PathAnswer<P = SurfaceRadians> {
 /// One point of a threshold sweep (paper Figs. 7 and 9).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepPoint {
+    /// γ, in the map's unit.
     pub threshold: f64,
+    /// Whether a path exists at γ.
     pub feasible: bool,
+    /// Why there is none; `None` when feasible.
     pub reason: Option<Infeasible>,
+    /// The shortest path's length at γ (m); `None` when infeasible.
     pub distance_m: Option<f64>,
+    /// `distance_m` / V_max (s); `None` when infeasible.
     pub travel_time_s: Option<f64>,
 }
 
+/// The answer to a sweep: distance versus threshold between two points (paper Figs. 7 and 9);
+/// the same body from the CLI and the API.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepAnswer {
+    /// The id of the map swept.
     pub map_id: String,
+    /// The unit of the thresholds: `dB` (gain maps) or `bit/s/Hz` (rate maps).
     pub unit: &'static str,
+    /// The largest threshold for which any path joins start and goal (`None`: none does).
     pub max_feasible_threshold: Option<f64>,
+    /// Where the start landed on the grid.
     pub start: Endpoint,
+    /// Where the goal landed on the grid.
     pub goal: Endpoint,
+    /// One point per requested threshold, in the order given.
     pub points: Vec<SweepPoint>,
 }
 

@@ -4,16 +4,24 @@
 use super::{CellSolutions, RadioMap};
 use serde::Serialize;
 
+/// Summary statistics of a map's values (dB or bit/s/Hz) over its free cells with a value.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MapStats {
+    /// Cells of the grid, occupied ones included.
     pub cells: usize,
+    /// Cells whose centre no obstruction occupies.
     pub free_cells: usize,
+    /// Cells whose centre an obstruction occupies (never a waypoint).
     pub occupied_cells: usize,
     /// Free cells with a value (on rate maps, those where every SRU can be served).
     pub valued_cells: usize,
+    /// Smallest value; `None` when no cell has one.
     pub min: Option<f64>,
+    /// Largest value; `None` when no cell has one.
     pub max: Option<f64>,
+    /// Mean value; `None` when no cell has one.
     pub mean: Option<f64>,
+    /// Median value (of an even count, the upper middle one); `None` when no cell has one.
     pub median: Option<f64>,
 }
 
@@ -22,8 +30,12 @@ pub struct MapStats {
 pub struct CertificateSummary {
     /// Cells with both an achieved rate and a finite bound.
     pub cells: usize,
+    /// Median of upper_bound − achieved (of an even count, the upper middle one); `None` without
+    /// cells.
     pub median_gap: Option<f64>,
+    /// Mean of upper_bound − achieved; `None` without cells.
     pub mean_gap: Option<f64>,
+    /// Largest upper_bound − achieved: the worst-certified cell; `None` without cells.
     pub max_gap: Option<f64>,
 }
 

@@ -148,7 +148,8 @@ mod tests {
         let multi = Scenario::builtin("paper-multi-user").unwrap();
         for kind in [MapKind::Gain, MapKind::Rate] {
             let key = MapKey::new("x", &multi, kind, None, None, None).unwrap();
-            let map = super::super::build(&multi, &key, &Default::default()).unwrap();
+            let map =
+                super::super::build(&multi, &key, "test".into(), &Default::default()).unwrap();
             let (estimate, actual) = (map_bytes(&multi, &key), map.size_bytes() as f64);
             assert!(
                 (estimate / actual - 1.0).abs() < 0.1,

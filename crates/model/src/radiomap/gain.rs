@@ -215,6 +215,7 @@ mod tests {
             let map = build(
                 &s,
                 &gain_key(&s, PhaseMode::Continuous),
+                "test".into(),
                 &Progress::default(),
             )
             .unwrap();
@@ -298,11 +299,23 @@ mod tests {
     fn quantised_phases_never_beat_continuous_and_none_is_the_direct_link() {
         let s = Scenario::builtin("small-test").unwrap();
         let progress = Progress::default();
-        let cont = build(&s, &gain_key(&s, PhaseMode::Continuous), &progress).unwrap();
-        let none = build(&s, &gain_key(&s, PhaseMode::None), &progress).unwrap();
+        let cont = build(
+            &s,
+            &gain_key(&s, PhaseMode::Continuous),
+            "test".into(),
+            &progress,
+        )
+        .unwrap();
+        let none = build(&s, &gain_key(&s, PhaseMode::None), "test".into(), &progress).unwrap();
         let model = ChannelModel::new(&s);
         for b in 1..=3 {
-            let q = build(&s, &gain_key(&s, PhaseMode::Bits(b)), &progress).unwrap();
+            let q = build(
+                &s,
+                &gain_key(&s, PhaseMode::Bits(b)),
+                "test".into(),
+                &progress,
+            )
+            .unwrap();
             for (a, c) in q.values.iter().zip(&cont.values) {
                 assert!(
                     a.is_nan() && c.is_nan() || a <= &(c + 1e-9),
@@ -331,7 +344,12 @@ mod tests {
         let s = Scenario::builtin("small-test").unwrap();
         let progress = Progress::default();
         progress.cancel();
-        let r = build(&s, &gain_key(&s, PhaseMode::Continuous), &progress);
+        let r = build(
+            &s,
+            &gain_key(&s, PhaseMode::Continuous),
+            "test".into(),
+            &progress,
+        );
         assert_eq!(r.unwrap_err(), Cancelled);
     }
 }

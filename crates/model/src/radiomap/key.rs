@@ -1,10 +1,10 @@
 //! What defines a map: its [`MapKey`] (scenario id, kind, phase mode, access, solver), whose
-//! hash is the map id under which the map is cached and served.
+//! hash (`irs_answers::map::map_id`) is the map id under which the map is cached and served.
 
 use crate::input::{FieldError, parse_name};
 use crate::phases::PhaseMode;
 use crate::rate::Access;
-use crate::scenario::{Scenario, hash_hex};
+use crate::scenario::Scenario;
 use crate::solver::SolverKind;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -36,17 +36,37 @@ impl fmt::Display for MapKind {
     }
 }
 
+/// The version of the model's physics. Bumped by every change that alters a value of any
+/// existing key's map, so that a map built before (kept in a data directory or Redis) is never
+/// served for it: the map id hashes the key, and the key carries this version.
+pub const MODEL_VERSION: u32 = 1;
+
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MapKey {
+    /// The id of the scenario the map is of (a hash of its canonical document).
     pub scenario_id: String,
+    /// Gain map (dB) or rate map (bit/s/Hz).
     pub kind: MapKind,
+    /// How the IRS phases are chosen; `none` for a scenario without an IRS.
     pub phases: PhaseMode,
     /// Rate maps only (default `noma`).
     pub access: Option<Access>,
     /// Rate maps only (default `fast`).
     pub solver: Option<SolverKind>,
+    /// The [`MODEL_VERSION`] the map is built with. Left out of the key's document at 1 (and
+    /// read as 1 where absent), so ids from before versions existed are unchanged.
+    #[serde(default = "first_version", skip_serializing_if = "is_first_version")]
+    pub model_version: u32,
+}
+
+fn first_version() -> u32 {
+    1
+}
+
+fn is_first_version(version: &u32) -> bool {
+    *version == 1
 }
 
 impl MapKey {
@@ -122,6 +142,7 @@ impl MapKey {
             phases,
             access,
             solver,
+            model_version: MODEL_VERSION,
         })
     }
 
@@ -158,15 +179,7 @@ impl MapKey {
         )
     }
 
-    /// The map id: hash of the key's canonical JSON.
-    pub fn id(&self) -> String {
-        hash_hex(
-            serde_json::to_string(self)
-                .expect("keys serialise")
-                .as_bytes(),
-        )
-    }
-
+    /// The unit of the map's values.
     pub fn unit(&self) -> &'static str {
         match self.kind {
             MapKind::Gain => "dB",
@@ -192,10 +205,6 @@ mod tests {
         assert_eq!(
             rate,
             MapKey::rate("x", &s, PhaseMode::Continuous, Access::Noma).unwrap()
-        );
-        assert_ne!(
-            rate.id(),
-            MapKey::gain("x", &s, PhaseMode::Continuous).unwrap().id()
         );
         assert_eq!("rate".parse::<MapKind>(), Ok(MapKind::Rate));
         assert_eq!(MapKind::Gain.to_string(), "gain");

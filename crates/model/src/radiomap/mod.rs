@@ -5,19 +5,20 @@
 //! * [`gain`]: the channel power gain map C (eqs. 9 and 12), in dB.
 //! * [`rate_cells`]: the communication rate map U (eqs. 26 and 37), in bit/s/Hz, solved per cell
 //!   by [`crate::solver`].
-//! * [`body`]: statistics, coverage and the JSON body of a built map.
+//! * [`body`]: statistics, coverage and the certificate summary of a built map.
 //!
 //! Occupied cells hold NaN (JSON null, the paper's −∞).
 
 pub mod body;
 pub mod cost;
-pub mod encoding;
 pub mod gain;
 pub mod key;
+mod parts;
 pub mod rate_cells;
 
 pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
+pub use parts::StoredCells;
 pub use rate_cells::RateCells;
 
 use crate::channel::ChannelModel;
@@ -36,15 +37,20 @@ pub struct Progress {
 }
 
 impl Progress {
+    /// Units of work done so far: grid cells for a map build, waypoints for a check, thresholds
+    /// for a sweep.
     pub fn cells_done(&self) -> usize {
         self.done.load(Ordering::Relaxed)
     }
+    /// Units of work in all, as the last [`Progress::start`] set them (0 before it).
     pub fn cells_total(&self) -> usize {
         self.total.load(Ordering::Relaxed)
     }
+    /// Asks the work to stop at its next check, where it returns [`Cancelled`].
     pub fn cancel(&self) {
         self.cancelled.store(true, Ordering::Relaxed);
     }
+    /// True once [`Progress::cancel`] was called.
     pub fn is_cancelled(&self) -> bool {
         self.cancelled.load(Ordering::Relaxed)
     }
@@ -68,8 +74,10 @@ pub struct Cancelled;
 /// or it was cancelled.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum WorkError {
+    /// The request is invalid: the field at fault and why.
     #[error(transparent)]
     Invalid(#[from] crate::input::FieldError),
+    /// The work was stopped through its [`Progress`].
     #[error(transparent)]
     Cancelled(#[from] Cancelled),
 }
@@ -84,6 +92,7 @@ pub enum CellSolutions {
         models: Vec<Arc<ChannelModel>>,
         /// The AP serving each cell (empty with one AP).
         serving: Vec<u8>,
+        /// H₀ (m): the height of the MRU antenna, where a waypoint's θ* is recomputed.
         antenna_height_m: f64,
     },
     /// Rate maps: the solver's argmax per cell (phases, power split, order, certificate).
@@ -114,16 +123,20 @@ pub struct CellConfig<P = SurfaceRadians> {
 /// A computed radio map.
 #[derive(Debug, Clone)]
 pub struct RadioMap {
+    /// What defines the map (scenario id, kind, phase mode, access, solver, model version).
     pub key: MapKey,
-    /// The map id, `key.id()` (a hash of the key's canonical JSON), computed once: every path
-    /// answer names it, and hashing the key was 3 % of a repeated path query's time.
+    /// The map id (`irs_answers::map::map_id`: a hash of the key's document), given to
+    /// [`build`] and kept: every path answer names it, and hashing the key was 3 % of a repeated
+    /// path query's time.
     pub id: String,
+    /// The scenario's grid the values are laid on.
     pub grid: Grid,
     /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
     /// (and, on rate maps, where no configuration meets every SRU's rate).
     pub values: Vec<f64>,
     /// Per cell: true if an obstacle, a wall or the floor plan occupies its centre.
     pub occupied: Vec<bool>,
+    /// What answers "how do I configure the IRS here?" at each cell.
     pub cells: CellSolutions,
     /// Wall-clock build time (s).
     pub build_seconds: f64,
@@ -223,11 +236,12 @@ pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
     occupied
 }
 
-/// Builds the map a key defines. Cells are spread over rayon's pool by rows of the grid; progress
-/// advances and cancellation is checked once per row.
+/// Builds the map a key defines, named `id`. Cells are spread over rayon's pool by rows of the
+/// grid; progress advances and cancellation is checked once per row.
 pub fn build(
     scenario: &Scenario,
     key: &MapKey,
+    id: String,
     progress: &Progress,
 ) -> Result<RadioMap, Cancelled> {
     let started = std::time::Instant::now();
@@ -259,7 +273,7 @@ pub fn build(
     };
     Ok(RadioMap {
         key: key.clone(),
-        id: key.id(),
+        id,
         grid,
         values,
         occupied,

@@ -13,6 +13,7 @@ use rayon::prelude::*;
 /// Per-cell configurations and certificates of a rate map (the values live in the map).
 #[derive(Debug, Clone)]
 pub struct RateCells {
+    /// Per cell (flat index i·ny + j): the SDR upper bound on the MRU's rate (bit/s/Hz, §5).
     pub upper_bound: Vec<f64>,
     /// N, phases per cell (0 for `none`).
     pub(super) subsurfaces: usize,
@@ -27,6 +28,8 @@ pub struct RateCells {
 }
 
 impl RateCells {
+    /// The configuration achieving the rate at cell `index` (flat): phases decoded from their
+    /// codes, the power split and, under NOMA, the decoding order.
     pub fn config(&self, index: usize) -> CellConfig {
         let users = self.model.users();
         let n = self.subsurfaces;
@@ -58,6 +61,7 @@ impl RateCells {
         self.order[index] as usize
     }
 
+    /// The users' fixed data the cells were solved with: P_max, σ², the SRUs' targets, the orders.
     pub fn rate_model(&self) -> &RateModel {
         &self.model
     }

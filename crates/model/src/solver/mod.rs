@@ -73,13 +73,16 @@ pub struct CellProblem {
     pub dim: usize,
     /// a_l stacked: user l occupies `a[l·dim .. (l+1)·dim]`.
     pub a: Vec<C64>,
+    /// τ_l per user (linear): the scattered power the phases cannot steer.
     pub tau: Vec<f64>,
 }
 
 impl CellProblem {
+    /// K + 1: the users of the problem, MRU first.
     pub fn users(&self) -> usize {
         self.tau.len()
     }
+    /// a_l of user `l` (N + 1 coefficients).
     pub fn user(&self, l: usize) -> &[C64] {
         &self.a[l * self.dim..(l + 1) * self.dim]
     }

@@ -36,6 +36,8 @@ pub struct SdrScaSolution {
     pub relaxed_rate: f64,
 }
 
+/// Solves one cell (§5, `sdr-sca`): per decoding order, bisection on the MRU's rate target,
+/// each target checked by the SDR and then SCA; returns the best v (θ = 0 unless SCA beats it).
 pub fn solve(problem: &CellProblem, model: &RateModel) -> SdrScaSolution {
     let dim = problem.dim;
     let mut best_v = vec![C64::new(1.0, 0.0); dim];

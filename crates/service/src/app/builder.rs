@@ -94,10 +94,9 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
     let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
-        let encoded =
-            crate::tasks::spawn_blocking(move || irs_model::radiomap::encoding::encode(&map))
-                .await
-                .map_err(|e| e.to_string())?;
+        let encoded = crate::tasks::spawn_blocking(move || irs_answers::encoding::encode(&map))
+            .await
+            .map_err(|e| e.to_string())?;
         publisher
             .put_map(&map_id, &encoded)
             .await

@@ -237,7 +237,7 @@ impl App {
         key: MapKey,
         cheap: bool,
     ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
-        let map_id = key.id();
+        let map_id = irs_answers::map::map_id(&key);
         if let Some(map) = self.shared_map(&map_id).await? {
             return Ok(Ok(map));
         }
@@ -297,14 +297,14 @@ impl App {
         let Some(encoded) = cluster.map(map_id).await? else {
             return Ok(None);
         };
-        let key = irs_model::radiomap::encoding::peek_key(&encoded)
+        let key = irs_answers::encoding::peek_key(&encoded)
             .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
         let Some(stored) = self.scenario(&key.scenario_id).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
         let map = crate::tasks::spawn_blocking(move || {
-            irs_model::radiomap::encoding::decode(&encoded, &scenario)
+            irs_answers::encoding::decode(&encoded, &scenario)
         })
         .await
         .map_err(|e| Error::internal(e.to_string()))?

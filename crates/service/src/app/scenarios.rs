@@ -7,6 +7,7 @@
 use super::identity::Caller;
 use super::{App, Error, registrants};
 use crate::cache::StoredScenario;
+use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
 use std::sync::Arc;
 

@@ -7,7 +7,7 @@
 //! is rewritten only when the job ends.
 //!
 //! Every file is `MAGIC`, the SHA-256 of the payload, then the payload (JSON for scenarios and
-//! jobs, [`irs_model::radiomap::encoding`] for maps), written to a temporary file in the same
+//! jobs, [`irs_answers::encoding`] for maps), written to a temporary file in the same
 //! directory, flushed to disk and renamed over the target: a reader sees the old file or the
 //! new one, never half of one. A file whose digest or content does not check out (a torn write
 //! from before this scheme, a disk error, an edit) is skipped with a warning and never served;
@@ -17,7 +17,8 @@
 //! The memory cache stays in front (a map read from disk enters it), so the disk is read once
 //! per map and restart, not per query.
 
-use irs_model::radiomap::{RadioMap, encoding};
+use irs_answers::encoding;
+use irs_model::radiomap::RadioMap;
 use irs_model::scenario::Scenario;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
@@ -140,7 +141,7 @@ impl DataDir {
                 _ => Err("not a record of this format (magic bytes differ)".to_string()),
             };
             match key {
-                Ok(key) if key.id() == id => {
+                Ok(key) if irs_answers::map::map_id(&key) == id => {
                     maps.insert(
                         id,
                         MapFile {
@@ -420,7 +421,9 @@ mod tests {
 
     #[test]
     fn maps_past_the_budget_go_oldest_first() {
-        use irs_model::radiomap::{MapKey, MapKind, Progress, build};
+        use irs_answers::map::build;
+        use irs_answers::scenario::ScenarioDocument;
+        use irs_model::radiomap::{MapKey, MapKind, Progress};
         let dir = temporary_dir("budget");
         let scenario = std::sync::Arc::new(Scenario::builtin("small-test").unwrap());
         let id = scenario.content_hash();

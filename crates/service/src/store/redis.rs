@@ -89,7 +89,7 @@ impl BuildEntry {
         let map_id: String = entry.get("map_id")?;
         let key: String = entry.get("key")?;
         let key: MapKey = serde_json::from_str(&key).ok()?;
-        (key.id() == map_id).then(|| BuildEntry {
+        (irs_answers::map::map_id(&key) == map_id).then(|| BuildEntry {
             stream_id: entry.id.clone(),
             job_id,
             map_id,
@@ -461,6 +461,7 @@ impl Cluster {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use irs_answers::scenario::ScenarioDocument;
     use irs_model::radiomap::MapKind;
     use irs_model::scenario::Scenario;
 
@@ -495,7 +496,7 @@ mod tests {
         )
         .unwrap();
         let json = serde_json::to_string(&key).unwrap();
-        let id = key.id();
+        let id = irs_answers::map::map_id(&key);
         let good = BuildEntry::of(&entry(&[("job_id", "j1"), ("map_id", &id), ("key", &json)]))
             .expect("a well-formed entry");
         assert_eq!((good.job_id.as_str(), good.key), ("j1", key));

@@ -10,15 +10,14 @@
 //! NaN cells included. The paper's 41² gain map is 15 kB; a 1001² one about 9 MB.
 //!
 //! The encoding carries no checksum of its own: the store frames it with a digest
-//! (`service::store`), and [`decode`] checks every length against the scenario's grid, so
+//! (the service's store), and [`decode`] checks every length against the scenario's grid, so
 //! bytes that parse but belong to another scenario are refused.
 
-use super::{CellSolutions, MapKey, MapKind, RadioMap, RateCells};
-use crate::channel::ChannelModel;
-use crate::rate::RateModel;
-use crate::scenario::Scenario;
+use crate::map::map_id;
+use crate::scenario::ScenarioDocument;
+use irs_model::radiomap::{MapKey, RadioMap, StoredCells};
+use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 
 /// Bumped whenever the layout below changes; a stored map of another version is not decoded
 /// (it is rebuilt on request).
@@ -36,50 +35,32 @@ struct Stored {
     cells: StoredCells,
 }
 
-#[derive(Serialize, Deserialize)]
-enum StoredCells {
-    Gain {
-        serving: Vec<u8>,
-    },
-    Rate {
-        upper_bound: Vec<f64>,
-        phases: Vec<u16>,
-        power_w: Vec<f64>,
-        order: Vec<u8>,
-    },
-}
-
 /// Why stored bytes are not a map of the given scenario.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DecodeError {
+    /// The bytes do not parse as a stored map (truncated, another layout, or a bad key).
     #[error("not a stored map: {0}")]
     Malformed(String),
+    /// Stored in another [`FORMAT_VERSION`]: the map is rebuilt rather than decoded.
     #[error("stored in format version {found}, this build reads version {FORMAT_VERSION}")]
-    Version { found: u32 },
+    Version {
+        /// The format version the bytes were written in.
+        found: u32,
+    },
+    /// A well-formed map of another scenario, or whose lengths do not fit this scenario's grid.
     #[error("{0}")]
     Mismatch(String),
 }
 
 /// The map's bytes.
 pub fn encode(map: &RadioMap) -> Vec<u8> {
-    let cells = match &map.cells {
-        CellSolutions::Gain { serving, .. } => StoredCells::Gain {
-            serving: serving.clone(),
-        },
-        CellSolutions::Rate(rate) => StoredCells::Rate {
-            upper_bound: rate.upper_bound.clone(),
-            phases: rate.phases.clone(),
-            power_w: rate.power_w.clone(),
-            order: rate.order.clone(),
-        },
-    };
     let stored = Stored {
         version: FORMAT_VERSION,
         key: serde_json::to_string(&map.key).expect("keys serialise"),
         build_seconds: map.build_seconds,
         values: map.values.clone(),
         occupied: map.occupied.clone(),
-        cells,
+        cells: map.stored_cells(),
     };
     postcard::to_stdvec(&stored).expect("a map serialises to memory")
 }
@@ -113,11 +94,6 @@ pub fn decode(bytes: &[u8], scenario: &Scenario) -> Result<RadioMap, DecodeError
     let stored: Stored =
         postcard::from_bytes(bytes).map_err(|e| DecodeError::Malformed(e.to_string()))?;
     let key = parse_key(&stored.key)?;
-    let mismatch = |what: &str, found: usize, expected: usize| {
-        Err(DecodeError::Mismatch(format!(
-            "{what}: {found} entries stored, the scenario's grid needs {expected}"
-        )))
-    };
     if key.scenario_id != scenario.content_hash() {
         return Err(DecodeError::Mismatch(format!(
             "built from scenario {}, not {}",
@@ -125,101 +101,24 @@ pub fn decode(bytes: &[u8], scenario: &Scenario) -> Result<RadioMap, DecodeError
             scenario.content_hash()
         )));
     }
-    let grid = scenario.grid();
-    let cells = grid.cells();
-    if stored.values.len() != cells {
-        return mismatch("values", stored.values.len(), cells);
-    }
-    if stored.occupied.len() != cells {
-        return mismatch("occupied", stored.occupied.len(), cells);
-    }
-    let solutions = match (key.kind, stored.cells) {
-        (MapKind::Gain, StoredCells::Gain { serving }) => {
-            let aps = scenario.access_points().len();
-            let expected = if aps > 1 { cells } else { 0 };
-            if serving.len() != expected {
-                return mismatch("serving", serving.len(), expected);
-            }
-            if serving.iter().any(|&ap| usize::from(ap) >= aps) {
-                return Err(DecodeError::Mismatch(format!(
-                    "a cell is served by an AP the scenario (with {aps}) does not have"
-                )));
-            }
-            CellSolutions::Gain {
-                models: (0..aps)
-                    .map(|ap| Arc::new(ChannelModel::for_ap(scenario, ap)))
-                    .collect(),
-                serving,
-                antenna_height_m: scenario.mru.antenna_height_m,
-            }
-        }
-        (
-            MapKind::Rate,
-            StoredCells::Rate {
-                upper_bound,
-                phases,
-                power_w,
-                order,
-            },
-        ) => {
-            let access = key.access.ok_or_else(|| {
-                DecodeError::Mismatch("a rate map's key without an access scheme".into())
-            })?;
-            let channel = ChannelModel::new(scenario);
-            let model = RateModel::for_scenario(scenario, access);
-            let with_irs = key.phases != crate::phases::PhaseMode::None;
-            let n = if with_irs { channel.subsurfaces() } else { 0 };
-            if upper_bound.len() != cells {
-                return mismatch("upper_bound", upper_bound.len(), cells);
-            }
-            if phases.len() != cells * n {
-                return mismatch("phases", phases.len(), cells * n);
-            }
-            if power_w.len() != cells * model.users() {
-                return mismatch("power_w", power_w.len(), cells * model.users());
-            }
-            if order.len() != cells {
-                return mismatch("order", order.len(), cells);
-            }
-            if order
-                .iter()
-                .any(|&o| usize::from(o) >= model.orders().len())
-            {
-                return Err(DecodeError::Mismatch(
-                    "a cell's decoding order is not one of the scenario's".into(),
-                ));
-            }
-            CellSolutions::Rate(RateCells {
-                upper_bound,
-                subsurfaces: n,
-                surface_lengths: channel.surface_lengths(),
-                phases,
-                power_w,
-                order,
-                model,
-            })
-        }
-        (kind, _) => {
-            return Err(DecodeError::Mismatch(format!(
-                "the key says a {kind} map, the cells are of the other kind"
-            )));
-        }
-    };
-    Ok(RadioMap {
-        id: key.id(),
+    let id = map_id(&key);
+    RadioMap::from_parts(
+        scenario,
         key,
-        grid,
-        values: stored.values,
-        occupied: stored.occupied,
-        cells: solutions,
-        build_seconds: stored.build_seconds,
-    })
+        id,
+        stored.build_seconds,
+        stored.values,
+        stored.occupied,
+        stored.cells,
+    )
+    .map_err(DecodeError::Mismatch)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::radiomap::{MapKey, Progress, build};
+    use crate::map::build;
+    use irs_model::radiomap::{MapKind, Progress};
 
     fn builtin(name: &str) -> Scenario {
         Scenario::builtin(name).expect("a built-in scenario")
