@@ -13,12 +13,9 @@
 //! took, a lookup for a kept answer) is appended per request.
 
 use crate::app::Error;
-use crate::http::json;
-use axum::response::Response;
 use bytes::Bytes;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_model::planner::Threshold;
-use std::time::Instant;
 
 /// What a path answer depends on besides its map's content: the map's id and the query's
 /// fields, the coordinates as their exact bits (an answer repeats the requested points).
@@ -74,10 +71,10 @@ impl OpenAnswer {
         }
     }
 
-    /// The answer closed with `took_ms`, the time since `started`, as its last field (where
-    /// [`irs_model::timing::Timed`] writes it).
-    pub fn respond(&self, started: Instant) -> Response {
-        json::with_took_ms(&self.0, started)
+    /// The answer's text without its closing brace: `took_ms` is written after it, when the
+    /// answer is sent (where [`irs_answers::timing::Timed`] writes it).
+    pub fn open_text(&self) -> &[u8] {
+        &self.0
     }
 }
 

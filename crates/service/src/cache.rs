@@ -2,9 +2,9 @@
 //! least recently used API scenarios evicted first) and the map cache (moka, bounded by bytes
 //! through a weigher, keyed by the map id = hash of the map key).
 
-use super::store::{DataDir, Kind};
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::store::{DataDir, Kind};
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_answers::scenario::hash_hex;
 use irs_model::planner::{self, Bottlenecks};
@@ -348,7 +348,7 @@ impl MapCache {
                 let disk = disk.clone();
                 let id = map_id.to_string();
                 // Reading and checking a map of megabytes is blocking work.
-                crate::runtime::recorder::spawn_blocking(move || {
+                crate::tasks::spawn_blocking(move || {
                     disk.dir.load_map(&id, |sid| {
                         disk.scenarios.get(sid).map(|s| s.scenario.clone())
                     })
@@ -372,8 +372,7 @@ impl MapCache {
     pub async fn insert(&self, map_id: String, map: Arc<RadioMap>) {
         if let Some(disk) = &self.disk {
             let (dir, id, to_save) = (disk.dir.clone(), map_id.clone(), map.clone());
-            let _ =
-                crate::runtime::recorder::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
+            let _ = crate::tasks::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
         }
         self.maps.insert(map_id, map).await;
         self.maps.run_pending_tasks().await;

@@ -11,9 +11,9 @@
 //! [`irs_model::radiomap::build`] checks once per grid row.
 
 use super::cache::MapCache;
-use super::store::{DataDir, Kind};
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::store::{DataDir, Kind};
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::placement::{self, Candidate, Placement, Search};
 use irs_model::radiomap::{Cancelled, MapKey, Progress, RadioMap, WorkError};
@@ -593,9 +593,7 @@ impl Jobs {
             job.hand_over(&map);
             cache.insert(map_id_of(&job), map).await;
         };
-        crate::runtime::recorder::spawn(
-            self.clone().run(job.clone(), work, finish).instrument(span),
-        );
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(MapRequestOutcome::Building(job))
     }
 
@@ -633,7 +631,7 @@ impl Jobs {
         };
         let runner = self.clone();
         let handle = job.clone();
-        crate::runtime::recorder::spawn(
+        crate::tasks::spawn(
             async move {
                 let in_flight = handle.map_id().unwrap_or_default().to_string();
                 runner
@@ -732,9 +730,7 @@ impl Jobs {
                 }));
             }
         };
-        crate::runtime::recorder::spawn(
-            self.clone().run(job.clone(), work, finish).instrument(span),
-        );
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(job)
     }
 
@@ -820,7 +816,7 @@ impl Jobs {
         let waited = queued_at.elapsed().as_secs_f64();
         tracing::info!(queued_s = waited, "job started");
         let started = Instant::now();
-        let result = crate::runtime::recorder::spawn_blocking(|| {
+        let result = crate::tasks::spawn_blocking(|| {
             // The job's own sequential parts yield to the runtime as the pools' threads do. The
             // blocking pool runs nothing latency-bound (builds, map encoding, disk writes), so
             // a thread that stays lowered for its next task costs nothing.
@@ -869,10 +865,8 @@ impl Jobs {
         if let Some(disk) = self.disk.clone() {
             let (id, record) = (job.id.clone(), job.record());
             // A small file, but flushed to disk: off the async threads.
-            let _ = crate::runtime::recorder::spawn_blocking(move || {
-                disk.save_json(Kind::Job, &id, &record)
-            })
-            .await;
+            let _ =
+                crate::tasks::spawn_blocking(move || disk.save_json(Kind::Job, &id, &record)).await;
         }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());

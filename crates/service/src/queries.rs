@@ -96,12 +96,12 @@ impl QueryPool {
         let progress = Arc::new(Progress::default());
         let mut guard = CancelOnDrop(Some(progress.clone()));
         let (tx, rx) = oneshot::channel();
-        self.threads.spawn(move || {
+        self.threads.spawn(crate::tasks::bind(move || {
             // A panic must not reach rayon, whose default handler aborts the process.
             let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&progress)));
             drop(permit);
             let _ = tx.send(answer);
-        });
+        }));
         let answer = rx.await;
         guard.0 = None;
         match answer {

@@ -125,3 +125,13 @@ impl From<FieldError> for Error {
         }
     }
 }
+
+/// The shared store's refusals, as the application reports them.
+impl From<crate::store::Error> for Error {
+    fn from(error: crate::store::Error) -> Self {
+        match error {
+            crate::store::Error::Unavailable { reason } => Error::Unavailable { reason },
+            crate::store::Error::Full { limit } => Error::QueueFull { limit },
+        }
+    }
+}

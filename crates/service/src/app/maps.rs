@@ -6,8 +6,8 @@
 use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
-use crate::cluster::Cluster;
 use crate::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
+use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
 use irs_model::radiomap::{MapKey, MapKind, RadioMap, cost};
 use irs_model::rate::Access;
@@ -303,7 +303,7 @@ impl App {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
-        let map = crate::runtime::recorder::spawn_blocking(move || {
+        let map = crate::tasks::spawn_blocking(move || {
             irs_answers::encoding::decode(&encoded, &scenario)
         })
         .await

@@ -5,6 +5,7 @@
 //! (`http::problem` maps them), and identity ([`identity`]: tokens, owners, callers) is decided
 //! here, not in the transport.
 
+pub(crate) mod builder;
 pub(crate) mod error;
 pub(crate) mod identity;
 pub(crate) mod maps;
@@ -18,7 +19,7 @@ use crate::cache::{self, MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use crate::config::ServeArgs;
 use crate::jobs::Jobs;
 use crate::queries::QueryPool;
-use crate::{cluster, store};
+use crate::store::{self, redis::Cluster};
 use axum::http::HeaderValue;
 use identity::{Caller, Tokens};
 use irs_answers::scenario::BUILTIN;
@@ -66,7 +67,7 @@ struct Inner {
     /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
     disk: Option<Arc<store::DataDir>>,
     /// `--redis-url`, if set: the store shared with the other replicas.
-    cluster: Option<Arc<cluster::Cluster>>,
+    cluster: Option<Arc<Cluster>>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
 }
@@ -142,7 +143,7 @@ impl App {
                 cors_origins,
                 disk,
                 cluster: match &args.redis_url {
-                    Some(url) => Some(Arc::new(cluster::Cluster::new(url)?)),
+                    Some(url) => Some(Arc::new(Cluster::new(url)?)),
                     None => None,
                 },
                 ready: AtomicBool::new(false),
@@ -196,7 +197,7 @@ impl App {
             })
     }
 
-    pub(crate) fn cluster(&self) -> Option<&Arc<cluster::Cluster>> {
+    pub(crate) fn cluster(&self) -> Option<&Arc<Cluster>> {
         self.inner.cluster.as_ref()
     }
 

@@ -106,7 +106,7 @@ impl App {
 
     /// In a cluster: publishes an API scenario (document and owners) for the other replicas;
     /// `replace` false leaves a record already there as it is (see
-    /// [`crate::cluster::Cluster::put_scenario`]).
+    /// [`crate::store::redis::Cluster::put_scenario`]).
     pub(super) async fn share_scenario(
         &self,
         stored: &StoredScenario,
@@ -116,7 +116,8 @@ impl App {
             Some(cluster) if stored.source == "api" => {
                 cluster
                     .put_scenario(&stored.id, &stored.record(), replace)
-                    .await
+                    .await?;
+                Ok(())
             }
             _ => Ok(()),
         }

@@ -1,7 +1,7 @@
 //! `/v1/paths`, `/v1/sweeps` and `/v1/maps/{map_id}/coverage`: the queries on a built map
 //! (a path at a threshold, a sweep of thresholds, the covered share of the floor).
 
-use super::json::serialize_sized;
+use super::json::{self, serialize_sized};
 use super::maps::MapRequest;
 use super::problem::ApiError;
 use super::{Body, accepted, heavy, only_query};
@@ -166,7 +166,7 @@ pub(super) async fn plan_path(
         )
     });
     if let Some(kept) = query.as_ref().and_then(|q| state.answers().get(q)) {
-        return Ok(kept.respond(started));
+        return Ok(json::with_took_ms(kept.open_text(), started));
     }
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
@@ -216,7 +216,7 @@ pub(super) async fn plan_path(
     if let Some(query) = query {
         state.answers().insert(query, answer.clone());
     }
-    Ok(answer.respond(started))
+    Ok(json::with_took_ms(answer.open_text(), started))
 }
 
 #[derive(Debug, Deserialize)]

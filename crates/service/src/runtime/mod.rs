@@ -1,17 +1,16 @@
 //! Running the service: [`run`] serves one [`App`] on a listener until a shutdown future
 //! resolves, then drains. It installs nothing process-wide: the metrics registry is the
-//! server's own ([`recorder`]), and no tracing subscriber or rayon pool is set up inside it, so
+//! server's own ([`Metrics`]), and no tracing subscriber or rayon pool is set up inside it, so
 //! tests start servers in-process, several per process. [`serve`] is the process's entry
 //! (`irs-planner serve`): it installs the tracing subscriber and the build pool, binds, and
 //! runs until SIGINT/SIGTERM. [`server`] is the accept loop and its timeouts.
 
-pub mod recorder;
 pub(crate) mod server;
 
 use crate::app::{self, App};
 use crate::config::{LogFormat, ServeArgs};
+use crate::tasks::{self, Metrics};
 use crate::{http, priority};
-use recorder::Metrics;
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::net::TcpListener;
@@ -166,13 +165,13 @@ async fn serve_app(
         idle_timeout: Duration::from_secs(args.idle_timeout_s.max(1)),
     };
     let warming = state.clone();
-    let mut background = vec![recorder::spawn(async move {
-        app::warm_from_disk(&warming).await
-    })];
+    let mut background = vec![tasks::spawn(
+        async move { app::warm_from_disk(&warming).await },
+    )];
     // The registry's histograms are drained into their buckets now and then, as the
     // process-wide exporter's upkeep thread would.
     let upkeep = metrics.handle();
-    background.push(recorder::spawn(async move {
+    background.push(tasks::spawn(async move {
         loop {
             tokio::time::sleep(Duration::from_secs(5)).await;
             upkeep.run_upkeep();
@@ -180,8 +179,8 @@ async fn serve_app(
     }));
     if let Some(cluster) = state.cluster().cloned() {
         let health = cluster.clone();
-        background.push(recorder::spawn(async move { health.watch_health().await }));
-        background.push(recorder::spawn(crate::cluster::run_builder(
+        background.push(tasks::spawn(async move { health.watch_health().await }));
+        background.push(tasks::spawn(app::builder::run(
             state.clone(),
             cluster.clone(),
         )));

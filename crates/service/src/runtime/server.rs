@@ -95,7 +95,7 @@ pub(crate) async fn serve(
         let _ = stream.set_nodelay(true);
         metrics::counter!("irs_connections_total").increment(1);
         let (builder, app, closing) = (builder.clone(), app.clone(), closing.subscribe());
-        crate::runtime::recorder::spawn(async move {
+        crate::tasks::spawn(async move {
             connection(&builder, stream, app, limits.idle_timeout, closing).await;
             tracing::debug!(%peer, "connection closed");
             drop(permit);
@@ -126,7 +126,7 @@ async fn connection(
         let in_flight = InFlight::new(counted.clone());
         let answer = app.clone().oneshot(request);
         // Recorded: an HTTP/2 stream's future runs in a task hyper spawns, not in this one.
-        crate::runtime::recorder::recorded(async move {
+        crate::tasks::recorded(async move {
             let response = answer.await;
             drop(in_flight);
             response

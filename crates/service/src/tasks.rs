@@ -1,7 +1,7 @@
-//! The metrics registry of one server, injected rather than installed process-wide: every task
-//! the server spawns, every request it answers and every blocking call it makes runs with the
-//! server's recorder set as the `metrics` crate's local recorder, so the `metrics::counter!`
-//! and friends throughout the service record into it. Two servers in one process (tests) keep
+//! A server's metrics registry, injected rather than installed process-wide, and the spawning
+//! of tasks that keep it: every task the server spawns, every request it answers and every
+//! blocking call it makes runs with the server's recorder set as the `metrics` crate's local
+//! recorder, so the `metrics::counter!` and friends throughout the service record into it. Two servers in one process (tests) keep
 //! separate metrics, and a process that installs no global recorder loses none.
 
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle, PrometheusRecorder};
@@ -93,15 +93,24 @@ where
     tokio::spawn(recorded(future))
 }
 
+/// `work`, recording into the calling server's registry wherever it later runs (a blocking
+/// thread, the query pool).
+pub(crate) fn bind<F, R>(work: F) -> impl FnOnce() -> R + Send + 'static
+where
+    F: FnOnce() -> R + Send + 'static,
+{
+    let recorder = CURRENT.with(|c| c.borrow().clone());
+    move || match recorder {
+        Some(recorder) => metrics::with_local_recorder(&*recorder, work),
+        None => work(),
+    }
+}
+
 /// `tokio::task::spawn_blocking`, the work recording into the calling server's registry.
 pub(crate) fn spawn_blocking<F, R>(work: F) -> tokio::task::JoinHandle<R>
 where
     F: FnOnce() -> R + Send + 'static,
     R: Send + 'static,
 {
-    let recorder = CURRENT.with(|c| c.borrow().clone());
-    tokio::task::spawn_blocking(move || match recorder {
-        Some(recorder) => metrics::with_local_recorder(&*recorder, work),
-        None => work(),
-    })
+    tokio::task::spawn_blocking(bind(work))
 }

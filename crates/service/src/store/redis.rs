@@ -1,5 +1,7 @@
-//! Replicas sharing Redis (`serve --redis-url URL`): any replica answers for any scenario, map
-//! or job, and a map is built once in the whole cluster.
+//! The shared store of replicas (`serve --redis-url URL`): Redis, through which any replica
+//! answers for any scenario, map or job, and a map is built once in the whole cluster. This is
+//! storage and coordination only; the build loop that reads the stream is the application's
+//! (`app::builder`).
 //!
 //! What lives in Redis (keys under `irs:`):
 //! * `irs:scenario:<id>`: a registered API scenario (its canonical document and owner digests,
@@ -21,10 +23,10 @@
 //! maps already in a replica's cache still answer path queries, and everything resumes when
 //! the ping succeeds again (the client reconnects by itself).
 
-use super::cache::ScenarioRecord;
-use super::jobs::JobRecord;
-use super::store;
-use crate::app::Error;
+use super::Error;
+use super::disk as store;
+use crate::cache::ScenarioRecord;
+use crate::jobs::JobRecord;
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
 use redis::streams::{
@@ -338,7 +340,7 @@ impl Cluster {
             }
             let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
             if waiting >= queue_limit {
-                return Err(Error::QueueFull { limit: queue_limit });
+                return Err(Error::Full { limit: queue_limit });
             }
             let options = SetOptions::default()
                 .conditional_set(ExistenceCheck::NX)
@@ -454,136 +456,6 @@ impl Cluster {
             let _: redis::RedisResult<()> = conn.del(lock_key(&build.map_id)).await;
         }
     }
-}
-
-/// Reads builds from the stream whenever this replica has a free worker, forever (a task
-/// per replica, started with the server).
-pub(crate) async fn run_builder(state: super::App, cluster: std::sync::Arc<Cluster>) {
-    let mut conn: Option<ConnectionManager> = None;
-    loop {
-        if state.jobs().free_workers() == 0 || cluster.unavailable().is_some() {
-            tokio::time::sleep(HEARTBEAT).await;
-            continue;
-        }
-        let mut active = match conn.take() {
-            Some(c) => c,
-            None => match cluster.connect().await {
-                Ok(c) => c,
-                Err(_) => {
-                    tokio::time::sleep(HEALTH_PERIOD).await;
-                    continue;
-                }
-            },
-        };
-        match cluster.next_build(&mut active).await {
-            Ok(Some(build)) => {
-                crate::runtime::recorder::spawn(build_entry(state.clone(), cluster.clone(), build));
-            }
-            Ok(None) => {}
-            Err(e) => {
-                tracing::debug!(error = %e, "reading the build stream");
-                tokio::time::sleep(HEALTH_PERIOD).await;
-            }
-        }
-        conn = Some(active);
-    }
-}
-
-/// Builds one stream entry on this replica: the map goes to Redis, the record follows the
-/// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
-async fn build_entry(state: super::App, cluster: std::sync::Arc<Cluster>, build: BuildEntry) {
-    let record = cluster.job(&build.job_id).await.ok().flatten();
-    let owner = record.as_ref().and_then(|r| r.owner());
-    let end = |mut record: JobRecord, state: super::jobs::JobState, error: Option<String>| {
-        record.state = state;
-        record.error = error;
-        record.finished_at = Some(
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0.0, |d| d.as_secs_f64()),
-        );
-        record
-    };
-    let record = record.unwrap_or_else(|| {
-        let mut r = JobRecord::queued(&build.key, None);
-        r.job_id = build.job_id.clone();
-        r
-    });
-    // Built already (a build taken over just after its map was stored), or cancelled while
-    // it waited: nothing to build.
-    if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
-        if !record.state.is_terminal() {
-            let _ = cluster
-                .put_job(&end(record, super::jobs::JobState::Done, None))
-                .await;
-        }
-        cluster.finish(&build).await;
-        return;
-    }
-    if cluster.cancel_requested(&build.job_id).await {
-        let _ = cluster
-            .put_job(&end(record, super::jobs::JobState::Cancelled, None))
-            .await;
-        cluster.finish(&build).await;
-        return;
-    }
-    let scenario = match state.scenario(&build.key.scenario_id).await {
-        Ok(Some(stored)) => stored.scenario.clone(),
-        other => {
-            let reason = match other {
-                Err(e) => e.to_string(),
-                _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
-            };
-            let _ = cluster
-                .put_job(&end(record, super::jobs::JobState::Failed, Some(reason)))
-                .await;
-            cluster.finish(&build).await;
-            return;
-        }
-    };
-    let publisher = cluster.clone();
-    let map_id = build.map_id.clone();
-    let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
-        let encoded =
-            crate::runtime::recorder::spawn_blocking(move || irs_answers::encoding::encode(&map))
-                .await
-                .map_err(|e| e.to_string())?;
-        publisher
-            .put_map(&map_id, &encoded)
-            .await
-            .map_err(|e| e.to_string())
-    };
-    let job = state.jobs().build_shared(
-        build.job_id.clone(),
-        scenario,
-        build.key.clone(),
-        owner,
-        state.cache(),
-        publish,
-    );
-    tracing::info!(job_id = %build.job_id, map_id = %build.map_id, replica = %cluster.replica, "building for the cluster");
-    loop {
-        tokio::select! {
-            _ = job.finished() => break,
-            _ = tokio::time::sleep(HEARTBEAT) => {
-                cluster.heartbeat(&build).await;
-                let _ = cluster.put_job(&job.record()).await;
-                if cluster.cancel_requested(&build.job_id).await {
-                    state.jobs().cancel_local(&job);
-                }
-            }
-        }
-    }
-    // The final record, written until it lands (Redis may be down just now): the job's
-    // waiters on other replicas read it.
-    let final_record = job.record();
-    for attempt in 0..20u32 {
-        if cluster.put_job(&final_record).await.is_ok() {
-            break;
-        }
-        tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;
-    }
-    cluster.finish(&build).await;
 }
 
 #[cfg(test)]

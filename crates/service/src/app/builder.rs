@@ -1,0 +1,136 @@
+//! The cluster's build loop: whenever this replica has a free worker it takes the next build
+//! from the shared stream (a dead replica's first), builds the map as a local job, publishes
+//! it to the shared store and keeps the job's record there current (heartbeats) until it ends.
+
+use super::App;
+use crate::jobs::{JobRecord, JobState};
+use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
+use redis::aio::ConnectionManager;
+use std::sync::Arc;
+
+/// Reads builds from the stream whenever this replica has a free worker, forever (a task
+/// per replica, started with the server).
+pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
+    let mut conn: Option<ConnectionManager> = None;
+    loop {
+        if state.jobs().free_workers() == 0 || cluster.unavailable().is_some() {
+            tokio::time::sleep(HEARTBEAT).await;
+            continue;
+        }
+        let mut active = match conn.take() {
+            Some(c) => c,
+            None => match cluster.connect().await {
+                Ok(c) => c,
+                Err(_) => {
+                    tokio::time::sleep(HEALTH_PERIOD).await;
+                    continue;
+                }
+            },
+        };
+        match cluster.next_build(&mut active).await {
+            Ok(Some(build)) => {
+                crate::tasks::spawn(build_entry(state.clone(), cluster.clone(), build));
+            }
+            Ok(None) => {}
+            Err(e) => {
+                tracing::debug!(error = %e, "reading the build stream");
+                tokio::time::sleep(HEALTH_PERIOD).await;
+            }
+        }
+        conn = Some(active);
+    }
+}
+
+/// Builds one stream entry on this replica: the map goes to Redis, the record follows the
+/// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
+async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
+    let record = cluster.job(&build.job_id).await.ok().flatten();
+    let owner = record.as_ref().and_then(|r| r.owner());
+    let end = |mut record: JobRecord, state: JobState, error: Option<String>| {
+        record.state = state;
+        record.error = error;
+        record.finished_at = Some(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+        );
+        record
+    };
+    let record = record.unwrap_or_else(|| {
+        let mut r = JobRecord::queued(&build.key, None);
+        r.job_id = build.job_id.clone();
+        r
+    });
+    // Built already (a build taken over just after its map was stored), or cancelled while
+    // it waited: nothing to build.
+    if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
+        if !record.state.is_terminal() {
+            let _ = cluster.put_job(&end(record, JobState::Done, None)).await;
+        }
+        cluster.finish(&build).await;
+        return;
+    }
+    if cluster.cancel_requested(&build.job_id).await {
+        let _ = cluster
+            .put_job(&end(record, JobState::Cancelled, None))
+            .await;
+        cluster.finish(&build).await;
+        return;
+    }
+    let scenario = match state.scenario(&build.key.scenario_id).await {
+        Ok(Some(stored)) => stored.scenario.clone(),
+        other => {
+            let reason = match other {
+                Err(e) => e.to_string(),
+                _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
+            };
+            let _ = cluster
+                .put_job(&end(record, JobState::Failed, Some(reason)))
+                .await;
+            cluster.finish(&build).await;
+            return;
+        }
+    };
+    let publisher = cluster.clone();
+    let map_id = build.map_id.clone();
+    let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
+        let encoded = crate::tasks::spawn_blocking(move || irs_answers::encoding::encode(&map))
+            .await
+            .map_err(|e| e.to_string())?;
+        publisher
+            .put_map(&map_id, &encoded)
+            .await
+            .map_err(|e| super::Error::from(e).to_string())
+    };
+    let job = state.jobs().build_shared(
+        build.job_id.clone(),
+        scenario,
+        build.key.clone(),
+        owner,
+        state.cache(),
+        publish,
+    );
+    tracing::info!(job_id = %build.job_id, map_id = %build.map_id, replica = %cluster.replica, "building for the cluster");
+    loop {
+        tokio::select! {
+            _ = job.finished() => break,
+            _ = tokio::time::sleep(HEARTBEAT) => {
+                cluster.heartbeat(&build).await;
+                let _ = cluster.put_job(&job.record()).await;
+                if cluster.cancel_requested(&build.job_id).await {
+                    state.jobs().cancel_local(&job);
+                }
+            }
+        }
+    }
+    // The final record, written until it lands (Redis may be down just now): the job's
+    // waiters on other replicas read it.
+    let final_record = job.record();
+    for attempt in 0..20u32 {
+        if cluster.put_job(&final_record).await.is_ok() {
+            break;
+        }
+        tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;
+    }
+    cluster.finish(&build).await;
+}
