@@ -20,7 +20,6 @@ use crate::config::ServeArgs;
 use crate::jobs::Jobs;
 use crate::queries::QueryPool;
 use crate::store::{self, redis::Cluster};
-use axum::http::HeaderValue;
 use identity::{Caller, Tokens};
 use irs_answers::scenario::BUILTIN;
 use irs_answers::scenario::ScenarioDocument as _;
@@ -63,7 +62,6 @@ struct Inner {
     jobs: Arc<Jobs>,
     queries: QueryPool,
     tokens: Tokens,
-    cors_origins: Vec<HeaderValue>,
     /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
     disk: Option<Arc<store::DataDir>>,
     /// `--redis-url`, if set: the store shared with the other replicas.
@@ -84,16 +82,6 @@ impl App {
                 ))
             }
         };
-        let cors_origins = args
-            .cors_origin
-            .iter()
-            .map(|o| {
-                HeaderValue::from_str(o.trim())
-                    .ok()
-                    .filter(|_| o.starts_with("http://") || o.starts_with("https://"))
-                    .ok_or_else(|| format!("--cors-origin {o:?}: not an http(s) origin"))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
         let mb = |v: u64| usize::try_from(v.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX);
         let disk = match &args.data_dir {
             Some(dir) => Some(Arc::new(store::DataDir::open(
@@ -140,7 +128,6 @@ impl App {
                 )),
                 queries: QueryPool::new(args.query_workers(), args.query_queue)?,
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
-                cors_origins,
                 disk,
                 cluster: match &args.redis_url {
                     Some(url) => Some(Arc::new(Cluster::new(url)?)),
@@ -171,10 +158,6 @@ impl App {
     }
     pub(crate) fn tokens(&self) -> &Tokens {
         &self.inner.tokens
-    }
-    /// The origins allowed by CORS (`--cors-origin`); none: no CORS headers at all.
-    pub(crate) fn cors_origins(&self) -> &[HeaderValue] {
-        &self.inner.cors_origins
     }
     /// Registers a scenario for `caller`, evicting the least recently used unneeded ones if the
     /// registry is full (see [`ScenarioRegistry`]).

@@ -253,13 +253,28 @@ fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), E
 /// with characters outside `[A-Za-z0-9._:-]`, is replaced by a fresh UUID so logs stay clean.
 const MAX_REQUEST_ID_CHARS: usize = 64;
 
+/// The origins CORS allows (`--cors-origin`), checked: each an http(s) origin that is a
+/// valid header value.
+pub(crate) fn cors_origins(origins: &[String]) -> Result<Vec<HeaderValue>, String> {
+    origins
+        .iter()
+        .map(|o| {
+            HeaderValue::from_str(o.trim())
+                .ok()
+                .filter(|_| o.starts_with("http://") || o.starts_with("https://"))
+                .ok_or_else(|| format!("--cors-origin {o:?}: not an http(s) origin"))
+        })
+        .collect()
+}
+
 /// The full application: routes, fallbacks, metrics, authentication, the request timeout,
-/// request ids, tracing, CORS (only when origins are configured) and the body limit.
-pub(crate) fn app(state: App) -> axum::Router {
+/// request ids, tracing, CORS (only when origins are configured: none, no CORS headers at all)
+/// and the body limit.
+pub(crate) fn app(state: App, cors_origins: Vec<HeaderValue>) -> axum::Router {
     let max_body = state.limits().max_body_bytes;
-    let cors = (!state.cors_origins().is_empty()).then(|| {
+    let cors = (!cors_origins.is_empty()).then(|| {
         CorsLayer::new()
-            .allow_origin(AllowOrigin::list(state.cors_origins().to_vec()))
+            .allow_origin(AllowOrigin::list(cors_origins))
             .allow_methods([Method::GET, Method::POST, Method::DELETE])
             .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION, header::ACCEPT])
             .expose_headers([header::LOCATION, header::RETRY_AFTER])

@@ -142,6 +142,8 @@ async fn serve_app(
 ) -> Result<(), ServeError> {
     let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
     let grace = Duration::from_secs(args.shutdown_grace_s);
+    // First, as before the split: an operator sees the same error first.
+    let cors_origins = http::cors_origins(&args.cors_origin).map_err(ServeError::Config)?;
     let state = App::new(&args, metrics.handle()).map_err(ServeError::Config)?;
     let _cancel = CancelJobsOnDrop(state.clone());
     app::preload(&state, &args.scenarios).map_err(ServeError::Config)?;
@@ -187,10 +189,15 @@ async fn serve_app(
         tracing::info!(replica = %cluster.replica, "sharing scenarios, maps and jobs through Redis");
     }
     let stopping = state.clone();
-    let connections = server::serve(listener, http::app(state.clone()), limits, async move {
-        shutdown.await;
-        stopping.set_ready(false);
-    })
+    let connections = server::serve(
+        listener,
+        http::app(state.clone(), cors_origins),
+        limits,
+        async move {
+            shutdown.await;
+            stopping.set_ready(false);
+        },
+    )
     .await;
     drain(&state, &connections, grace).await;
     for task in background {
