@@ -8,7 +8,8 @@
 //! `RAYON_NUM_THREADS=1 cargo bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use irs_answers::phase_text::{PhaseFormat, PhasePrecision, write_phases};
+use irs_answers::path::write_phases;
+use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;

@@ -12,8 +12,6 @@ use irs_model::radiomap::{Cancelled, Progress, RadioMap};
 use irs_model::scenario::Scenario;
 use serde::Serialize;
 
-pub use crate::phase_text::write_phases;
-
 /// A path answer with its optional Monte Carlo check: the body of `irs-planner plan` and of
 /// `POST /v1/paths`.
 #[derive(Debug, Clone, Serialize)]
@@ -40,6 +38,22 @@ pub fn phase_options(
         ));
     }
     Ok((format, precision.unwrap_or_default()))
+}
+
+/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
+pub fn write_phases(
+    path: PathAnswer,
+    format: PhaseFormat,
+    precision: PhasePrecision,
+) -> PathAnswer<SurfacePhases> {
+    path.map_phases(|radians| {
+        let phases = SurfacePhases::Radians(radians);
+        match (format, precision.decimals()) {
+            (PhaseFormat::Codes, _) => phases.to_codes(),
+            (PhaseFormat::Radians, None) => phases,
+            (PhaseFormat::Radians, Some(decimals)) => phases.to_decimals(decimals),
+        }
+    })
 }
 
 /// The Monte Carlo check (paper Fig. 10) of a written path: it evaluates the phases as sent

@@ -15,7 +15,6 @@ use serde_json::value::RawValue;
 use std::f64::consts::TAU;
 use std::str::FromStr;
 
-use irs_model::planner::PathAnswer;
 use irs_model::vecmath::ROUNDING_SHIFT;
 
 /// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
@@ -186,7 +185,7 @@ pub enum PhasePrecision {
 
 impl PhasePrecision {
     /// Decimals kept, `None` for full precision.
-    fn decimals(self) -> Option<u32> {
+    pub(crate) fn decimals(self) -> Option<u32> {
         match self {
             PhasePrecision::Centi => Some(2),
             PhasePrecision::Milli => Some(3),
@@ -225,22 +224,6 @@ impl FromStr for PhaseFormat {
     fn from_str(s: &str) -> Result<Self, String> {
         irs_model::input::parse_name(s)
     }
-}
-
-/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
-pub fn write_phases(
-    path: PathAnswer,
-    format: PhaseFormat,
-    precision: PhasePrecision,
-) -> PathAnswer<SurfacePhases> {
-    path.map_phases(|radians| {
-        let phases = SurfacePhases::Radians(radians);
-        match (format, precision.decimals()) {
-            (PhaseFormat::Codes, _) => phases.to_codes(),
-            (PhaseFormat::Radians, None) => phases,
-            (PhaseFormat::Radians, Some(decimals)) => phases.to_decimals(decimals),
-        }
-    })
 }
 
 /// "00", "01", …, "99": two digits of a number per lookup, half the divisions of one at a time.
@@ -303,7 +286,8 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use irs_model::planner::{Endpoint, Waypoint};
+    use crate::path::write_phases;
+    use irs_model::planner::{Endpoint, PathAnswer, Waypoint};
     use irs_model::radiomap::CellConfig;
 
     /// Each precision writes its number of decimals (the writer itself is tested in
