@@ -316,6 +316,16 @@ mod tests {
                 "irs.normal",
             ),
             (Box::new(|v| v["irs"]["nx_sub"] = 0.into()), "irs.nx_sub"),
+            // The whole surface stays in the room: 2 × 2 tiles of 1.2 m around z = 2 m reach
+            // past the 3 m ceiling; a 10³⁰⁸ m pitch (found by the fuzzer) past everything.
+            (
+                Box::new(|v| v["irs"]["sub_pitch_m"] = 1.2.into()),
+                "irs.sub_pitch_m",
+            ),
+            (
+                Box::new(|v| v["irs"]["sub_pitch_m"] = 1.00751e308.into()),
+                "irs.sub_pitch_m",
+            ),
             // Products that wrap around in 64 bits must not slip through the size limits.
             (
                 Box::new(|v| {
@@ -374,6 +384,17 @@ mod tests {
             let e = mutated(mutate);
             assert_eq!(e.field, field, "{e}");
         }
+    }
+
+    /// A surface that just fits (2 × 2 tiles of 1 m around z = 2 m under a 3 m ceiling, 2 m of
+    /// a 6 m wall) is valid: the extent check has no margin beyond the wall tolerance.
+    #[test]
+    fn a_surface_that_just_fits_is_valid() {
+        let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+        v["irs"]["sub_pitch_m"] = 1.0.into();
+        assert!(Scenario::from_json(&v.to_string()).is_ok());
+        v["irs"]["sub_pitch_m"] = 1.01.into();
+        assert!(Scenario::from_json(&v.to_string()).is_err());
     }
 
     /// An IRS on an obstacle's side, facing away from it, is a valid mount.

@@ -431,6 +431,7 @@ impl Scenario {
             }
             _ => {}
         }
+        self.check_irs_extent(irs, at, pitch)?;
         let ahead = |p: [f64; 3]| {
             (p[0] - irs.center[0]) * n[0]
                 + (p[1] - irs.center[1]) * n[1]
@@ -489,6 +490,58 @@ impl Scenario {
             }
         }
         Ok(())
+    }
+
+    /// The whole surface fits in the room: its nx_sub × nz_sub tiles of `pitch` (each sub-surface
+    /// a square of side `sub_pitch_m`), laid along the wall's horizontal axis ẑ × n and the
+    /// vertical, stay between the room's walls, the floor and the ceiling. Besides catching a
+    /// pitch typed in the wrong unit, this bounds every element position, so no distance in the
+    /// channel model overflows (a 10³⁰⁸ m pitch once made every cascaded gain NaN).
+    fn check_irs_extent(&self, irs: &Irs, at: &str, pitch: f64) -> Result<(), FieldError> {
+        let (c, n, r) = (irs.center, irs.normal, &self.room);
+        let horizontal = n[0].hypot(n[1]);
+        // ẑ × n = (−n_y, n_x, 0), normalised: the wall's horizontal axis.
+        let axis = [-n[1] / horizontal, n[0] / horizontal];
+        let half_width = irs.nx_sub as f64 * pitch / 2.0;
+        let half_height = irs.nz_sub as f64 * pitch / 2.0;
+        let ends = [-1.0, 1.0].map(|s| {
+            [
+                c[0] + s * half_width * axis[0],
+                c[1] + s * half_width * axis[1],
+            ]
+        });
+        let along_fits = ends.iter().all(|p| {
+            p[0] >= r.x_min - WALL_TOL_M
+                && p[0] <= r.x_max + WALL_TOL_M
+                && p[1] >= r.y_min - WALL_TOL_M
+                && p[1] <= r.y_max + WALL_TOL_M
+        });
+        let up_fits =
+            c[2] - half_height >= -WALL_TOL_M && c[2] + half_height <= r.ceiling_m + WALL_TOL_M;
+        if along_fits && up_fits {
+            return Ok(());
+        }
+        // Metres as people write them, or in scientific notation when absurdly large.
+        let metres = |v: f64| {
+            if v < 1e6 {
+                format!("{v:.3} m")
+            } else {
+                format!("{v:.3e} m")
+            }
+        };
+        Err(FieldError::new(
+            format!("{at}.sub_pitch_m"),
+            format!(
+                "the surface ({} × {} sub-surfaces of {}: {} wide and {} tall around its \
+                 centre) does not fit in the room: it would reach past a wall, the floor or the \
+                 ceiling",
+                irs.nx_sub,
+                irs.nz_sub,
+                metres(pitch),
+                metres(2.0 * half_width),
+                metres(2.0 * half_height)
+            ),
+        ))
     }
 
     /// An IRS hangs on something: a wall of the room or a face of an obstacle, with its normal
