@@ -464,7 +464,14 @@ mod tests {
             ),
             (|v| v["irss"][0]["nx_sub"] = 0.into(), "irss[0].nx_sub"),
             (|v| v["irs"] = v["irss"][0].clone(), "irss"),
-            (|v| v["irss"][1]["nx_sub"] = 1021.into(), "irss"),
+            // Within its own limits and the room (a 2 m row), beyond the sum's.
+            (
+                |v| {
+                    v["irss"][1]["nx_sub"] = 1021.into();
+                    v["irss"][1]["sub_pitch_m"] = 0.002.into();
+                },
+                "irss",
+            ),
         ];
         for (edit, field) in cases {
             let e = two(edit);
