@@ -571,7 +571,19 @@ fn place_prints_the_ranking_and_draws_the_best() {
     ]);
     assert_eq!(code, 0, "{err}");
     let answer = json(&body);
-    assert_eq!(answer["candidates"].as_array().unwrap().len(), 11);
+    // Eleven samples 2 m apart; the two at the room's corners move inward by half the
+    // surface's width (10 sub-surfaces of 7.5 mm), so the whole surface lies on the wall.
+    let candidates = answer["candidates"].as_array().unwrap();
+    assert_eq!(candidates.len(), 11);
+    assert_eq!(answer["rejected"].as_array().unwrap().len(), 0);
+    let xs: Vec<f64> = candidates
+        .iter()
+        .map(|c| c["center"][0].as_f64().unwrap())
+        .collect();
+    let lowest = xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let highest = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    assert!((lowest + 10.0 - 0.0375).abs() < 1e-9, "{xs:?}");
+    assert!((highest - 10.0 + 0.0375).abs() < 1e-9, "{xs:?}");
     assert_eq!(
         answer["candidates"][0]["center"],
         serde_json::json!([0.0, -10.0, 2.0])

@@ -1356,7 +1356,7 @@ async fn placements_rank_candidates_and_keep_the_best_ready() {
     assert_eq!(body["map_kind"], "gain");
     assert_eq!(body["registered"], 3);
     let ranked = body["candidates"].as_array().unwrap();
-    assert_eq!(ranked.len(), 21);
+    assert_eq!(ranked.len(), 21, "{}", body["rejected"]);
     assert_eq!(
         ranked[0]["center"],
         json!([0.0, -10.0, 2.0]),
@@ -1701,6 +1701,174 @@ async fn maps_are_delivered_and_never_built_beyond_the_cache() {
         .await;
     problem(s, &b, StatusCode::UNPROCESSABLE_ENTITY, "limit_exceeded");
     assert_eq!(b["limit"], 2 * 1024 * 1024);
+}
+
+/// Writes `request` on a new loopback connection whose receive buffer is as small as the
+/// kernel allows, and never reads: the client that stops reading.
+async fn unread_request(base: &str, request: &str) -> tokio::net::TcpStream {
+    use tokio::io::AsyncWriteExt;
+    let addr: std::net::SocketAddr = base.strip_prefix("http://").unwrap().parse().unwrap();
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    let mut stream = socket.connect(addr).await.unwrap();
+    stream.write_all(request.as_bytes()).await.unwrap();
+    stream
+}
+
+/// Reads until the server closes (or resets) the connection; the bytes read and how long that
+/// took.
+async fn read_to_close(stream: &mut tokio::net::TcpStream, limit: Duration) -> (usize, Duration) {
+    use tokio::io::AsyncReadExt;
+    let started = Instant::now();
+    let mut total = 0;
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        match tokio::time::timeout_at((started + limit).into(), stream.read(&mut buf)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => return (total, started.elapsed()),
+            Ok(Ok(n)) => total += n,
+            Err(_) => panic!("the connection was still open after {limit:?} ({total} bytes read)"),
+        }
+    }
+}
+
+/// A client that stops reading a 15.8 MB map body holds it against `--answers-in-flight-mb`
+/// (another client asking meanwhile gets 503 `answers_in_flight`) until `--write-timeout-s`
+/// closes its connection, which frees the budget: the next request is answered in full.
+#[tokio::test]
+async fn a_client_that_stops_reading_is_cut_off_and_its_answer_freed() {
+    let server = start(&[
+        "--write-timeout-s",
+        "1",
+        "--answers-in-flight-mb",
+        "20",
+        "--sync-cells",
+        "2000000",
+    ]);
+    let fine = scenario("paper-single-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.02.into();
+        v["name"] = "two-cm".into();
+    });
+    let (status, map) = server
+        .post("/v1/maps", json!({"scenario": fine, "kind": "gain"}))
+        .await;
+    assert_eq!(status, StatusCode::OK, "{map}");
+    let path = format!("/v1/maps/{}", map["map_id"].as_str().unwrap());
+    let full = server
+        .client
+        .get(format!("{}{path}", server.base))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap()
+        .len();
+    assert!(full > 15_000_000, "{full} bytes");
+    let mut stalled = unread_request(
+        &server.base,
+        &format!("GET {path} HTTP/1.1\r\nhost: test\r\n\r\n"),
+    )
+    .await;
+    // The stalled answer holds 15.8 of the 20 MiB (once built: slow in a test build): a second
+    // one does not fit.
+    let in_flight = || server.metric("irs_answers_in_flight_bytes");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while in_flight().await < 15e6 {
+        assert!(
+            Instant::now() < deadline,
+            "the unread answer never held the budget"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let (status, body) = server.get(&path).await;
+    problem(
+        status,
+        &body,
+        StatusCode::SERVICE_UNAVAILABLE,
+        "answers_in_flight",
+    );
+    assert_eq!(body["limit"], 20 * 1024 * 1024);
+    // Cut off within the write timeout plus the watchdog's tick: reading now gets what the
+    // socket buffers held, then the end.
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let (received, _) = read_to_close(&mut stalled, Duration::from_secs(5)).await;
+    assert!(received < full, "{received} of {full} bytes");
+    assert_eq!(in_flight().await, 0.0, "the budget was not freed");
+    let resp = server
+        .client
+        .get(format!("{}{path}", server.base))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::OK);
+    assert_eq!(resp.bytes().await.unwrap().len(), full);
+    assert_eq!(
+        server.metric("irs_connections_stalled_closed_total").await,
+        1.0
+    );
+    assert!(server.metric("irs_answers_refused_in_flight_total").await >= 1.0);
+}
+
+/// An HTTP/2 connection that only sends PINGs is closed by the idle timeout (PINGs are not
+/// requests), and one client address holds at most `--max-connections-per-client`.
+#[tokio::test]
+async fn pings_do_not_keep_a_connection_and_one_client_holds_a_bounded_share() {
+    use tokio::io::AsyncWriteExt;
+    let server = start(&["--idle-timeout-s", "1", "--max-connections-per-client", "2"]);
+    // h2c with prior knowledge: the preface, an empty SETTINGS frame, then a PING every 200 ms.
+    let mut pinging = unread_request(&server.base, "PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n").await;
+    pinging
+        .write_all(&[0, 0, 0, 0x4, 0, 0, 0, 0, 0])
+        .await
+        .unwrap();
+    let started = Instant::now();
+    let (mut reader, mut writer) = pinging.into_split();
+    let pinger = tokio::spawn(async move {
+        let ping = [0, 0, 8, 0x6, 0, 0, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8];
+        while writer.write_all(&ping).await.is_ok() {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    });
+    let closed = {
+        use tokio::io::AsyncReadExt;
+        let mut buf = vec![0u8; 4096];
+        loop {
+            match tokio::time::timeout(Duration::from_secs(6), reader.read(&mut buf)).await {
+                Ok(Ok(0)) | Ok(Err(_)) => break started.elapsed(),
+                Ok(Ok(_)) => {}
+                Err(_) => panic!("a PING-only connection was still open after 6 s"),
+            }
+        }
+    };
+    pinger.abort();
+    assert!(closed < Duration::from_secs(4), "closed after {closed:?}");
+    assert_eq!(
+        server.metric("irs_connections_idle_closed_total").await,
+        1.0
+    );
+    // Once the metrics request's kept-alive connection has idled out, two connections held
+    // open: a third from the same address is closed at once, and served again once one goes.
+    tokio::time::sleep(Duration::from_millis(1600)).await;
+    let idle_client = |_| unread_request(&server.base, "");
+    let first = idle_client(0).await;
+    let second = idle_client(1).await;
+    let mut third = idle_client(2).await;
+    let (_, after) = read_to_close(&mut third, Duration::from_secs(2)).await;
+    assert!(after < Duration::from_secs(1));
+    drop(first);
+    drop(second);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let fresh = Server {
+        running: Running::InProcess(tokio::spawn(async { Ok(()) })),
+        base: server.base.clone(),
+        client: client(),
+    };
+    assert!(
+        fresh
+            .metric("irs_connections_refused_per_client_total")
+            .await
+            >= 1.0
+    );
 }
 
 /// CORS is deliberate: no CORS headers unless origins are configured, and then only for them.

@@ -3,7 +3,7 @@
 case against its own server on a loopback port, with the figure it measured in the log.
 
 Usage: suite.py BINARY [CASE ...]   (cases: overflow cache lost-work starvation slow-loris
-ownership shutdown; default all). Exits 1 on the first failed expectation. Bounded: every
+slow-readers ownership shutdown; default all). Exits 1 on the first failed expectation. Bounded: every
 case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1 only.
 """
 
@@ -318,6 +318,107 @@ def slow_loris():
         server.stop()
 
 
+def slow_readers():
+    """150 clients ask for a 15.8 MB map body and never read: the answers in flight stay within
+    their budget, the rest get 503, the stalled connections are closed by the write timeout,
+    and a client that reads is served throughout. Then 20 HTTP/2 connections that only PING
+    fill --max-connections and are closed by the idle timeout, so a new client gets in."""
+    budget_mb, write_s = 64, 3
+    server = Server("--answers-in-flight-mb", str(budget_mb), "--write-timeout-s", str(write_s),
+                    "--sync-cells", "2000000", "--query-queue", "200")
+    try:
+        fine = scenario("paper-single-user", lambda d: (
+            d.update(name="two-cm"), d["grid"].update(resolution_m=0.02)))
+        status, built, _ = server.post("/v1/maps", {"scenario": fine, "kind": "gain"})
+        expect(status == 200, f"the 1001² map: {status} {built}")
+        path = f"/v1/maps/{built['map_id']}"
+        status, _, _ = server.get(path)
+        expect(status == 200, f"the body: {status}")
+        baseline = server.rss_mb()
+        sockets = []
+        for _ in range(150):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            s.connect(("127.0.0.1", server.port))
+            s.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+            sockets.append(s)
+        started = time.time()
+        peak, health = 0.0, []
+        while time.time() - started < write_s - 0.5:
+            peak = max(peak, server.rss_mb())
+            health.append(server.timed_get("/healthz"))
+            time.sleep(0.1)
+        # Past the write timeout every unread answer's connection is closed: reading now gets
+        # what the socket buffers held (a 503 problem, or part of the body), then the end.
+        time.sleep(write_s / 2 + 1)
+        refused, cut, whole = 0, 0, 0
+        for s in sockets:
+            s.settimeout(10)
+            data = b""
+            try:
+                while chunk := s.recv(1 << 16):
+                    data += chunk
+            except OSError:
+                pass
+            s.close()
+            head = data.split(b"\r\n", 1)[0]
+            if b" 503 " in head:
+                refused += 1
+            elif len(data) < 15_000_000:
+                cut += 1
+            else:
+                whole += 1
+        # Answers admitted after the first were cut off reach clients that now read: whole.
+        expect(cut >= 1 and refused >= 1, f"cut {cut}, refused {refused}, whole {whole}")
+        # Budget, plus the answers being built at the moment (one per query worker) and slack.
+        bound = budget_mb + 2 * 16 + 40
+        expect(peak - baseline <= bound,
+               f"RSS grew {peak - baseline:.0f} MB with 150 unread answers (bound {bound} MB)")
+        expect(all(st == 200 and ms < 200 for st, ms in health), f"health: {health[:5]}")
+        status, _, _ = server.get(path)
+        expect(status == 200, f"a reading client after the flood: {status}")
+        worst = max(ms for _, ms in health)
+        figure("slow-readers", f"150 unread 15.8 MB answers: RSS +{peak - baseline:.0f} MB "
+               f"(budget {budget_mb} MB; unbounded they would hold 2.4 GB); {cut} cut off after "
+               f"the {write_s} s write timeout, {refused} refused 503, {whole} read later in full; "
+               f"/healthz max {worst:.1f} ms")
+    finally:
+        server.stop()
+    server = Server("--max-connections", "20", "--idle-timeout-s", "2")
+    try:
+        preface = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+        ping = bytes([0, 0, 8, 6, 0, 0, 0, 0, 0]) + b"12345678"
+        pinging = []
+        for _ in range(20):
+            s = socket.create_connection(("127.0.0.1", server.port))
+            s.sendall(preface)
+            s.setblocking(False)
+            pinging.append(s)
+        started, open_ = time.time(), set(range(20))
+        while open_ and time.time() - started < 8:
+            for k in list(open_):
+                try:
+                    pinging[k].sendall(ping)
+                    while pinging[k].recv(4096):
+                        pass
+                    open_.discard(k)
+                except BlockingIOError:
+                    pass
+                except OSError:
+                    open_.discard(k)
+            time.sleep(0.5)
+        closed_s = time.time() - started
+        for s in pinging:
+            s.close()
+        expect(not open_, f"{len(open_)} PING-only connections still open after 8 s")
+        status, ms = server.timed_get("/healthz")
+        expect(status == 200, f"a new client after the PING flood: {status}")
+        figure("slow-readers", f"20 PING-only HTTP/2 connections (--max-connections 20) closed "
+               f"after {closed_s:.1f} s (idle timeout 2 s); a new client then served in {ms:.1f} ms")
+    finally:
+        server.stop()
+
+
 def ownership():
     """With tokens, writes need one and jobs belong to their token."""
     alice, bob = "alice-reliability-0001", "bob-reliability-000002"
@@ -372,6 +473,7 @@ CASES = {
     "lost-work": lost_work,
     "starvation": starvation,
     "slow-loris": slow_loris,
+    "slow-readers": slow_readers,
     "ownership": ownership,
     "shutdown": shutdown,
 }

@@ -448,7 +448,7 @@ fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout
         let n = irs.normal;
         let along = [-n[1], n[0]];
         let norm = along[0].hypot(along[1]).max(f64::MIN_POSITIVE);
-        let width = irs.nx_sub as f64 * irs.sub_pitch_m.unwrap_or(0.0);
+        let width = irs.width_m();
         let half = (width / 2.0).max(1.5 * map.grid.resolution_m);
         let steps = 200;
         for k in 0..=steps {

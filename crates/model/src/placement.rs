@@ -2,7 +2,8 @@
 //! maps (docs/model.md §7). The question a site planner asks before buying a surface.
 //!
 //! Candidates are explicit poses, or wall segments sampled every `step_m` with the normal
-//! facing into the room. Objectives: `coverage` (η(γ), paper eq. 44), `max_threshold` (the
+//! facing into the room (an IRS's samples kept half its width from the segment's ends, so the
+//! whole surface lies on the segment). Objectives: `coverage` (η(γ), paper eq. 44), `max_threshold` (the
 //! widest-path value between a start and a goal) and `distance` (the shortest path at γ;
 //! infeasible ranks last).
 //!
@@ -310,8 +311,23 @@ pub fn candidates(base: &Scenario, search: &Search) -> Result<Vec<Candidate>, Fi
                     format!("more than {MAX_CANDIDATES} candidates"),
                 ));
             }
+            // An IRS sample nearer a segment's end than half the surface's width moves inward
+            // until the whole surface lies on the segment: one centred on a room's corner
+            // would reach into the side wall (and is refused, see `Scenario` validation).
+            let inset = match search.what {
+                What::Irs => base.surfaces()[search.index].width_m() / 2.0 / length,
+                What::Ap => 0.0,
+            };
+            let mut previous = None;
             for i in 0..=samples as usize {
-                let t = i as f64 * step / length;
+                let mut t = i as f64 * step / length;
+                if inset <= 0.5 {
+                    t = t.clamp(inset, 1.0 - inset);
+                }
+                if previous == Some(t) {
+                    continue;
+                }
+                previous = Some(t);
                 let (x, y) = (wall.from[0] + t * dx, wall.from[1] + t * dy);
                 let normal = match search.what {
                     What::Irs => Some(inward_normal(

@@ -98,9 +98,18 @@ pub struct ServeArgs {
     /// Seconds a client has to send a request's body once its headers arrived (408 after).
     #[arg(long, env = "IRS_BODY_TIMEOUT_S", default_value_t = 30)]
     pub body_timeout_s: u64,
-    /// Seconds an idle kept-alive connection stays open.
+    /// Seconds a connection with no request in flight and no answer going out stays open
+    /// (HTTP/2 PINGs do not keep it open).
     #[arg(long, env = "IRS_IDLE_TIMEOUT_S", default_value_t = 60)]
     pub idle_timeout_s: u64,
+    /// Seconds an answer may make no progress (its client stopped reading) before its
+    /// connection is closed and the answer's memory freed.
+    #[arg(long, env = "IRS_WRITE_TIMEOUT_S", default_value_t = 30)]
+    pub write_timeout_s: u64,
+    /// Memory in MiB that answers being sent may hold at once (answers under 64 KiB aside); an
+    /// answer that would exceed it is answered 503 with Retry-After instead.
+    #[arg(long, env = "IRS_ANSWERS_IN_FLIGHT_MB", default_value_t = 256)]
+    pub answers_in_flight_mb: u64,
     /// Seconds one request may take from its headers to its answer (503 after; long builds
     /// run as jobs, so only a stuck request reaches it).
     #[arg(long, env = "IRS_REQUEST_TIMEOUT_S", default_value_t = 120)]
@@ -108,6 +117,14 @@ pub struct ServeArgs {
     /// Connections served at once; further ones wait in the kernel's accept queue.
     #[arg(long, env = "IRS_MAX_CONNECTIONS", default_value_t = 1024)]
     pub max_connections: usize,
+    /// Connections one client address may hold at once; more are closed as they arrive. Behind
+    /// a proxy every client has the proxy's address: set it to at least the proxy's
+    /// connections to this server there, and limit clients at the proxy.
+    #[arg(long, env = "IRS_MAX_CONNECTIONS_PER_CLIENT", default_value_t = 256)]
+    pub max_connections_per_client: usize,
+    /// HTTP/2 streams (requests) one connection may have open at once.
+    #[arg(long, env = "IRS_MAX_STREAMS", default_value_t = 32)]
+    pub max_streams: u32,
     /// Bearer tokens, comma-separated: when any is set (here or in --api-tokens-file), every
     /// mutating request needs one, and jobs and API scenarios belong to the token that made
     /// them. Off by default (the embedded development set-up).

@@ -120,6 +120,14 @@ impl Irs {
     pub fn elements(&self) -> usize {
         self.subsurfaces() * self.elements_per_sub
     }
+    /// Width along the wall (m): `nx_sub` tiles of `sub_pitch_m` (0 before defaults resolve).
+    pub fn width_m(&self) -> f64 {
+        self.nx_sub as f64 * self.sub_pitch_m.unwrap_or(0.0)
+    }
+    /// Height up the wall (m): `nz_sub` tiles of `sub_pitch_m` (0 before defaults resolve).
+    pub fn height_m(&self) -> f64 {
+        self.nz_sub as f64 * self.sub_pitch_m.unwrap_or(0.0)
+    }
 }
 
 /// The mobile robot (MRU) whose path is planned.

@@ -502,8 +502,8 @@ impl Scenario {
         let horizontal = n[0].hypot(n[1]);
         // ẑ × n = (−n_y, n_x, 0), normalised: the wall's horizontal axis.
         let axis = [-n[1] / horizontal, n[0] / horizontal];
-        let half_width = irs.nx_sub as f64 * pitch / 2.0;
-        let half_height = irs.nz_sub as f64 * pitch / 2.0;
+        let half_width = irs.width_m() / 2.0;
+        let half_height = irs.height_m() / 2.0;
         let ends = [-1.0, 1.0].map(|s| {
             [
                 c[0] + s * half_width * axis[0],

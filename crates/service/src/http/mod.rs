@@ -7,6 +7,7 @@
 //! ([`auth`]).
 
 pub(crate) mod auth;
+pub(crate) mod delivery;
 mod exports;
 mod jobs;
 pub(crate) mod json;
@@ -268,9 +269,13 @@ pub(crate) fn cors_origins(origins: &[String]) -> Result<Vec<HeaderValue>, Strin
 }
 
 /// The full application: routes, fallbacks, metrics, authentication, the request timeout,
-/// request ids, tracing, CORS (only when origins are configured: none, no CORS headers at all)
-/// and the body limit.
-pub(crate) fn app(state: App, cors_origins: Vec<HeaderValue>) -> axum::Router {
+/// request ids, tracing, CORS (only when origins are configured: none, no CORS headers at all),
+/// the body limit and the answers' delivery under `answers` ([`delivery`]).
+pub(crate) fn app(
+    state: App,
+    cors_origins: Vec<HeaderValue>,
+    answers: delivery::Budget,
+) -> axum::Router {
     let max_body = state.limits().max_body_bytes;
     let cors = (!cors_origins.is_empty()).then(|| {
         CorsLayer::new()
@@ -287,6 +292,8 @@ pub(crate) fn app(state: App, cors_origins: Vec<HeaderValue>) -> axum::Router {
         .layer(DefaultBodyLimit::max(max_body))
         .layer(middleware::from_fn_with_state(state.clone(), auth::authenticate))
         .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
+        // Inside compression, so answers are weighed as built (see `delivery`).
+        .layer(middleware::from_fn_with_state(answers, delivery::deliver))
         // gzip or brotli when the client accepts it (a 577k-cell map body is 10.9 MB of JSON);
         // tower-http's default predicate leaves PNGs and tiny bodies alone.
         .layer(CompressionLayer::new())

@@ -136,6 +136,21 @@ impl ApiError {
         )
         .with_limit(seconds)
     }
+    /// The answers being sent fill `--answers-in-flight-mb`: this one was built and dropped.
+    pub fn answers_in_flight(budget_bytes: u64) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "answers_in_flight",
+            "Too many answers in flight",
+            format!(
+                "the answers being sent to clients hold the server's budget of {budget_bytes} \
+                 bytes; retry shortly"
+            ),
+        )
+        .with_limit(budget_bytes);
+        e.retry_after_s = Some(1);
+        e
+    }
     pub fn not_ready() -> Self {
         Self::new(
             StatusCode::SERVICE_UNAVAILABLE,

@@ -165,6 +165,9 @@ async fn serve_app(
         max_connections: args.max_connections,
         header_timeout: Duration::from_secs(args.header_timeout_s.max(1)),
         idle_timeout: Duration::from_secs(args.idle_timeout_s.max(1)),
+        write_timeout: Duration::from_secs(args.write_timeout_s.max(1)),
+        per_client: args.max_connections_per_client,
+        max_streams: args.max_streams.max(1),
     };
     let warming = state.clone();
     let mut background = vec![tasks::spawn(
@@ -191,7 +194,11 @@ async fn serve_app(
     let stopping = state.clone();
     let connections = server::serve(
         listener,
-        http::app(state.clone(), cors_origins),
+        http::app(
+            state.clone(),
+            cors_origins,
+            http::delivery::Budget::new(args.answers_in_flight_mb.saturating_mul(1 << 20)),
+        ),
         limits,
         async move {
             shutdown.await;
