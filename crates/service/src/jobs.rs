@@ -898,3 +898,37 @@ impl Jobs {
         Ok(job)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A finished map job's record as the data directory and Redis hold it.
+    const MAP_RECORD: &str = r#"{"job_id":"0123456789abcdef0123456789abcdef","seq":7,"owner":"d1gest","scenario_id":"5c3na410","key":{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null},"state":"done","cells_done":40,"cells_total":40,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"placement":null}"#;
+
+    /// A finished placement job's record.
+    const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
+
+    #[test]
+    fn records_of_today_are_read_and_shown_as_before() {
+        let map: JobRecord = serde_json::from_str(MAP_RECORD).unwrap();
+        let map_id = irs_answers::map::map_id(map.key.as_ref().unwrap());
+        let expected = format!(
+            r#"{{"job_id":"0123456789abcdef0123456789abcdef","kind":"map","scenario_id":"5c3na410","map_id":"{map_id}","key":{{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null}},"state":"done","cells_done":40,"cells_total":40,"progress":1.0,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"href":"/v1/jobs/0123456789abcdef0123456789abcdef","result_href":"/v1/maps/{map_id}"}}"#
+        );
+        assert_eq!(serde_json::to_string(&map.view()).unwrap(), expected);
+        let job = Job::restore(map).unwrap();
+        assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
+        assert_eq!(serde_json::to_string(&job.record()).unwrap(), MAP_RECORD);
+
+        let placement: JobRecord = serde_json::from_str(PLACEMENT_RECORD).unwrap();
+        let expected = r#"{"job_id":"fedcba9876543210fedcba9876543210","kind":"placement","scenario_id":"5c3na410","map_id":null,"key":null,"state":"failed","cells_done":3,"cells_total":12,"progress":0.25,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","href":"/v1/jobs/fedcba9876543210fedcba9876543210","result_href":"/v1/placements/fedcba9876543210fedcba9876543210"}"#;
+        assert_eq!(serde_json::to_string(&placement.view()).unwrap(), expected);
+        let job = Job::restore(placement).unwrap();
+        assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
+        assert_eq!(
+            serde_json::to_string(&job.record()).unwrap(),
+            PLACEMENT_RECORD
+        );
+    }
+}
