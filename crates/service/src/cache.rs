@@ -4,9 +4,9 @@
 
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::ids::{MapId, ScenarioId};
 use crate::store::{DataDir, Kind};
 use irs_answers::scenario::ScenarioDocument as _;
-use irs_answers::scenario::hash_hex;
 use irs_model::planner::{self, Bottlenecks};
 use irs_model::radiomap::RadioMap;
 use irs_model::scenario::Scenario;
@@ -15,14 +15,47 @@ use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 
+/// Where a registered scenario came from. Only API scenarios are evicted or deleted: the
+/// others are the server's configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScenarioSource {
+    /// Built into the binary.
+    Builtin,
+    /// A file of the scenarios directory, read at start-up.
+    File,
+    /// Sent to the API (registered, inline in a request, or a placement's candidate).
+    Api,
+}
+
+impl ScenarioSource {
+    /// Its name in listings (`source`) and error details.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ScenarioSource::Builtin => "builtin",
+            ScenarioSource::File => "file",
+            ScenarioSource::Api => "api",
+        }
+    }
+}
+
+impl std::fmt::Display for ScenarioSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Serialize for ScenarioSource {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
 /// A registered scenario.
 #[derive(Debug)]
 pub struct StoredScenario {
-    pub id: String,
+    pub id: ScenarioId,
     pub scenario: Arc<Scenario>,
-    /// Where it came from: "builtin", "file", or "api". Only "api" scenarios are evicted or
-    /// deleted: the others are the server's configuration.
-    pub source: &'static str,
+    pub source: ScenarioSource,
     /// Its weight in the registry's byte budget: its canonical document and decoded raster.
     bytes: usize,
     /// The tokens that registered it (empty when authentication is off): each may delete its
@@ -34,9 +67,9 @@ pub struct StoredScenario {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct ScenarioSummary {
-    pub id: String,
+    pub id: ScenarioId,
     pub name: Option<String>,
-    pub source: &'static str,
+    pub source: ScenarioSource,
     pub href: String,
 }
 
@@ -63,13 +96,13 @@ impl StoredScenario {
             id: self.id.clone(),
             name: self.scenario.name.clone(),
             source: self.source,
-            href: format!("/v1/scenarios/{}", self.id),
+            href: self.id.href(),
         }
     }
 
     /// May `caller` see it in a listing? The server's own scenarios are everybody's.
     fn visible_to(&self, caller: &Caller) -> bool {
-        self.source != "api"
+        self.source != ScenarioSource::Api
             || *caller == Caller::Open
             || caller
                 .owner()
@@ -86,7 +119,7 @@ impl StoredScenario {
 pub struct ScenarioRegistry {
     limit: usize,
     budget_bytes: usize,
-    by_id: RwLock<HashMap<String, Arc<StoredScenario>>>,
+    by_id: RwLock<HashMap<ScenarioId, Arc<StoredScenario>>>,
     clock: AtomicU64,
     /// With `--data-dir`: API scenarios are written there (with their owners) and removed when
     /// they are deleted or evicted, so the directory mirrors the registry.
@@ -119,7 +152,7 @@ impl ScenarioRegistry {
     /// Writes an API scenario's record (its document and current owners) to the data directory.
     fn persist(&self, stored: &StoredScenario) {
         let Some(disk) = &self.disk else { return };
-        if stored.source != "api" {
+        if stored.source != ScenarioSource::Api {
             return;
         }
         let _serial = self.disk_writes.lock().expect("registry disk lock");
@@ -130,13 +163,13 @@ impl ScenarioRegistry {
             return;
         }
         let record = stored.record();
-        disk.save_json(Kind::Scenario, &stored.id, &record);
+        disk.save_json(Kind::Scenario, stored.id.as_str(), &record);
     }
 
     /// Removes a scenario's record; called under the registry's write lock.
-    fn unpersist(&self, id: &str) {
+    fn unpersist(&self, id: &ScenarioId) {
         if let Some(disk) = &self.disk {
-            disk.remove_json(Kind::Scenario, id);
+            disk.remove_json(Kind::Scenario, id.as_str());
         }
     }
 
@@ -150,13 +183,13 @@ impl ScenarioRegistry {
     pub fn register(
         &self,
         scenario: Scenario,
-        source: &'static str,
+        source: ScenarioSource,
         owner: Option<Owner>,
-        in_use: impl FnOnce() -> HashSet<String>,
+        in_use: impl FnOnce() -> HashSet<ScenarioId>,
     ) -> Result<(Arc<StoredScenario>, bool), Error> {
         // One canonical form for both the id and the weight (a floor plan's is megabytes).
         let canonical = scenario.canonical_json();
-        let id = hash_hex(canonical.as_bytes());
+        let id = ScenarioId::of_canonical(&canonical);
         let bytes = canonical.len() + scenario.raster_bytes();
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
@@ -179,9 +212,9 @@ impl ScenarioRegistry {
         let mut held: usize = by_id.values().map(|s| s.bytes).sum();
         if by_id.len() >= self.limit || held + bytes > self.budget_bytes {
             let needed = in_use();
-            let mut victims: Vec<(u64, String, usize)> = by_id
+            let mut victims: Vec<(u64, ScenarioId, usize)> = by_id
                 .values()
-                .filter(|s| s.source == "api" && !needed.contains(&s.id))
+                .filter(|s| s.source == ScenarioSource::Api && !needed.contains(&s.id))
                 .map(|s| (s.last_used.load(Ordering::Relaxed), s.id.clone(), s.bytes))
                 .collect();
             victims.sort_unstable();
@@ -220,7 +253,7 @@ impl ScenarioRegistry {
         Ok((stored, true))
     }
 
-    pub fn get(&self, id: &str) -> Option<Arc<StoredScenario>> {
+    pub fn get(&self, id: &ScenarioId) -> Option<Arc<StoredScenario>> {
         let found = self.by_id.read().expect("registry lock").get(id).cloned();
         if let Some(s) = &found {
             s.last_used.store(self.tick(), Ordering::Relaxed);
@@ -231,14 +264,14 @@ impl ScenarioRegistry {
     /// Removes `caller`'s registration of an API scenario; the scenario goes with its last
     /// registration (true then). Built-in and preloaded files stay (409); a scenario the caller
     /// did not register is not found (404), as if it were not there.
-    pub fn delete(&self, id: &str, caller: &Caller) -> Result<bool, Error> {
+    pub fn delete(&self, id: &ScenarioId, caller: &Caller) -> Result<bool, Error> {
         let mut by_id = self.by_id.write().expect("registry lock");
         let Some(stored) = by_id.get(id) else {
             return Err(Error::not_found("scenario", id));
         };
-        if stored.source != "api" {
+        if stored.source != ScenarioSource::Api {
             return Err(Error::ScenarioProtected {
-                id: id.to_string(),
+                id: id.clone(),
                 origin: stored.source,
             });
         }
@@ -293,13 +326,13 @@ impl ScenarioRegistry {
 /// to both, a deleted one leaves both).
 #[derive(Clone)]
 pub struct MapCache {
-    maps: moka::future::Cache<String, Arc<RadioMap>>,
+    maps: moka::future::Cache<MapId, Arc<RadioMap>>,
     /// Each queried map's widest-path index ([`Bottlenecks`], 8 bytes a cell), built by its
     /// first path or sweep query. Its own budget, a quarter of the maps', holds the indexes of
     /// the maps being queried (an index is at most as big as its map); an evicted one is rebuilt
     /// on demand (≈ 0.1 s for 1001² cells). Map ids hash the map's inputs, so an index can never
     /// outlive the map it describes.
-    indexes: moka::sync::Cache<String, Arc<Bottlenecks>>,
+    indexes: moka::sync::Cache<MapId, Arc<Bottlenecks>>,
     disk: Option<MapDisk>,
 }
 
@@ -319,14 +352,14 @@ impl MapCache {
         let maps = moka::future::Cache::builder()
             .eviction_policy(moka::policy::EvictionPolicy::lru())
             .max_capacity((budget_bytes / 1024).max(1))
-            .weigher(|_id: &String, map: &Arc<RadioMap>| {
+            .weigher(|_id: &MapId, map: &Arc<RadioMap>| {
                 (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
             })
             .build();
         let indexes = moka::sync::Cache::builder()
             .eviction_policy(moka::policy::EvictionPolicy::lru())
             .max_capacity((budget_bytes / 4 / 1024).max(1))
-            .weigher(|_id: &String, index: &Arc<Bottlenecks>| {
+            .weigher(|_id: &MapId, index: &Arc<Bottlenecks>| {
                 (index.bytes() / 1024).clamp(1, u32::MAX as usize) as u32
             })
             .build();
@@ -338,19 +371,21 @@ impl MapCache {
     }
 
     /// Looks a map up in memory, then on disk, counting hits (memory or disk) and misses.
-    pub async fn get(&self, map_id: &str) -> Option<Arc<RadioMap>> {
+    pub async fn get(&self, map_id: &MapId) -> Option<Arc<RadioMap>> {
         if let Some(map) = self.maps.get(map_id).await {
             metrics::counter!("irs_map_cache_requests_total", "outcome" => "hit").increment(1);
             return Some(map);
         }
         let loaded = match &self.disk {
-            Some(disk) if disk.dir.has_map(map_id) => {
+            Some(disk) if disk.dir.has_map(map_id.as_str()) => {
                 let disk = disk.clone();
-                let id = map_id.to_string();
+                let id = map_id.clone();
                 // Reading and checking a map of megabytes is blocking work.
                 crate::tasks::spawn_blocking(move || {
-                    disk.dir.load_map(&id, |sid| {
-                        disk.scenarios.get(sid).map(|s| s.scenario.clone())
+                    disk.dir.load_map(id.as_str(), |sid| {
+                        disk.scenarios
+                            .get(&ScenarioId::given(sid))
+                            .map(|s| s.scenario.clone())
                     })
                 })
                 .await
@@ -362,17 +397,17 @@ impl MapCache {
         let outcome = if loaded.is_some() { "disk" } else { "miss" };
         metrics::counter!("irs_map_cache_requests_total", "outcome" => outcome).increment(1);
         let map = Arc::new(loaded?);
-        self.maps.insert(map_id.to_string(), map.clone()).await;
+        self.maps.insert(map_id.clone(), map.clone()).await;
         self.record_size();
         Some(map)
     }
 
     /// Caches a new map, and writes it to the data directory (before returning: a finished
     /// job's map is on disk by the time the job says `done`).
-    pub async fn insert(&self, map_id: String, map: Arc<RadioMap>) {
+    pub async fn insert(&self, map_id: MapId, map: Arc<RadioMap>) {
         if let Some(disk) = &self.disk {
             let (dir, id, to_save) = (disk.dir.clone(), map_id.clone(), map.clone());
-            let _ = crate::tasks::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
+            let _ = crate::tasks::spawn_blocking(move || dir.save_map(id.as_str(), &to_save)).await;
         }
         self.maps.insert(map_id, map).await;
         self.maps.run_pending_tasks().await;
@@ -381,7 +416,7 @@ impl MapCache {
 
     /// The widest-path index of a cached map, built on first use by the calling thread (a query
     /// worker; concurrent first queries wait for one build).
-    pub fn bottlenecks(&self, map_id: &str, map: &RadioMap) -> Arc<Bottlenecks> {
+    pub fn bottlenecks(&self, map_id: &MapId, map: &RadioMap) -> Arc<Bottlenecks> {
         self.indexes
             .get_with_by_ref(map_id, || Arc::new(planner::bottlenecks(map)))
     }
@@ -393,7 +428,7 @@ impl MapCache {
         let mut loaded = 0usize;
         let mut held = 0u64;
         for map_id in disk.dir.map_ids() {
-            let Some(map) = self.get(&map_id).await else {
+            let Some(map) = self.get(&MapId::given(map_id)).await else {
                 continue;
             };
             held += map.size_bytes() as u64;
@@ -415,40 +450,40 @@ impl MapCache {
     }
 
     /// The cached maps (id and map), for listing.
-    pub fn entries(&self) -> Vec<(String, Arc<RadioMap>)> {
+    pub fn entries(&self) -> Vec<(MapId, Arc<RadioMap>)> {
         self.maps.iter().map(|(k, v)| ((*k).clone(), v)).collect()
     }
 
     /// Drops a map from memory and disk; true if it was held.
-    pub async fn remove(&self, map_id: &str) -> bool {
+    pub async fn remove(&self, map_id: &MapId) -> bool {
         let mut removed = self.maps.remove(map_id).await.is_some();
         self.indexes.invalidate(map_id);
         if let Some(disk) = &self.disk {
-            removed |= disk.dir.remove_map(map_id);
+            removed |= disk.dir.remove_map(map_id.as_str());
         }
         self.record_size();
         removed
     }
 
     /// Drops every map of a deleted scenario, from memory and disk.
-    pub async fn remove_scenario_maps(&self, scenario_id: &str) {
+    pub async fn remove_scenario_maps(&self, scenario_id: &ScenarioId) {
         for (map_id, map) in self.entries() {
-            if map.key.scenario_id == scenario_id {
+            if map.key.scenario_id == scenario_id.as_str() {
                 self.maps.remove(&map_id).await;
                 self.indexes.invalidate(&map_id);
             }
         }
         if let Some(disk) = &self.disk {
-            disk.dir.remove_maps_of(scenario_id);
+            disk.dir.remove_maps_of(scenario_id.as_str());
         }
         self.record_size();
     }
 
     /// The scenarios the cached maps were built from.
-    pub fn scenario_ids(&self) -> HashSet<String> {
+    pub fn scenario_ids(&self) -> HashSet<ScenarioId> {
         self.maps
             .iter()
-            .map(|(_, m)| m.key.scenario_id.clone())
+            .map(|(_, m)| ScenarioId::of_key(&m.key))
             .collect()
     }
 }

@@ -13,8 +13,8 @@
 use super::cache::MapCache;
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::ids::{JobId, MapId, ScenarioId};
 use crate::store::{DataDir, Kind};
-use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::placement::{self, Candidate, Placement, Search};
 use irs_model::radiomap::{Cancelled, MapKey, Progress, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
@@ -55,11 +55,35 @@ impl JobState {
     }
 }
 
+/// What kind of job it is: shown as `kind` and labels its metrics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JobKind {
+    /// Builds a map.
+    Map,
+    /// Ranks placement candidates.
+    Placement,
+}
+
+impl JobKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::Map => "map",
+            JobKind::Placement => "placement",
+        }
+    }
+}
+
+impl Serialize for JobKind {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
 /// What a job does.
 pub enum Work {
     /// Builds one map (single flight by map id); `handover` passes it to the waiters.
     Map {
-        map_id: String,
+        map_id: MapId,
         key: MapKey,
         handover: Mutex<Handover>,
     },
@@ -114,13 +138,13 @@ pub struct PlacementOutcome {
 
 /// One job.
 pub struct Job {
-    pub id: String,
+    pub id: JobId,
     /// Order of creation, for listings (newest first) and their cursors.
     pub seq: u64,
     /// The token that started it (`None` with authentication off); only it may cancel.
     pub owner: Option<Owner>,
     /// The scenario the job works on (a live job keeps it registered).
-    pub scenario_id: String,
+    pub scenario_id: ScenarioId,
     pub work: Work,
     pub progress: Arc<Progress>,
     state: watch::Sender<JobState>,
@@ -139,12 +163,11 @@ struct JobTimes {
 /// A job as the API shows it.
 #[derive(Debug, Clone, Serialize)]
 pub struct JobView {
-    pub job_id: String,
-    /// `map` or `placement`.
-    pub kind: &'static str,
-    pub scenario_id: String,
+    pub job_id: JobId,
+    pub kind: JobKind,
+    pub scenario_id: ScenarioId,
     /// Map jobs: the map being built and its key (null for placements).
-    pub map_id: Option<String>,
+    pub map_id: Option<MapId>,
     pub key: Option<MapKey>,
     pub state: JobState,
     pub cells_done: usize,
@@ -164,11 +187,11 @@ pub struct JobView {
 /// and, for a placement, to answer it.
 #[derive(Debug, Serialize, Deserialize)]
 pub(crate) struct JobRecord {
-    pub job_id: String,
+    pub job_id: JobId,
     pub seq: u64,
     /// The owner's digest (never the token).
     pub owner: Option<String>,
-    pub scenario_id: String,
+    pub scenario_id: ScenarioId,
     /// Map jobs: the map's key (its hash is the map id).
     pub key: Option<MapKey>,
     pub state: JobState,
@@ -187,10 +210,10 @@ impl JobRecord {
     pub(crate) fn view(&self) -> JobView {
         let (kind, map_id, result_href) = match &self.key {
             Some(key) => {
-                let map_id = irs_answers::map::map_id(key);
-                ("map", Some(map_id.clone()), format!("/v1/maps/{map_id}"))
+                let map_id = MapId::of(key);
+                (JobKind::Map, Some(map_id.clone()), map_id.href())
             }
-            None => ("placement", None, format!("/v1/placements/{}", self.job_id)),
+            None => (JobKind::Placement, None, self.job_id.placement_href()),
         };
         JobView {
             job_id: self.job_id.clone(),
@@ -210,7 +233,7 @@ impl JobRecord {
             started_at: self.started_at,
             finished_at: self.finished_at,
             error: self.error.clone(),
-            href: format!("/v1/jobs/{}", self.job_id),
+            href: self.job_id.href(),
             result_href,
         }
     }
@@ -218,10 +241,10 @@ impl JobRecord {
     /// A map job not started yet, as the replica that takes a request records it.
     pub(crate) fn queued(key: &MapKey, owner: Option<&Owner>) -> JobRecord {
         JobRecord {
-            job_id: uuid::Uuid::new_v4().simple().to_string(),
+            job_id: JobId::random(),
             seq: 0,
             owner: owner.map(|o| o.to_string()),
-            scenario_id: key.scenario_id.clone(),
+            scenario_id: ScenarioId::of_key(key),
             key: Some(key.clone()),
             state: JobState::Queued,
             cells_done: 0,
@@ -256,8 +279,15 @@ impl Job {
         *self.state.borrow()
     }
 
+    pub fn kind(&self) -> JobKind {
+        match &self.work {
+            Work::Map { .. } => JobKind::Map,
+            Work::Placement { .. } => JobKind::Placement,
+        }
+    }
+
     /// The map a map job builds.
-    pub fn map_id(&self) -> Option<&str> {
+    pub fn map_id(&self) -> Option<&MapId> {
         match &self.work {
             Work::Map { map_id, .. } => Some(map_id),
             Work::Placement { .. } => None,
@@ -311,17 +341,12 @@ impl Job {
         let (done, total) = (self.progress.cells_done(), self.progress.cells_total());
         let (kind, map_id, key, result_href) = match &self.work {
             Work::Map { map_id, key, .. } => (
-                "map",
+                JobKind::Map,
                 Some(map_id.clone()),
                 Some(key.clone()),
-                format!("/v1/maps/{map_id}"),
+                map_id.href(),
             ),
-            Work::Placement { .. } => (
-                "placement",
-                None,
-                None,
-                format!("/v1/placements/{}", self.id),
-            ),
+            Work::Placement { .. } => (JobKind::Placement, None, None, self.id.placement_href()),
         };
         JobView {
             job_id: self.id.clone(),
@@ -341,7 +366,7 @@ impl Job {
             started_at: unix(times.started),
             finished_at: unix(times.finished),
             error: self.error.lock().expect("job lock").clone(),
-            href: format!("/v1/jobs/{}", self.id),
+            href: self.id.href(),
             result_href,
         }
     }
@@ -376,7 +401,7 @@ impl Job {
         }
         let work = match (record.key, record.placement) {
             (Some(key), None) => Work::Map {
-                map_id: irs_answers::map::map_id(&key),
+                map_id: MapId::of(&key),
                 key,
                 handover: Mutex::new(Handover::default()),
             },
@@ -439,11 +464,6 @@ impl Job {
     }
 }
 
-/// The map id of a map job (empty for a placement).
-fn map_id_of(job: &Job) -> String {
-    job.map_id().unwrap_or_default().to_string()
-}
-
 /// The outcome of asking for a map.
 pub enum MapRequestOutcome {
     Ready(Arc<RadioMap>),
@@ -456,9 +476,9 @@ pub struct Jobs {
     queue_limit: usize,
     queued: Arc<AtomicUsize>,
     history_limit: usize,
-    by_id: Mutex<HashMap<String, Arc<Job>>>,
-    finished_order: Mutex<VecDeque<String>>,
-    in_flight: tokio::sync::Mutex<HashMap<String, Arc<Job>>>,
+    by_id: Mutex<HashMap<JobId, Arc<Job>>>,
+    finished_order: Mutex<VecDeque<JobId>>,
+    in_flight: tokio::sync::Mutex<HashMap<MapId, Arc<Job>>>,
     /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
     disk: Option<Arc<DataDir>>,
 }
@@ -491,7 +511,7 @@ impl Jobs {
             .load_json::<JobRecord>(Kind::Job)
             .into_iter()
             .filter_map(|(file_id, record)| {
-                (record.job_id == file_id)
+                (record.job_id.as_str() == file_id)
                     .then_some(record)
                     .and_then(Job::restore)
             })
@@ -499,7 +519,7 @@ impl Jobs {
         jobs.sort_by_key(|job| job.seq);
         let surplus = jobs.len().saturating_sub(self.history_limit);
         for old in jobs.drain(..surplus) {
-            disk.remove_json(Kind::Job, &old.id);
+            disk.remove_json(Kind::Job, old.id.as_str());
         }
         let next = jobs.last().map_or(0, |job| job.seq + 1);
         self.next_seq.fetch_max(next, Ordering::Relaxed);
@@ -513,17 +533,17 @@ impl Jobs {
         restored
     }
 
-    pub fn get(&self, id: &str) -> Option<Arc<Job>> {
+    pub fn get(&self, id: &JobId) -> Option<Arc<Job>> {
         self.by_id.lock().expect("jobs lock").get(id).cloned()
     }
 
     /// The job building `map_id`, if one is queued or running.
-    pub async fn building(&self, map_id: &str) -> Option<Arc<Job>> {
+    pub async fn building(&self, map_id: &MapId) -> Option<Arc<Job>> {
         self.in_flight.lock().await.get(map_id).cloned()
     }
 
     /// Cancels every queued and running job (shutdown); returns their ids.
-    pub fn cancel_all(&self) -> Vec<String> {
+    pub fn cancel_all(&self) -> Vec<JobId> {
         self.live()
             .into_iter()
             .map(|job| {
@@ -567,7 +587,7 @@ impl Jobs {
         key: MapKey,
         owner: Option<Owner>,
     ) -> Result<MapRequestOutcome, Error> {
-        let map_id = irs_answers::map::map_id(&key);
+        let map_id = MapId::of(&key);
         let mut in_flight = self.in_flight.lock().await;
         if let Some(map) = cache.get(&map_id).await {
             return Ok(MapRequestOutcome::Ready(map));
@@ -581,9 +601,9 @@ impl Jobs {
                 limit: self.queue_limit,
             });
         }
-        let job = self.admit_map(uuid::Uuid::new_v4().simple().to_string(), &key, owner);
-        in_flight.insert(map_id, job.clone());
-        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id_of(&job), scenario_id = %key.scenario_id);
+        let job = self.admit_map(JobId::random(), &key, owner);
+        in_flight.insert(map_id.clone(), job.clone());
+        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
         let cache = cache.clone();
         let work =
@@ -591,7 +611,7 @@ impl Jobs {
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
             job.hand_over(&map);
-            cache.insert(map_id_of(&job), map).await;
+            cache.insert(map_id, map).await;
         };
         crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
         Ok(MapRequestOutcome::Building(job))
@@ -603,7 +623,7 @@ impl Jobs {
     /// `irs_map_builds_total`, which in a cluster counts builds, not requests.
     pub(crate) fn build_shared<P, Fut>(
         self: &Arc<Self>,
-        job_id: String,
+        job_id: JobId,
         scenario: Arc<Scenario>,
         key: MapKey,
         owner: Option<Owner>,
@@ -614,31 +634,27 @@ impl Jobs {
         P: FnOnce(Arc<RadioMap>) -> Fut + Send + 'static,
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
-        let map_id = irs_answers::map::map_id(&key);
+        let map_id = MapId::of(&key);
         let job = self.admit_map(job_id, &key, owner);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
         let work =
             move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let built_id = map_id.clone();
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
             job.hand_over(&map);
             if let Err(e) = publish(map.clone()).await {
                 tracing::warn!(error = %e, "built map not shared: other replicas will build it again");
             }
-            cache.insert(map_id_of(&job), map).await;
+            cache.insert(built_id, map).await;
         };
         let runner = self.clone();
         let handle = job.clone();
         crate::tasks::spawn(
             async move {
-                let in_flight = handle.map_id().unwrap_or_default().to_string();
-                runner
-                    .in_flight
-                    .lock()
-                    .await
-                    .insert(in_flight, handle.clone());
+                runner.in_flight.lock().await.insert(map_id, handle.clone());
                 runner.run(handle, work, finish).await;
             }
             .instrument(span),
@@ -680,7 +696,7 @@ impl Jobs {
             });
         }
         let job = self.admit(
-            scenario.content_hash(),
+            ScenarioId::of(&scenario),
             owner,
             Work::Placement {
                 outcome: OnceLock::new(),
@@ -708,7 +724,7 @@ impl Jobs {
                     if progress.is_cancelled() {
                         return Err(Cancelled.into());
                     }
-                    let key = MapKey::gain(&s.content_hash(), s, phases)?;
+                    let key = MapKey::gain(ScenarioId::of(s).as_str(), s, phases)?;
                     Ok(irs_answers::map::build(s, &key, &Progress::default())?)
                 })
                 .collect::<Result<Vec<_>, WorkError>>()?;
@@ -719,7 +735,7 @@ impl Jobs {
             let mut registered = 0;
             for (scenario, map) in placement.scenarios.into_iter().zip(maps) {
                 if register(scenario) {
-                    cache.insert(map.id.clone(), Arc::new(map)).await;
+                    cache.insert(MapId::of_map(&map), Arc::new(map)).await;
                     registered += 1;
                 }
             }
@@ -735,24 +751,19 @@ impl Jobs {
     }
 
     /// Creates a queued job and records it.
-    fn admit(&self, scenario_id: String, owner: Option<Owner>, work: Work) -> Arc<Job> {
-        self.admit_as(
-            uuid::Uuid::new_v4().simple().to_string(),
-            scenario_id,
-            owner,
-            work,
-        )
+    fn admit(&self, scenario_id: ScenarioId, owner: Option<Owner>, work: Work) -> Arc<Job> {
+        self.admit_as(JobId::random(), scenario_id, owner, work)
     }
 
     /// A map build admitted as job `id`, counted in `irs_map_builds_total`.
-    fn admit_map(&self, id: String, key: &MapKey, owner: Option<Owner>) -> Arc<Job> {
+    fn admit_map(&self, id: JobId, key: &MapKey, owner: Option<Owner>) -> Arc<Job> {
         metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
         self.admit_as(
             id,
-            key.scenario_id.clone(),
+            ScenarioId::of_key(key),
             owner,
             Work::Map {
-                map_id: irs_answers::map::map_id(key),
+                map_id: MapId::of(key),
                 key: key.clone(),
                 handover: Mutex::new(Handover::default()),
             },
@@ -762,8 +773,8 @@ impl Jobs {
     /// [`Jobs::admit`] under a given id (a cluster job keeps the id its record has).
     fn admit_as(
         &self,
-        id: String,
-        scenario_id: String,
+        id: JobId,
+        scenario_id: ScenarioId,
         owner: Option<Owner>,
         work: Work,
     ) -> Arc<Job> {
@@ -828,7 +839,8 @@ impl Jobs {
         let seconds = started.elapsed().as_secs_f64();
         match result {
             Ok(Ok(output)) => {
-                metrics::histogram!("irs_job_seconds", "kind" => job.view().kind).record(seconds);
+                metrics::histogram!("irs_job_seconds", "kind" => job.kind().as_str())
+                    .record(seconds);
                 finish(job.clone(), output).await;
                 job.set_state(JobState::Done);
                 tracing::info!(run_s = seconds, "job done");
@@ -865,8 +877,10 @@ impl Jobs {
         if let Some(disk) = self.disk.clone() {
             let (id, record) = (job.id.clone(), job.record());
             // A small file, but flushed to disk: off the async threads.
-            let _ =
-                crate::tasks::spawn_blocking(move || disk.save_json(Kind::Job, &id, &record)).await;
+            let _ = crate::tasks::spawn_blocking(move || {
+                disk.save_json(Kind::Job, id.as_str(), &record)
+            })
+            .await;
         }
         let mut order = self.finished_order.lock().expect("jobs lock");
         order.push_back(job.id.clone());
@@ -874,14 +888,14 @@ impl Jobs {
             if let Some(old) = order.pop_front() {
                 self.by_id.lock().expect("jobs lock").remove(&old);
                 if let Some(disk) = &self.disk {
-                    disk.remove_json(Kind::Job, &old);
+                    disk.remove_json(Kind::Job, old.as_str());
                 }
             }
         }
     }
 
     /// Cancels a queued or running job; a job of another token is not found (404).
-    pub fn cancel(&self, id: &str, caller: &Caller) -> Result<Arc<Job>, Error> {
+    pub fn cancel(&self, id: &JobId, caller: &Caller) -> Result<Arc<Job>, Error> {
         let job = self
             .get(id)
             .filter(|job| caller.may_touch(job.owner.as_ref()))
@@ -889,7 +903,7 @@ impl Jobs {
         let state = job.state();
         if state.is_terminal() {
             return Err(Error::JobFinished {
-                job_id: id.to_string(),
+                job_id: id.clone(),
                 state: state.label(),
             });
         }

@@ -24,6 +24,7 @@ pub mod app;
 pub(crate) mod cache;
 pub mod config;
 pub mod http;
+pub(crate) mod ids;
 pub(crate) mod jobs;
 pub(crate) mod priority;
 pub mod probe;

@@ -3,6 +3,7 @@
 //! it to the shared store and keeps the job's record there current (heartbeats) until it ends.
 
 use super::App;
+use crate::ids::ScenarioId;
 use crate::jobs::{JobRecord, JobState};
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
 use redis::aio::ConnectionManager;
@@ -77,7 +78,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
         cluster.finish(&build).await;
         return;
     }
-    let scenario = match state.scenario(&build.key.scenario_id).await {
+    let scenario = match state.scenario(&ScenarioId::of_key(&build.key)).await {
         Ok(Some(stored)) => stored.scenario.clone(),
         other => {
             let reason = match other {

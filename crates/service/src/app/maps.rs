@@ -6,6 +6,8 @@
 use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
+use crate::cache::ScenarioSource;
+use crate::ids::{MapId, ScenarioId};
 use crate::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
 use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
@@ -63,13 +65,13 @@ pub(crate) fn check_budget(
 impl App {
     /// A built map by id, from wherever it is; not ready (with its job) while a build of it
     /// runs here or anywhere in the cluster, else not found.
-    pub(crate) async fn map(&self, map_id: &str) -> Result<Arc<RadioMap>, Error> {
+    pub(crate) async fn map(&self, map_id: &MapId) -> Result<Arc<RadioMap>, Error> {
         if let Some(map) = self.shared_map(map_id).await? {
             return Ok(map);
         }
         if let Some(job) = self.jobs().building(map_id).await {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id: job.id.clone(),
             });
         }
@@ -77,7 +79,7 @@ impl App {
             && let Some(job_id) = cluster.building(map_id).await?
         {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id,
             });
         }
@@ -87,11 +89,11 @@ impl App {
     /// A built map and the scenario it was built from.
     pub(crate) async fn map_with_scenario(
         &self,
-        map_id: &str,
+        map_id: &MapId,
     ) -> Result<(Arc<RadioMap>, Arc<Scenario>), Error> {
         let map = self.map(map_id).await?;
         let stored = self
-            .scenario(&map.key.scenario_id)
+            .scenario(&ScenarioId::of_key(&map.key))
             .await?
             .ok_or_else(|| Error::not_found("scenario", &map.key.scenario_id))?;
         Ok((map, stored.scenario.clone()))
@@ -121,10 +123,10 @@ impl App {
 
     /// Drops a built map here and from the shared store (the next request for it builds it
     /// again). A map being built here is not ready: cancel its job instead.
-    pub(crate) async fn delete_map(&self, map_id: &str) -> Result<(), Error> {
+    pub(crate) async fn delete_map(&self, map_id: &MapId) -> Result<(), Error> {
         if let Some(job) = self.jobs().building(map_id).await {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id: job.id.clone(),
             });
         }
@@ -154,7 +156,7 @@ impl App {
             inline,
         } = self.named_scenario(spec.scenario, prefix).await?;
         let key = MapKey::new(
-            &id,
+            id.as_str(),
             &scenario,
             spec.kind,
             spec.phases,
@@ -193,7 +195,8 @@ impl App {
             ));
         }
         if inline {
-            let (stored, _) = self.register_scenario((*scenario).clone(), "api", caller)?;
+            let (stored, _) =
+                self.register_scenario((*scenario).clone(), ScenarioSource::Api, caller)?;
             return Ok((stored.scenario.clone(), key));
         }
         Ok((scenario, key))
@@ -237,13 +240,13 @@ impl App {
         key: MapKey,
         cheap: bool,
     ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
-        let map_id = irs_answers::map::map_id(&key);
+        let map_id = MapId::of(&key);
         if let Some(map) = self.shared_map(&map_id).await? {
             return Ok(Ok(map));
         }
         // The replica that builds it reads the scenario from the shared store.
         let stored = self
-            .scenario(&key.scenario_id)
+            .scenario(&ScenarioId::of_key(&key))
             .await?
             .ok_or_else(|| Error::not_found("scenario", &key.scenario_id))?;
         self.share_scenario(&stored, false).await?;
@@ -286,7 +289,7 @@ impl App {
     /// the shared store, decoded against its scenario and cached here.
     async fn shared_map(
         &self,
-        map_id: &str,
+        map_id: &MapId,
     ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, Error> {
         if let Some(map) = self.cache().get(map_id).await {
             return Ok(Some(map));
@@ -299,7 +302,7 @@ impl App {
         };
         let key = irs_answers::encoding::peek_key(&encoded)
             .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
-        let Some(stored) = self.scenario(&key.scenario_id).await? else {
+        let Some(stored) = self.scenario(&ScenarioId::of_key(&key)).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
@@ -309,13 +312,13 @@ impl App {
         .await
         .map_err(|e| Error::internal(e.to_string()))?
         .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
-        if map.id != map_id {
+        if map.id != map_id.as_str() {
             return Err(Error::internal(format!(
                 "shared map {map_id} holds another map"
             )));
         }
         let map = Arc::new(map);
-        self.cache().insert(map_id.to_string(), map.clone()).await;
+        self.cache().insert(map_id.clone(), map.clone()).await;
         Ok(Some(map))
     }
 }

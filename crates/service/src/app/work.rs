@@ -3,11 +3,12 @@
 
 use super::identity::Caller;
 use super::{App, Error};
+use crate::ids::JobId;
 use crate::jobs::JobView;
 
 impl App {
     /// A job by id: this replica's, else another replica's as its builder last recorded it.
-    pub(crate) async fn job(&self, id: &str) -> Result<JobView, Error> {
+    pub(crate) async fn job(&self, id: &JobId) -> Result<JobView, Error> {
         if let Some(job) = self.jobs().get(id) {
             return Ok(job.view());
         }
@@ -21,7 +22,7 @@ impl App {
 
     /// Cancels a queued or running job of `caller`'s (a job of another token is not found);
     /// returns it as it was when asked.
-    pub(crate) async fn cancel_job(&self, id: &str, caller: &Caller) -> Result<JobView, Error> {
+    pub(crate) async fn cancel_job(&self, id: &JobId, caller: &Caller) -> Result<JobView, Error> {
         let local = self.jobs().get(id).is_some();
         if let Some(cluster) = self.cluster().filter(|_| !local) {
             // Another replica runs it: it reads the request at its next heartbeat.
@@ -32,7 +33,7 @@ impl App {
                 .ok_or_else(|| Error::not_found("job", id))?;
             if record.state.is_terminal() {
                 return Err(Error::JobFinished {
-                    job_id: id.to_string(),
+                    job_id: id.clone(),
                     state: record.state.label(),
                 });
             }

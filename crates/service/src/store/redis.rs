@@ -26,6 +26,7 @@
 use super::Error;
 use super::disk as store;
 use crate::cache::ScenarioRecord;
+use crate::ids::{JobId, MapId, ScenarioId};
 use crate::jobs::JobRecord;
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
@@ -58,19 +59,19 @@ const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
 /// Cancellation requests and job records outlive any job: a day.
 const RECORD_TTL_S: u64 = 86_400;
 
-fn scenario_key(id: &str) -> String {
+fn scenario_key(id: &ScenarioId) -> String {
     format!("irs:scenario:{id}")
 }
-fn map_key(id: &str) -> String {
+fn map_key(id: &MapId) -> String {
     format!("irs:map:{id}")
 }
-fn job_key(id: &str) -> String {
+fn job_key(id: &JobId) -> String {
     format!("irs:job:{id}")
 }
-fn cancel_key(id: &str) -> String {
+fn cancel_key(id: &JobId) -> String {
     format!("irs:cancel:{id}")
 }
-fn lock_key(map_id: &str) -> String {
+fn lock_key(map_id: &MapId) -> String {
     format!("irs:building:{map_id}")
 }
 
@@ -78,8 +79,8 @@ fn lock_key(map_id: &str) -> String {
 #[derive(Debug, Clone)]
 pub(crate) struct BuildEntry {
     pub stream_id: String,
-    pub job_id: String,
-    pub map_id: String,
+    pub job_id: JobId,
+    pub map_id: MapId,
     pub key: MapKey,
 }
 
@@ -89,10 +90,10 @@ impl BuildEntry {
         let map_id: String = entry.get("map_id")?;
         let key: String = entry.get("key")?;
         let key: MapKey = serde_json::from_str(&key).ok()?;
-        (irs_answers::map::map_id(&key) == map_id).then(|| BuildEntry {
+        (MapId::of(&key).as_str() == map_id).then(|| BuildEntry {
             stream_id: entry.id.clone(),
-            job_id,
-            map_id,
+            job_id: JobId::given(job_id),
+            map_id: MapId::given(map_id),
             key,
         })
     }
@@ -222,7 +223,7 @@ impl Cluster {
     /// map request must make its scenario readable, not upload a floor plan each time).
     pub async fn put_scenario(
         &self,
-        id: &str,
+        id: &ScenarioId,
         record: &ScenarioRecord,
         replace: bool,
     ) -> Result<(), Error> {
@@ -242,7 +243,7 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn scenario(&self, id: &str) -> Result<Option<ScenarioRecord>, Error> {
+    pub async fn scenario(&self, id: &ScenarioId) -> Result<Option<ScenarioRecord>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn
             .get(scenario_key(id))
@@ -251,7 +252,7 @@ impl Cluster {
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn delete_scenario(&self, id: &str) -> Result<(), Error> {
+    pub async fn delete_scenario(&self, id: &ScenarioId) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.del::<_, ()>(scenario_key(id))
             .await
@@ -259,7 +260,7 @@ impl Cluster {
     }
 
     /// Stores a map's encoded bytes, framed with their digest.
-    pub async fn put_map(&self, id: &str, encoded: &[u8]) -> Result<(), Error> {
+    pub async fn put_map(&self, id: &MapId, encoded: &[u8]) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
             .await
@@ -267,19 +268,19 @@ impl Cluster {
     }
 
     /// A map's encoded bytes, if Redis has it and its digest checks out.
-    pub async fn map(&self, id: &str) -> Result<Option<Vec<u8>>, Error> {
+    pub async fn map(&self, id: &MapId) -> Result<Option<Vec<u8>>, Error> {
         let mut conn = self.conn()?;
         let framed: Option<Vec<u8>> = conn.get(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(framed.and_then(|bytes| match store::unframe(&bytes) {
             Ok(payload) => Some(payload.to_vec()),
             Err(reason) => {
-                tracing::warn!(map_id = id, reason, "map in Redis ignored");
+                tracing::warn!(map_id = %id, reason, "map in Redis ignored");
                 None
             }
         }))
     }
 
-    pub async fn delete_map(&self, id: &str) -> Result<bool, Error> {
+    pub async fn delete_map(&self, id: &MapId) -> Result<bool, Error> {
         let mut conn = self.conn()?;
         let removed: usize = conn.del(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(removed > 0)
@@ -293,20 +294,20 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn job(&self, id: &str) -> Result<Option<JobRecord>, Error> {
+    pub async fn job(&self, id: &JobId) -> Result<Option<JobRecord>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn request_cancel(&self, id: &str) -> Result<(), Error> {
+    pub async fn request_cancel(&self, id: &JobId) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set_ex::<_, _, ()>(cancel_key(id), 1, RECORD_TTL_S)
             .await
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn cancel_requested(&self, id: &str) -> bool {
+    pub async fn cancel_requested(&self, id: &JobId) -> bool {
         let Ok(mut conn) = self.conn() else {
             return false;
         };
@@ -314,9 +315,13 @@ impl Cluster {
     }
 
     /// The job building `map_id` somewhere in the cluster, if one is.
-    pub async fn building(&self, map_id: &str) -> Result<Option<String>, Error> {
+    pub async fn building(&self, map_id: &MapId) -> Result<Option<JobId>, Error> {
         let mut conn = self.conn()?;
-        conn.get(lock_key(map_id)).await.map_err(|e| self.error(&e))
+        let holder: Option<String> = conn
+            .get(lock_key(map_id))
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(holder.map(JobId::given))
     }
 
     /// Single flight across replicas: the id of the job building `map_id`, and whether it was
@@ -324,11 +329,11 @@ impl Cluster {
     /// `queue_limit` bounds the builds queued or running in the whole cluster (503 past it).
     pub async fn enqueue(
         &self,
-        map_id: &str,
+        map_id: &MapId,
         key: &MapKey,
         queued: JobRecord,
         queue_limit: usize,
-    ) -> Result<(String, bool), Error> {
+    ) -> Result<(JobId, bool), Error> {
         let mut conn = self.conn()?;
         for _ in 0..3 {
             let existing: Option<String> = conn
@@ -336,7 +341,7 @@ impl Cluster {
                 .await
                 .map_err(|e| self.error(&e))?;
             if let Some(job_id) = existing {
-                return Ok((job_id, false));
+                return Ok((JobId::given(job_id), false));
             }
             let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
             if waiting >= queue_limit {
@@ -346,7 +351,7 @@ impl Cluster {
                 .conditional_set(ExistenceCheck::NX)
                 .with_expiration(SetExpiry::PX(LEASE.as_millis() as u64));
             let taken: Option<String> = conn
-                .set_options(lock_key(map_id), &queued.job_id, options)
+                .set_options(lock_key(map_id), queued.job_id.as_str(), options)
                 .await
                 .map_err(|e| self.error(&e))?;
             if taken.is_none() {
@@ -360,7 +365,7 @@ impl Cluster {
                         "*",
                         &[
                             ("job_id", queued.job_id.as_str()),
-                            ("map_id", map_id),
+                            ("map_id", map_id.as_str()),
                             ("key", key_json.as_str()),
                         ],
                     )
