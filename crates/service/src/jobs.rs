@@ -81,11 +81,11 @@ impl Serialize for JobKind {
 
 /// What a job does.
 pub enum Work {
-    /// Builds one map (single flight by map id); `handover` passes it to the waiters.
+    /// Builds one map (single flight by map id); `delivery` passes it to the waiters.
     Map {
         map_id: MapId,
         key: MapKey,
-        handover: Mutex<Handover>,
+        delivery: Mutex<MapDelivery>,
     },
     /// Ranks placement candidates; the answer is kept here once the job is done.
     Placement {
@@ -93,9 +93,9 @@ pub enum Work {
     },
 }
 
-/// How a map job hands its map to the requests waiting for it.
+/// How a map job delivers its built map to the requests waiting for it.
 #[derive(Default)]
-pub struct Handover {
+pub struct MapDelivery {
     /// Requests waiting for the map.
     waiters: usize,
     /// The map, held while waiters remain.
@@ -105,7 +105,7 @@ pub struct Handover {
 }
 
 /// One request waiting for a map job; the last to go lets the job drop the map.
-struct Waiter<'a>(&'a Mutex<Handover>);
+struct Waiter<'a>(&'a Mutex<MapDelivery>);
 
 impl Drop for Waiter<'_> {
     fn drop(&mut self) {
@@ -160,99 +160,105 @@ struct JobTimes {
     finished: Option<SystemTime>,
 }
 
-/// A job as the API shows it.
-#[derive(Debug, Clone, Serialize)]
+/// A job as the API shows it, and the part of its record that says so: the fields here are
+/// the facts a record keeps (read back with serde's derive, so a record from any release that
+/// has them is readable); what follows from them (`kind`, `map_id`, `progress` and the links)
+/// is added when the view is written (its `Serialize`, below).
+#[derive(Debug, Clone, Deserialize)]
 pub struct JobView {
     pub job_id: JobId,
-    pub kind: JobKind,
     pub scenario_id: ScenarioId,
-    /// Map jobs: the map being built and its key (null for placements).
-    pub map_id: Option<MapId>,
+    /// Map jobs: the key of the map being built (null for placements; its hash is the map id).
     pub key: Option<MapKey>,
     pub state: JobState,
     pub cells_done: usize,
     pub cells_total: usize,
-    /// cells_done / cells_total (0 before the build starts).
-    pub progress: f64,
     pub created_at: f64,
     pub started_at: Option<f64>,
     pub finished_at: Option<f64>,
     pub error: Option<String>,
-    pub href: String,
-    /// Where the result is read once the job is done: the map, or the placement answer.
-    pub result_href: String,
 }
 
-/// A finished job as the data directory keeps it (`serve --data-dir`): enough to show it again
-/// and, for a placement, to answer it.
+impl JobView {
+    pub fn kind(&self) -> JobKind {
+        match self.key {
+            Some(_) => JobKind::Map,
+            None => JobKind::Placement,
+        }
+    }
+
+    /// cells_done / cells_total (0 before the build starts).
+    pub fn progress(&self) -> f64 {
+        if self.cells_total == 0 {
+            0.0
+        } else {
+            self.cells_done as f64 / self.cells_total as f64
+        }
+    }
+}
+
+/// The API's `Job` (openapi.yaml): the view's fields with what follows from them, in this order.
+impl Serialize for JobView {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct as _;
+        let map_id = self.key.as_ref().map(MapId::of);
+        let result_href = match &map_id {
+            Some(map_id) => map_id.href(),
+            None => self.job_id.placement_href(),
+        };
+        let mut job = serializer.serialize_struct("JobView", 15)?;
+        job.serialize_field("job_id", &self.job_id)?;
+        job.serialize_field("kind", &self.kind())?;
+        job.serialize_field("scenario_id", &self.scenario_id)?;
+        job.serialize_field("map_id", &map_id)?;
+        job.serialize_field("key", &self.key)?;
+        job.serialize_field("state", &self.state)?;
+        job.serialize_field("cells_done", &self.cells_done)?;
+        job.serialize_field("cells_total", &self.cells_total)?;
+        job.serialize_field("progress", &self.progress())?;
+        job.serialize_field("created_at", &self.created_at)?;
+        job.serialize_field("started_at", &self.started_at)?;
+        job.serialize_field("finished_at", &self.finished_at)?;
+        job.serialize_field("error", &self.error)?;
+        job.serialize_field("href", &self.job_id.href())?;
+        // Where the result is read once the job is done: the map, or the placement answer.
+        job.serialize_field("result_href", &result_href)?;
+        job.end()
+    }
+}
+
+/// A job as the data directory (`serve --data-dir`, finished jobs) and Redis (a cluster's map
+/// builds, while they run and after) keep it: its view, and what it takes to list, authorise
+/// and, for a placement, answer it again.
 #[derive(Debug, Serialize, Deserialize)]
 pub(crate) struct JobRecord {
-    pub job_id: JobId,
+    #[serde(flatten)]
+    pub view: JobView,
     pub seq: u64,
     /// The owner's digest (never the token).
     pub owner: Option<String>,
-    pub scenario_id: ScenarioId,
-    /// Map jobs: the map's key (its hash is the map id).
-    pub key: Option<MapKey>,
-    pub state: JobState,
-    pub cells_done: usize,
-    pub cells_total: usize,
-    pub created_at: f64,
-    pub started_at: Option<f64>,
-    pub finished_at: Option<f64>,
-    pub error: Option<String>,
     /// Placement jobs that finished: the answer and how many candidates were registered.
     pub placement: Option<(serde_json::Value, usize)>,
 }
 
 impl JobRecord {
-    /// The job as the API shows it (a job another replica runs, seen from its record).
-    pub(crate) fn view(&self) -> JobView {
-        let (kind, map_id, result_href) = match &self.key {
-            Some(key) => {
-                let map_id = MapId::of(key);
-                (JobKind::Map, Some(map_id.clone()), map_id.href())
-            }
-            None => (JobKind::Placement, None, self.job_id.placement_href()),
-        };
-        JobView {
-            job_id: self.job_id.clone(),
-            kind,
-            scenario_id: self.scenario_id.clone(),
-            map_id,
-            key: self.key.clone(),
-            state: self.state,
-            cells_done: self.cells_done,
-            cells_total: self.cells_total,
-            progress: if self.cells_total == 0 {
-                0.0
-            } else {
-                self.cells_done as f64 / self.cells_total as f64
-            },
-            created_at: self.created_at,
-            started_at: self.started_at,
-            finished_at: self.finished_at,
-            error: self.error.clone(),
-            href: self.job_id.href(),
-            result_href,
-        }
-    }
-
     /// A map job not started yet, as the replica that takes a request records it.
     pub(crate) fn queued(key: &MapKey, owner: Option<&Owner>) -> JobRecord {
         JobRecord {
-            job_id: JobId::random(),
+            view: JobView {
+                job_id: JobId::random(),
+                scenario_id: ScenarioId::of_key(key),
+                key: Some(key.clone()),
+                state: JobState::Queued,
+                cells_done: 0,
+                cells_total: 0,
+                created_at: unix(Some(SystemTime::now())).unwrap_or(0.0),
+                started_at: None,
+                finished_at: None,
+                error: None,
+            },
             seq: 0,
             owner: owner.map(|o| o.to_string()),
-            scenario_id: ScenarioId::of_key(key),
-            key: Some(key.clone()),
-            state: JobState::Queued,
-            cells_done: 0,
-            cells_total: 0,
-            created_at: unix(Some(SystemTime::now())).unwrap_or(0.0),
-            started_at: None,
-            finished_at: None,
-            error: None,
             placement: None,
         }
     }
@@ -296,21 +302,21 @@ impl Job {
 
     /// Waits for a map job and takes its map: `None` if the build failed or was cancelled.
     pub async fn wait_for_map(&self) -> Option<Arc<RadioMap>> {
-        let Work::Map { handover, .. } = &self.work else {
+        let Work::Map { delivery, .. } = &self.work else {
             return None;
         };
         {
-            let mut h = handover.lock().expect("job lock");
+            let mut h = delivery.lock().expect("job lock");
             if let Some(built) = &h.built {
                 return built.upgrade();
             }
             h.waiters += 1;
         }
         // Counted out on drop too: a waiter whose client left must not pin the map.
-        let waiter = Waiter(handover);
+        let waiter = Waiter(delivery);
         self.finished().await;
         let map = {
-            let h = handover.lock().expect("job lock");
+            let h = delivery.lock().expect("job lock");
             h.map.clone().or_else(|| h.built.as_ref()?.upgrade())
         };
         drop(waiter);
@@ -318,9 +324,9 @@ impl Job {
     }
 
     /// Hands the built map to the waiters (held only if there are some).
-    fn hand_over(&self, map: &Arc<RadioMap>) {
-        if let Work::Map { handover, .. } = &self.work {
-            let mut h = handover.lock().expect("job lock");
+    fn deliver(&self, map: &Arc<RadioMap>) {
+        if let Work::Map { delivery, .. } = &self.work {
+            let mut h = delivery.lock().expect("job lock");
             h.built = Some(Arc::downgrade(map));
             if h.waiters > 0 {
                 h.map = Some(map.clone());
@@ -338,55 +344,29 @@ impl Job {
 
     pub fn view(&self) -> JobView {
         let times = *self.times.lock().expect("job lock");
-        let (done, total) = (self.progress.cells_done(), self.progress.cells_total());
-        let (kind, map_id, key, result_href) = match &self.work {
-            Work::Map { map_id, key, .. } => (
-                JobKind::Map,
-                Some(map_id.clone()),
-                Some(key.clone()),
-                map_id.href(),
-            ),
-            Work::Placement { .. } => (JobKind::Placement, None, None, self.id.placement_href()),
-        };
         JobView {
             job_id: self.id.clone(),
-            kind,
             scenario_id: self.scenario_id.clone(),
-            map_id,
-            key,
-            state: self.state(),
-            cells_done: done,
-            cells_total: total,
-            progress: if total == 0 {
-                0.0
-            } else {
-                done as f64 / total as f64
+            key: match &self.work {
+                Work::Map { key, .. } => Some(key.clone()),
+                Work::Placement { .. } => None,
             },
+            state: self.state(),
+            cells_done: self.progress.cells_done(),
+            cells_total: self.progress.cells_total(),
             created_at: unix(times.created).unwrap_or(0.0),
             started_at: unix(times.started),
             finished_at: unix(times.finished),
             error: self.error.lock().expect("job lock").clone(),
-            href: self.id.href(),
-            result_href,
         }
     }
 
-    /// The record a data directory keeps of a finished job.
+    /// The record a data directory keeps of a finished job (and Redis of a cluster's build).
     pub(crate) fn record(&self) -> JobRecord {
-        let view = self.view();
         JobRecord {
-            job_id: view.job_id,
+            view: self.view(),
             seq: self.seq,
             owner: self.owner.as_ref().map(|o| o.to_string()),
-            scenario_id: view.scenario_id,
-            key: view.key,
-            state: view.state,
-            cells_done: view.cells_done,
-            cells_total: view.cells_total,
-            created_at: view.created_at,
-            started_at: view.started_at,
-            finished_at: view.finished_at,
-            error: view.error,
             placement: self
                 .placement()
                 .map(|outcome| (outcome.answer.clone(), outcome.registered)),
@@ -396,14 +376,20 @@ impl Job {
     /// A finished job again, from its record; `None` for a record that is not of a finished
     /// job (the store only writes finished ones) or whose map key does not match its kind.
     fn restore(record: JobRecord) -> Option<Job> {
-        if !record.state.is_terminal() {
+        let JobRecord {
+            view,
+            seq,
+            owner,
+            placement,
+        } = record;
+        if !view.state.is_terminal() {
             return None;
         }
-        let work = match (record.key, record.placement) {
+        let work = match (view.key, placement) {
             (Some(key), None) => Work::Map {
                 map_id: MapId::of(&key),
                 key,
-                handover: Mutex::new(Handover::default()),
+                delivery: Mutex::new(MapDelivery::default()),
             },
             (None, placement) => {
                 let outcome = OnceLock::new();
@@ -415,24 +401,24 @@ impl Job {
             (Some(_), Some(_)) => return None,
         };
         let progress = Progress::default();
-        progress.start(record.cells_total);
-        progress.advance(record.cells_done.min(record.cells_total));
-        let (state, _) = watch::channel(record.state);
+        progress.start(view.cells_total);
+        progress.advance(view.cells_done.min(view.cells_total));
+        let (state, _) = watch::channel(view.state);
         Some(Job {
-            id: record.job_id,
-            seq: record.seq,
-            owner: record.owner.map(Owner::from_digest),
-            scenario_id: record.scenario_id,
+            id: view.job_id,
+            seq,
+            owner: owner.map(Owner::from_digest),
+            scenario_id: view.scenario_id,
             work,
             progress: Arc::new(progress),
             state,
             cancel: Notify::new(),
             times: Mutex::new(JobTimes {
-                created: from_unix(record.created_at),
-                started: record.started_at.and_then(from_unix),
-                finished: record.finished_at.and_then(from_unix),
+                created: from_unix(view.created_at),
+                started: view.started_at.and_then(from_unix),
+                finished: view.finished_at.and_then(from_unix),
             }),
-            error: Mutex::new(record.error),
+            error: Mutex::new(view.error),
         })
     }
 
@@ -511,7 +497,7 @@ impl Jobs {
             .load_json::<JobRecord>(Kind::Job)
             .into_iter()
             .filter_map(|(file_id, record)| {
-                (record.job_id.as_str() == file_id)
+                (record.view.job_id.as_str() == file_id)
                     .then_some(record)
                     .and_then(Job::restore)
             })
@@ -610,7 +596,7 @@ impl Jobs {
             move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
-            job.hand_over(&map);
+            job.deliver(&map);
             cache.insert(map_id, map).await;
         };
         crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
@@ -644,7 +630,7 @@ impl Jobs {
         let built_id = map_id.clone();
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
-            job.hand_over(&map);
+            job.deliver(&map);
             if let Err(e) = publish(map.clone()).await {
                 tracing::warn!(error = %e, "built map not shared: other replicas will build it again");
             }
@@ -765,7 +751,7 @@ impl Jobs {
             Work::Map {
                 map_id: MapId::of(key),
                 key: key.clone(),
-                handover: Mutex::new(Handover::default()),
+                delivery: Mutex::new(MapDelivery::default()),
             },
         )
     }
@@ -923,26 +909,35 @@ mod tests {
     /// A finished placement job's record.
     const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
 
+    /// A record reads back as the record it was, and carries every field of today's format
+    /// (so the release before this one reads it too).
+    fn round_trip(record: &JobRecord, today: &str) {
+        let written = serde_json::to_value(record).unwrap();
+        let again: JobRecord = serde_json::from_value(written.clone()).unwrap();
+        assert_eq!(serde_json::to_value(&again).unwrap(), written);
+        let today: serde_json::Value = serde_json::from_str(today).unwrap();
+        for (field, value) in today.as_object().unwrap() {
+            assert_eq!(&written[field], value, "{field}");
+        }
+    }
+
     #[test]
     fn records_of_today_are_read_and_shown_as_before() {
         let map: JobRecord = serde_json::from_str(MAP_RECORD).unwrap();
-        let map_id = irs_answers::map::map_id(map.key.as_ref().unwrap());
+        let map_id = irs_answers::map::map_id(map.view.key.as_ref().unwrap());
         let expected = format!(
             r#"{{"job_id":"0123456789abcdef0123456789abcdef","kind":"map","scenario_id":"5c3na410","map_id":"{map_id}","key":{{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null}},"state":"done","cells_done":40,"cells_total":40,"progress":1.0,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"href":"/v1/jobs/0123456789abcdef0123456789abcdef","result_href":"/v1/maps/{map_id}"}}"#
         );
-        assert_eq!(serde_json::to_string(&map.view()).unwrap(), expected);
+        assert_eq!(serde_json::to_string(&map.view).unwrap(), expected);
         let job = Job::restore(map).unwrap();
         assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
-        assert_eq!(serde_json::to_string(&job.record()).unwrap(), MAP_RECORD);
+        round_trip(&job.record(), MAP_RECORD);
 
         let placement: JobRecord = serde_json::from_str(PLACEMENT_RECORD).unwrap();
         let expected = r#"{"job_id":"fedcba9876543210fedcba9876543210","kind":"placement","scenario_id":"5c3na410","map_id":null,"key":null,"state":"failed","cells_done":3,"cells_total":12,"progress":0.25,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","href":"/v1/jobs/fedcba9876543210fedcba9876543210","result_href":"/v1/placements/fedcba9876543210fedcba9876543210"}"#;
-        assert_eq!(serde_json::to_string(&placement.view()).unwrap(), expected);
+        assert_eq!(serde_json::to_string(&placement.view).unwrap(), expected);
         let job = Job::restore(placement).unwrap();
         assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
-        assert_eq!(
-            serde_json::to_string(&job.record()).unwrap(),
-            PLACEMENT_RECORD
-        );
+        round_trip(&job.record(), PLACEMENT_RECORD);
     }
 }

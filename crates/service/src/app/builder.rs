@@ -48,9 +48,9 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     let record = cluster.job(&build.job_id).await.ok().flatten();
     let owner = record.as_ref().and_then(|r| r.owner());
     let end = |mut record: JobRecord, state: JobState, error: Option<String>| {
-        record.state = state;
-        record.error = error;
-        record.finished_at = Some(
+        record.view.state = state;
+        record.view.error = error;
+        record.view.finished_at = Some(
             std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0.0, |d| d.as_secs_f64()),
@@ -59,13 +59,13 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     };
     let record = record.unwrap_or_else(|| {
         let mut r = JobRecord::queued(&build.key, None);
-        r.job_id = build.job_id.clone();
+        r.view.job_id = build.job_id.clone();
         r
     });
     // Built already (a build taken over just after its map was stored), or cancelled while
     // it waited: nothing to build.
     if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
-        if !record.state.is_terminal() {
+        if !record.view.state.is_terminal() {
             let _ = cluster.put_job(&end(record, JobState::Done, None)).await;
         }
         cluster.finish(&build).await;

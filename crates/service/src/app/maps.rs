@@ -218,7 +218,7 @@ impl App {
         match outcome {
             MapRequestOutcome::Ready(map) => Ok(Ok(map)),
             MapRequestOutcome::Building(job) if cheap => {
-                // The job hands its map over itself, whatever the cache has done with it since.
+                // The job delivers its map itself, whatever the cache has done with it since.
                 match job.wait_for_map().await {
                     Some(map) => Ok(Ok(map)),
                     None => Err(Error::BuildFailed(job.view().error.unwrap_or_else(|| {
@@ -257,16 +257,16 @@ impl App {
         let record = |r: Option<JobRecord>| {
             r.unwrap_or_else(|| {
                 let mut r = JobRecord::queued(&key, None);
-                r.job_id = job_id.clone();
+                r.view.job_id = job_id.clone();
                 r
             })
         };
         if !cheap {
-            return Ok(Err(record(cluster.job(&job_id).await?).view()));
+            return Ok(Err(record(cluster.job(&job_id).await?).view));
         }
         loop {
             let current = record(cluster.job(&job_id).await?);
-            match current.state {
+            match current.view.state {
                 JobState::Done => {
                     return match self.shared_map(&map_id).await? {
                         Some(map) => Ok(Ok(map)),
@@ -276,9 +276,9 @@ impl App {
                     };
                 }
                 s if s.is_terminal() => {
-                    return Err(Error::BuildFailed(current.error.unwrap_or_else(|| {
-                        format!("job {job_id} ended {} without a map", s.label())
-                    })));
+                    return Err(Error::BuildFailed(current.view.error.unwrap_or_else(
+                        || format!("job {job_id} ended {} without a map", s.label()),
+                    )));
                 }
                 _ => tokio::time::sleep(SHARED_POLL).await,
             }

@@ -15,7 +15,7 @@ impl App {
         if let Some(cluster) = self.cluster()
             && let Some(record) = cluster.job(id).await?
         {
-            return Ok(record.view());
+            return Ok(record.view);
         }
         Err(Error::not_found("job", id))
     }
@@ -31,14 +31,14 @@ impl App {
                 .await?
                 .filter(|r| caller.may_touch(r.owner().as_ref()))
                 .ok_or_else(|| Error::not_found("job", id))?;
-            if record.state.is_terminal() {
+            if record.view.state.is_terminal() {
                 return Err(Error::JobFinished {
                     job_id: id.clone(),
-                    state: record.state.label(),
+                    state: record.view.state.label(),
                 });
             }
             cluster.request_cancel(id).await?;
-            return Ok(record.view());
+            return Ok(record.view);
         }
         let job = self.jobs().cancel(id, caller)?;
         if let Some(cluster) = self.cluster() {

@@ -209,7 +209,7 @@ impl Page {
 }
 
 fn accepted(view: JobView) -> Response {
-    let location = view.href.clone();
+    let location = view.job_id.href();
     (
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],

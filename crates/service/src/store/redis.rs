@@ -289,7 +289,7 @@ impl Cluster {
     pub async fn put_job(&self, record: &JobRecord) -> Result<(), Error> {
         let mut conn = self.conn()?;
         let json = serde_json::to_string(record).expect("records serialise");
-        conn.set_ex::<_, _, ()>(job_key(&record.job_id), json, RECORD_TTL_S)
+        conn.set_ex::<_, _, ()>(job_key(&record.view.job_id), json, RECORD_TTL_S)
             .await
             .map_err(|e| self.error(&e))
     }
@@ -351,7 +351,7 @@ impl Cluster {
                 .conditional_set(ExistenceCheck::NX)
                 .with_expiration(SetExpiry::PX(LEASE.as_millis() as u64));
             let taken: Option<String> = conn
-                .set_options(lock_key(map_id), queued.job_id.as_str(), options)
+                .set_options(lock_key(map_id), queued.view.job_id.as_str(), options)
                 .await
                 .map_err(|e| self.error(&e))?;
             if taken.is_none() {
@@ -364,7 +364,7 @@ impl Cluster {
                         STREAM,
                         "*",
                         &[
-                            ("job_id", queued.job_id.as_str()),
+                            ("job_id", queued.view.job_id.as_str()),
                             ("map_id", map_id.as_str()),
                             ("key", key_json.as_str()),
                         ],
@@ -379,7 +379,7 @@ impl Cluster {
                 let _: redis::RedisResult<()> = conn.del(lock_key(map_id)).await;
                 return Err(e);
             }
-            return Ok((queued.job_id, true));
+            return Ok((queued.view.job_id, true));
         }
         Err(Error::unavailable(
             "the build lock changed hands three times in a row; retry",
