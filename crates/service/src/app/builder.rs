@@ -45,7 +45,7 @@ pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
 /// Builds one stream entry on this replica: the map goes to Redis, the record follows the
 /// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
 async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
-    let record = cluster.job(&build.job_id).await.ok().flatten();
+    let record = cluster.job::<JobRecord>(&build.job_id).await.ok().flatten();
     let owner = record.as_ref().and_then(|r| r.owner());
     let end = |mut record: JobRecord, state: JobState, error: Option<String>| {
         record.view.state = state;
@@ -66,14 +66,16 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     // it waited: nothing to build.
     if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
         if !record.view.state.is_terminal() {
-            let _ = cluster.put_job(&end(record, JobState::Done, None)).await;
+            let _ = cluster
+                .put_job(&build.job_id, &end(record, JobState::Done, None))
+                .await;
         }
         cluster.finish(&build).await;
         return;
     }
     if cluster.cancel_requested(&build.job_id).await {
         let _ = cluster
-            .put_job(&end(record, JobState::Cancelled, None))
+            .put_job(&build.job_id, &end(record, JobState::Cancelled, None))
             .await;
         cluster.finish(&build).await;
         return;
@@ -86,7 +88,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
                 _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
             };
             let _ = cluster
-                .put_job(&end(record, JobState::Failed, Some(reason)))
+                .put_job(&build.job_id, &end(record, JobState::Failed, Some(reason)))
                 .await;
             cluster.finish(&build).await;
             return;
@@ -117,7 +119,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             _ = job.finished() => break,
             _ = tokio::time::sleep(HEARTBEAT) => {
                 cluster.heartbeat(&build).await;
-                let _ = cluster.put_job(&job.record()).await;
+                let _ = cluster.put_job(&build.job_id, &job.record()).await;
                 if cluster.cancel_requested(&build.job_id).await {
                     state.jobs().cancel_local(&job);
                 }
@@ -128,7 +130,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     // waiters on other replicas read it.
     let final_record = job.record();
     for attempt in 0..20u32 {
-        if cluster.put_job(&final_record).await.is_ok() {
+        if cluster.put_job(&build.job_id, &final_record).await.is_ok() {
             break;
         }
         tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;

@@ -252,7 +252,12 @@ impl App {
         self.share_scenario(&stored, false).await?;
         let queued = JobRecord::queued(&key, caller.owner().as_ref());
         let (job_id, _) = cluster
-            .enqueue(&map_id, &key, queued, self.limits().cluster_queue)
+            .enqueue(
+                &map_id,
+                &key,
+                (&queued.view.job_id, &queued),
+                self.limits().cluster_queue,
+            )
             .await?;
         let record = |r: Option<JobRecord>| {
             r.unwrap_or_else(|| {

@@ -6,7 +6,7 @@
 
 use super::identity::Caller;
 use super::{App, Error, registrants};
-use crate::cache::{ScenarioSource, StoredScenario};
+use crate::cache::{ScenarioRecord, ScenarioSource, StoredScenario};
 use crate::ids::ScenarioId;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
@@ -45,7 +45,7 @@ impl App {
         let Some(cluster) = self.cluster() else {
             return Ok(None);
         };
-        let Some(record) = cluster.scenario(id).await? else {
+        let Some(record) = cluster.scenario::<ScenarioRecord>(id).await? else {
             return Ok(None);
         };
         let scenario = Scenario::from_json(&record.document.to_string())

@@ -4,7 +4,7 @@
 use super::identity::Caller;
 use super::{App, Error};
 use crate::ids::JobId;
-use crate::jobs::JobView;
+use crate::jobs::{JobRecord, JobView};
 
 impl App {
     /// A job by id: this replica's, else another replica's as its builder last recorded it.
@@ -13,7 +13,7 @@ impl App {
             return Ok(job.view());
         }
         if let Some(cluster) = self.cluster()
-            && let Some(record) = cluster.job(id).await?
+            && let Some(record) = cluster.job::<JobRecord>(id).await?
         {
             return Ok(record.view);
         }
@@ -27,7 +27,7 @@ impl App {
         if let Some(cluster) = self.cluster().filter(|_| !local) {
             // Another replica runs it: it reads the request at its next heartbeat.
             let record = cluster
-                .job(id)
+                .job::<JobRecord>(id)
                 .await?
                 .filter(|r| caller.may_touch(r.owner().as_ref()))
                 .ok_or_else(|| Error::not_found("job", id))?;

@@ -22,12 +22,14 @@
 //! answers 503 with the reason, a request that needs Redis answers 503 with `Retry-After`,
 //! maps already in a replica's cache still answer path queries, and everything resumes when
 //! the ping succeeds again (the client reconnects by itself).
+//!
+//! The records are the application's (its scenario and job records); the store keeps them
+//! as JSON text and reads them back as the type it is asked for, so it depends on no type
+//! above it.
 
 use super::Error;
 use super::disk as store;
-use crate::cache::ScenarioRecord;
 use crate::ids::{JobId, MapId, ScenarioId};
-use crate::jobs::JobRecord;
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
 use redis::streams::{
@@ -35,6 +37,8 @@ use redis::streams::{
     StreamReadReply,
 };
 use redis::{AsyncCommands, ExistenceCheck, SetExpiry, SetOptions};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 use std::sync::{Mutex, RwLock};
 use std::time::Duration;
 
@@ -224,7 +228,7 @@ impl Cluster {
     pub async fn put_scenario(
         &self,
         id: &ScenarioId,
-        record: &ScenarioRecord,
+        record: &impl Serialize,
         replace: bool,
     ) -> Result<(), Error> {
         let mut conn = self.conn()?;
@@ -243,7 +247,7 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn scenario(&self, id: &ScenarioId) -> Result<Option<ScenarioRecord>, Error> {
+    pub async fn scenario<R: DeserializeOwned>(&self, id: &ScenarioId) -> Result<Option<R>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn
             .get(scenario_key(id))
@@ -286,15 +290,15 @@ impl Cluster {
         Ok(removed > 0)
     }
 
-    pub async fn put_job(&self, record: &JobRecord) -> Result<(), Error> {
+    pub async fn put_job(&self, id: &JobId, record: &impl Serialize) -> Result<(), Error> {
         let mut conn = self.conn()?;
         let json = serde_json::to_string(record).expect("records serialise");
-        conn.set_ex::<_, _, ()>(job_key(&record.view.job_id), json, RECORD_TTL_S)
+        conn.set_ex::<_, _, ()>(job_key(id), json, RECORD_TTL_S)
             .await
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn job(&self, id: &JobId) -> Result<Option<JobRecord>, Error> {
+    pub async fn job<R: DeserializeOwned>(&self, id: &JobId) -> Result<Option<R>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
@@ -331,7 +335,7 @@ impl Cluster {
         &self,
         map_id: &MapId,
         key: &MapKey,
-        queued: JobRecord,
+        (job_id, queued): (&JobId, &impl Serialize),
         queue_limit: usize,
     ) -> Result<(JobId, bool), Error> {
         let mut conn = self.conn()?;
@@ -351,20 +355,20 @@ impl Cluster {
                 .conditional_set(ExistenceCheck::NX)
                 .with_expiration(SetExpiry::PX(LEASE.as_millis() as u64));
             let taken: Option<String> = conn
-                .set_options(lock_key(map_id), queued.view.job_id.as_str(), options)
+                .set_options(lock_key(map_id), job_id.as_str(), options)
                 .await
                 .map_err(|e| self.error(&e))?;
             if taken.is_none() {
                 continue; // another replica took it between the GET and the SET: read it
             }
             let key_json = serde_json::to_string(key).expect("keys serialise");
-            let recorded = match self.put_job(&queued).await {
+            let recorded = match self.put_job(job_id, queued).await {
                 Ok(()) => conn
                     .xadd::<_, _, _, _, ()>(
                         STREAM,
                         "*",
                         &[
-                            ("job_id", queued.view.job_id.as_str()),
+                            ("job_id", job_id.as_str()),
                             ("map_id", map_id.as_str()),
                             ("key", key_json.as_str()),
                         ],
@@ -379,7 +383,7 @@ impl Cluster {
                 let _: redis::RedisResult<()> = conn.del(lock_key(map_id)).await;
                 return Err(e);
             }
-            return Ok((queued.view.job_id, true));
+            return Ok((job_id.clone(), true));
         }
         Err(Error::unavailable(
             "the build lock changed hands three times in a row; retry",
