@@ -3,8 +3,8 @@
 //! it to the shared store and keeps the job's record there current (heartbeats) until it ends.
 
 use super::App;
+use crate::app::jobs::{JobRecord, JobState};
 use crate::ids::ScenarioId;
-use crate::jobs::{JobRecord, JobState};
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
 use redis::aio::ConnectionManager;
 use std::sync::Arc;

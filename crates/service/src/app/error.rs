@@ -4,7 +4,7 @@
 //! headers (problem+json), so the caches, jobs, the query pool, identity and the cluster never
 //! build an HTTP answer.
 
-use crate::cache::ScenarioSource;
+use crate::app::registry::ScenarioSource;
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::input::FieldError;
 

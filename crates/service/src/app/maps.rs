@@ -6,9 +6,9 @@
 use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
-use crate::cache::ScenarioSource;
+use crate::app::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
+use crate::app::registry::ScenarioSource;
 use crate::ids::{MapId, ScenarioId};
-use crate::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
 use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
 use irs_model::radiomap::{MapKey, MapKind, RadioMap, cost};

@@ -5,27 +5,33 @@
 //! (`http::problem` maps them), and identity ([`identity`]: tokens, owners, callers) is decided
 //! here, not in the transport.
 
+pub(crate) mod answers;
 pub(crate) mod builder;
+pub(crate) mod cache;
 pub(crate) mod error;
 pub(crate) mod identity;
+pub(crate) mod jobs;
 pub(crate) mod maps;
+pub(crate) mod queries;
+pub(crate) mod registry;
 pub(crate) mod scenarios;
 mod work;
 
 pub(crate) use error::Error;
 
-use crate::answers::AnswerCache;
-use crate::cache::{self, MapCache, MapDisk, ScenarioRecord, ScenarioRegistry, ScenarioSource};
 use crate::config::ServeArgs;
 use crate::ids::ScenarioId;
-use crate::jobs::Jobs;
-use crate::queries::QueryPool;
 use crate::store::{self, redis::Cluster};
+use answers::AnswerCache;
+use cache::{MapCache, MapDisk};
 use identity::{Caller, Tokens};
 use irs_answers::scenario::BUILTIN;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
+use jobs::Jobs;
 use metrics_exporter_prometheus::PrometheusHandle;
+use queries::QueryPool;
+use registry::{ScenarioRecord, ScenarioRegistry, ScenarioSource, StoredScenario};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -167,7 +173,7 @@ impl App {
         scenario: Scenario,
         source: ScenarioSource,
         caller: &Caller,
-    ) -> Result<(Arc<cache::StoredScenario>, bool), Error> {
+    ) -> Result<(Arc<StoredScenario>, bool), Error> {
         self.registry()
             .register(scenario, source, caller.owner(), || {
                 let mut needed = self.cache().scenario_ids();

@@ -6,7 +6,7 @@
 
 use super::identity::Caller;
 use super::{App, Error, registrants};
-use crate::cache::{ScenarioRecord, ScenarioSource, StoredScenario};
+use crate::app::registry::{ScenarioRecord, ScenarioSource, StoredScenario};
 use crate::ids::ScenarioId;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;

@@ -3,8 +3,8 @@
 
 use super::identity::Caller;
 use super::{App, Error};
+use crate::app::jobs::{JobRecord, JobView};
 use crate::ids::JobId;
-use crate::jobs::{JobRecord, JobView};
 
 impl App {
     /// A job by id: this replica's, else another replica's as its builder last recorded it.

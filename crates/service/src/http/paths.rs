@@ -5,9 +5,9 @@ use super::json::{self, serialize_sized};
 use super::maps::MapRequest;
 use super::problem::ApiError;
 use super::{Body, accepted, heavy, only_query};
-use crate::answers::{OpenAnswer, PathQuery};
 use crate::app::App;
 use crate::app::Error;
+use crate::app::answers::{OpenAnswer, PathQuery};
 use crate::app::identity::Caller;
 use crate::app::maps::{Obtained, check_budget};
 use crate::ids::MapId;
@@ -155,7 +155,7 @@ pub(super) async fn plan_path(
         Err(accepted) => return Ok(accepted),
     };
     let map_id = MapId::of_map(&map);
-    // A plain query asked before is answered from the answer cache (service::answers).
+    // A plain query asked before is answered from the answer cache (`app::answers`).
     let query = request.monte_carlo_draws.is_none().then(|| {
         PathQuery::new(
             map_id.clone(),
