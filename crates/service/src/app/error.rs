@@ -4,6 +4,7 @@
 //! headers (problem+json), so the caches, jobs, the query pool, identity and the cluster never
 //! build an HTTP answer.
 
+use crate::app::jobs::JobState;
 use crate::app::registry::ScenarioSource;
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::input::FieldError;
@@ -71,7 +72,7 @@ pub(crate) enum Error {
     PlacementNotReady { job_id: JobId },
     /// The job ended already (`state`: done, failed or cancelled).
     #[error("job {job_id} is already {state}")]
-    JobFinished { job_id: JobId, state: &'static str },
+    JobFinished { job_id: JobId, state: JobState },
     /// A build or a search the request waited for ended without its result.
     #[error("{0}")]
     BuildFailed(String),

@@ -222,7 +222,7 @@ impl App {
                 match job.wait_for_map().await {
                     Some(map) => Ok(Ok(map)),
                     None => Err(Error::BuildFailed(job.view().error.unwrap_or_else(|| {
-                        format!("job {} ended {} without a map", job.id, job.state().label())
+                        format!("job {} ended {} without a map", job.id, job.state())
                     }))),
                 }
             }
@@ -282,7 +282,7 @@ impl App {
                 }
                 s if s.is_terminal() => {
                     return Err(Error::BuildFailed(current.view.error.unwrap_or_else(
-                        || format!("job {job_id} ended {} without a map", s.label()),
+                        || format!("job {job_id} ended {s} without a map"),
                     )));
                 }
                 _ => tokio::time::sleep(SHARED_POLL).await,

@@ -34,7 +34,7 @@ impl App {
             if record.view.state.is_terminal() {
                 return Err(Error::JobFinished {
                     job_id: id.clone(),
-                    state: record.view.state.label(),
+                    state: record.view.state,
                 });
             }
             cluster.request_cancel(id).await?;

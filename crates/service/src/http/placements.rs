@@ -166,7 +166,7 @@ pub(super) async fn get_placement(
         Some(outcome) => Ok(Json(placement_body(&job, &outcome)).into_response()),
         None if job.state().is_terminal() => Err(Error::JobFinished {
             job_id: job.id.clone(),
-            state: job.view().state.label(),
+            state: job.state(),
         }
         .into()),
         None => Err(Error::PlacementNotReady {

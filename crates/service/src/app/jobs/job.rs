@@ -11,8 +11,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use tokio::sync::{Notify, watch};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+/// Where a job is in its life; shown and recorded as its name ([`JobState::as_str`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum JobState {
     Queued,
     Running,
@@ -28,7 +28,16 @@ impl JobState {
             JobState::Done | JobState::Failed | JobState::Cancelled
         )
     }
-    pub(crate) fn label(self) -> &'static str {
+    const ALL: [JobState; 5] = [
+        JobState::Queued,
+        JobState::Running,
+        JobState::Done,
+        JobState::Failed,
+        JobState::Cancelled,
+    ];
+
+    /// Its name: in views, records, error details and metric labels.
+    pub fn as_str(self) -> &'static str {
         match self {
             JobState::Queued => "queued",
             JobState::Running => "running",
@@ -36,6 +45,30 @@ impl JobState {
             JobState::Failed => "failed",
             JobState::Cancelled => "cancelled",
         }
+    }
+}
+
+impl std::fmt::Display for JobState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Serialize for JobState {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> Deserialize<'de> for JobState {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        JobState::ALL
+            .into_iter()
+            .find(|state| state.as_str() == name)
+            .ok_or_else(|| {
+                serde::de::Error::invalid_value(serde::de::Unexpected::Str(&name), &"a job state")
+            })
     }
 }
 
@@ -214,8 +247,8 @@ impl Job {
     pub(super) fn set_state(&self, next: JobState) {
         let previous = self.state.send_replace(next);
         if previous != next {
-            metrics::gauge!("irs_jobs", "state" => previous.label()).decrement(1.0);
-            metrics::gauge!("irs_jobs", "state" => next.label()).increment(1.0);
+            metrics::gauge!("irs_jobs", "state" => previous.as_str()).decrement(1.0);
+            metrics::gauge!("irs_jobs", "state" => next.as_str()).increment(1.0);
         }
         let mut times = self.times.lock().expect("job lock");
         match next {

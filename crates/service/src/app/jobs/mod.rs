@@ -181,7 +181,7 @@ impl Jobs {
             }),
             error: Mutex::new(None),
         });
-        metrics::gauge!("irs_jobs", "state" => "queued").increment(1.0);
+        metrics::gauge!("irs_jobs", "state" => JobState::Queued.as_str()).increment(1.0);
         self.by_id
             .lock()
             .expect("jobs lock")
@@ -291,7 +291,7 @@ impl Jobs {
         if state.is_terminal() {
             return Err(Error::JobFinished {
                 job_id: id.clone(),
-                state: state.label(),
+                state,
             });
         }
         job.progress.cancel();
