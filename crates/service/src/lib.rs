@@ -10,24 +10,22 @@
 //!   problem+json answers ([`Problem`] is the body of every error answer) and authentication at
 //!   the door;
 //! * [`app`]: the facade [`App`] the handlers call (scenario and map acquisition wherever they
-//!   are, jobs, identity, the cluster's build loop) and its error type; with what it runs on:
-//!   `cache` (scenario registry, map cache and the maps' widest-path indexes), `answers` (path
-//!   answers kept for repeated queries), `jobs` (map builds and placement searches), `queries`
-//!   (admission of heavy queries);
-//! * `store`: the data directory of `--data-dir` and the Redis store of `--redis-url`;
-//! * leaves: [`config`] (flags and environment), `tasks` (spawning with the server's metrics
-//!   registry), `priority`, [`probe`], `viewer` (the built-in map viewer at `/`).
-
-pub(crate) mod answers;
+//!   are, jobs, identity, the cluster's build loop) and its error type; and what it owns:
+//!   `registry` (the scenarios), `cache` (maps and their widest-path indexes), `answers` (path
+//!   answers kept for repeated queries), `jobs` (map builds and placement searches, their view
+//!   and record), `queries` (admission of heavy queries);
+//! * `store`: the data directory of `--data-dir` and the Redis store of `--redis-url`, which
+//!   keep the application's records without knowing their types;
+//! * leaves: [`config`] (flags and environment), `ids` (map, scenario and job ids and the
+//!   links built from them), `tasks` (spawning with the server's metrics registry),
+//!   `priority`, [`probe`], `viewer` (the built-in map viewer at `/`).
 
 pub mod app;
-pub(crate) mod cache;
 pub mod config;
 pub mod http;
-pub(crate) mod jobs;
+pub(crate) mod ids;
 pub(crate) mod priority;
 pub mod probe;
-pub(crate) mod queries;
 pub mod runtime;
 pub(crate) mod store;
 pub(crate) mod tasks;

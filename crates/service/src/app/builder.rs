@@ -3,7 +3,8 @@
 //! it to the shared store and keeps the job's record there current (heartbeats) until it ends.
 
 use super::App;
-use crate::jobs::{JobRecord, JobState};
+use crate::app::jobs::{JobRecord, JobState};
+use crate::ids::ScenarioId;
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
 use redis::aio::ConnectionManager;
 use std::sync::Arc;
@@ -44,12 +45,12 @@ pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
 /// Builds one stream entry on this replica: the map goes to Redis, the record follows the
 /// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
 async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
-    let record = cluster.job(&build.job_id).await.ok().flatten();
+    let record = cluster.job::<JobRecord>(&build.job_id).await.ok().flatten();
     let owner = record.as_ref().and_then(|r| r.owner());
     let end = |mut record: JobRecord, state: JobState, error: Option<String>| {
-        record.state = state;
-        record.error = error;
-        record.finished_at = Some(
+        record.view.state = state;
+        record.view.error = error;
+        record.view.finished_at = Some(
             std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0.0, |d| d.as_secs_f64()),
@@ -58,26 +59,28 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     };
     let record = record.unwrap_or_else(|| {
         let mut r = JobRecord::queued(&build.key, None);
-        r.job_id = build.job_id.clone();
+        r.view.job_id = build.job_id.clone();
         r
     });
     // Built already (a build taken over just after its map was stored), or cancelled while
     // it waited: nothing to build.
     if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
-        if !record.state.is_terminal() {
-            let _ = cluster.put_job(&end(record, JobState::Done, None)).await;
+        if !record.view.state.is_terminal() {
+            let _ = cluster
+                .put_job(&build.job_id, &end(record, JobState::Done, None))
+                .await;
         }
         cluster.finish(&build).await;
         return;
     }
     if cluster.cancel_requested(&build.job_id).await {
         let _ = cluster
-            .put_job(&end(record, JobState::Cancelled, None))
+            .put_job(&build.job_id, &end(record, JobState::Cancelled, None))
             .await;
         cluster.finish(&build).await;
         return;
     }
-    let scenario = match state.scenario(&build.key.scenario_id).await {
+    let scenario = match state.scenario(&ScenarioId::of_key(&build.key)).await {
         Ok(Some(stored)) => stored.scenario.clone(),
         other => {
             let reason = match other {
@@ -85,7 +88,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
                 _ => format!("scenario {} is registered nowhere", build.key.scenario_id),
             };
             let _ = cluster
-                .put_job(&end(record, JobState::Failed, Some(reason)))
+                .put_job(&build.job_id, &end(record, JobState::Failed, Some(reason)))
                 .await;
             cluster.finish(&build).await;
             return;
@@ -116,7 +119,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             _ = job.finished() => break,
             _ = tokio::time::sleep(HEARTBEAT) => {
                 cluster.heartbeat(&build).await;
-                let _ = cluster.put_job(&job.record()).await;
+                let _ = cluster.put_job(&build.job_id, &job.record()).await;
                 if cluster.cancel_requested(&build.job_id).await {
                     state.jobs().cancel_local(&job);
                 }
@@ -127,7 +130,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     // waiters on other replicas read it.
     let final_record = job.record();
     for attempt in 0..20u32 {
-        if cluster.put_job(&final_record).await.is_ok() {
+        if cluster.put_job(&build.job_id, &final_record).await.is_ok() {
             break;
         }
         tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;

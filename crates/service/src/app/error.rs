@@ -4,6 +4,9 @@
 //! headers (problem+json), so the caches, jobs, the query pool, identity and the cluster never
 //! build an HTTP answer.
 
+use crate::app::jobs::JobState;
+use crate::app::registry::ScenarioSource;
+use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::input::FieldError;
 
 /// Why the application refused or failed a request.
@@ -54,19 +57,22 @@ pub(crate) enum Error {
     RegistryFull(String),
     /// A built-in or file scenario: part of the configuration, never deleted.
     #[error("scenario {id} comes from the server's {origin} scenarios and cannot be deleted")]
-    ScenarioProtected { id: String, origin: &'static str },
+    ScenarioProtected {
+        id: ScenarioId,
+        origin: ScenarioSource,
+    },
     /// A live job needs the scenario.
     #[error("job {job_id} is building a map of scenario {id}; cancel it or wait")]
-    ScenarioInUse { id: String, job_id: String },
+    ScenarioInUse { id: ScenarioId, job_id: JobId },
     /// The map is being built.
     #[error("map {map_id} is being built by job {job_id}; poll /v1/jobs/{job_id}")]
-    MapNotReady { map_id: String, job_id: String },
+    MapNotReady { map_id: MapId, job_id: JobId },
     /// The placement search is still running.
     #[error("placement {job_id} is still running; poll /v1/jobs/{job_id}")]
-    PlacementNotReady { job_id: String },
+    PlacementNotReady { job_id: JobId },
     /// The job ended already (`state`: done, failed or cancelled).
     #[error("job {job_id} is already {state}")]
-    JobFinished { job_id: String, state: &'static str },
+    JobFinished { job_id: JobId, state: JobState },
     /// A build or a search the request waited for ended without its result.
     #[error("{0}")]
     BuildFailed(String),
@@ -79,7 +85,7 @@ pub(crate) enum Error {
 }
 
 impl Error {
-    pub fn not_found(what: &'static str, id: &str) -> Self {
+    pub fn not_found(what: &'static str, id: impl ToString) -> Self {
         Error::NotFound {
             what,
             id: id.to_string(),

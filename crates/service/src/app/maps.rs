@@ -6,7 +6,9 @@
 use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
-use crate::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
+use crate::app::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
+use crate::app::registry::ScenarioSource;
+use crate::ids::{MapId, ScenarioId};
 use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
 use irs_model::radiomap::{MapKey, MapKind, RadioMap, cost};
@@ -63,13 +65,13 @@ pub(crate) fn check_budget(
 impl App {
     /// A built map by id, from wherever it is; not ready (with its job) while a build of it
     /// runs here or anywhere in the cluster, else not found.
-    pub(crate) async fn map(&self, map_id: &str) -> Result<Arc<RadioMap>, Error> {
+    pub(crate) async fn map(&self, map_id: &MapId) -> Result<Arc<RadioMap>, Error> {
         if let Some(map) = self.shared_map(map_id).await? {
             return Ok(map);
         }
         if let Some(job) = self.jobs().building(map_id).await {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id: job.id.clone(),
             });
         }
@@ -77,7 +79,7 @@ impl App {
             && let Some(job_id) = cluster.building(map_id).await?
         {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id,
             });
         }
@@ -87,11 +89,11 @@ impl App {
     /// A built map and the scenario it was built from.
     pub(crate) async fn map_with_scenario(
         &self,
-        map_id: &str,
+        map_id: &MapId,
     ) -> Result<(Arc<RadioMap>, Arc<Scenario>), Error> {
         let map = self.map(map_id).await?;
         let stored = self
-            .scenario(&map.key.scenario_id)
+            .scenario(&ScenarioId::of_key(&map.key))
             .await?
             .ok_or_else(|| Error::not_found("scenario", &map.key.scenario_id))?;
         Ok((map, stored.scenario.clone()))
@@ -121,10 +123,10 @@ impl App {
 
     /// Drops a built map here and from the shared store (the next request for it builds it
     /// again). A map being built here is not ready: cancel its job instead.
-    pub(crate) async fn delete_map(&self, map_id: &str) -> Result<(), Error> {
+    pub(crate) async fn delete_map(&self, map_id: &MapId) -> Result<(), Error> {
         if let Some(job) = self.jobs().building(map_id).await {
             return Err(Error::MapNotReady {
-                map_id: map_id.to_string(),
+                map_id: map_id.clone(),
                 job_id: job.id.clone(),
             });
         }
@@ -154,7 +156,7 @@ impl App {
             inline,
         } = self.named_scenario(spec.scenario, prefix).await?;
         let key = MapKey::new(
-            &id,
+            id.as_str(),
             &scenario,
             spec.kind,
             spec.phases,
@@ -193,7 +195,8 @@ impl App {
             ));
         }
         if inline {
-            let (stored, _) = self.register_scenario((*scenario).clone(), "api", caller)?;
+            let (stored, _) =
+                self.register_scenario((*scenario).clone(), ScenarioSource::Api, caller)?;
             return Ok((stored.scenario.clone(), key));
         }
         Ok((scenario, key))
@@ -215,11 +218,11 @@ impl App {
         match outcome {
             MapRequestOutcome::Ready(map) => Ok(Ok(map)),
             MapRequestOutcome::Building(job) if cheap => {
-                // The job hands its map over itself, whatever the cache has done with it since.
+                // The job delivers its map itself, whatever the cache has done with it since.
                 match job.wait_for_map().await {
                     Some(map) => Ok(Ok(map)),
                     None => Err(Error::BuildFailed(job.view().error.unwrap_or_else(|| {
-                        format!("job {} ended {} without a map", job.id, job.state().label())
+                        format!("job {} ended {} without a map", job.id, job.state())
                     }))),
                 }
             }
@@ -237,33 +240,38 @@ impl App {
         key: MapKey,
         cheap: bool,
     ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
-        let map_id = irs_answers::map::map_id(&key);
+        let map_id = MapId::of(&key);
         if let Some(map) = self.shared_map(&map_id).await? {
             return Ok(Ok(map));
         }
         // The replica that builds it reads the scenario from the shared store.
         let stored = self
-            .scenario(&key.scenario_id)
+            .scenario(&ScenarioId::of_key(&key))
             .await?
             .ok_or_else(|| Error::not_found("scenario", &key.scenario_id))?;
         self.share_scenario(&stored, false).await?;
         let queued = JobRecord::queued(&key, caller.owner().as_ref());
         let (job_id, _) = cluster
-            .enqueue(&map_id, &key, queued, self.limits().cluster_queue)
+            .enqueue(
+                &map_id,
+                &key,
+                (&queued.view.job_id, &queued),
+                self.limits().cluster_queue,
+            )
             .await?;
         let record = |r: Option<JobRecord>| {
             r.unwrap_or_else(|| {
                 let mut r = JobRecord::queued(&key, None);
-                r.job_id = job_id.clone();
+                r.view.job_id = job_id.clone();
                 r
             })
         };
         if !cheap {
-            return Ok(Err(record(cluster.job(&job_id).await?).view()));
+            return Ok(Err(record(cluster.job(&job_id).await?).view));
         }
         loop {
             let current = record(cluster.job(&job_id).await?);
-            match current.state {
+            match current.view.state {
                 JobState::Done => {
                     return match self.shared_map(&map_id).await? {
                         Some(map) => Ok(Ok(map)),
@@ -273,9 +281,9 @@ impl App {
                     };
                 }
                 s if s.is_terminal() => {
-                    return Err(Error::BuildFailed(current.error.unwrap_or_else(|| {
-                        format!("job {job_id} ended {} without a map", s.label())
-                    })));
+                    return Err(Error::BuildFailed(current.view.error.unwrap_or_else(
+                        || format!("job {job_id} ended {s} without a map"),
+                    )));
                 }
                 _ => tokio::time::sleep(SHARED_POLL).await,
             }
@@ -286,7 +294,7 @@ impl App {
     /// the shared store, decoded against its scenario and cached here.
     async fn shared_map(
         &self,
-        map_id: &str,
+        map_id: &MapId,
     ) -> Result<Option<Arc<irs_model::radiomap::RadioMap>>, Error> {
         if let Some(map) = self.cache().get(map_id).await {
             return Ok(Some(map));
@@ -299,7 +307,7 @@ impl App {
         };
         let key = irs_answers::encoding::peek_key(&encoded)
             .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
-        let Some(stored) = self.scenario(&key.scenario_id).await? else {
+        let Some(stored) = self.scenario(&ScenarioId::of_key(&key)).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
@@ -309,13 +317,13 @@ impl App {
         .await
         .map_err(|e| Error::internal(e.to_string()))?
         .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
-        if map.id != map_id {
+        if map.id != map_id.as_str() {
             return Err(Error::internal(format!(
                 "shared map {map_id} holds another map"
             )));
         }
         let map = Arc::new(map);
-        self.cache().insert(map_id.to_string(), map.clone()).await;
+        self.cache().insert(map_id.clone(), map.clone()).await;
         Ok(Some(map))
     }
 }

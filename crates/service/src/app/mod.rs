@@ -5,26 +5,33 @@
 //! (`http::problem` maps them), and identity ([`identity`]: tokens, owners, callers) is decided
 //! here, not in the transport.
 
+pub(crate) mod answers;
 pub(crate) mod builder;
+pub(crate) mod cache;
 pub(crate) mod error;
 pub(crate) mod identity;
+pub(crate) mod jobs;
 pub(crate) mod maps;
+pub(crate) mod queries;
+pub(crate) mod registry;
 pub(crate) mod scenarios;
 mod work;
 
 pub(crate) use error::Error;
 
-use crate::answers::AnswerCache;
-use crate::cache::{self, MapCache, MapDisk, ScenarioRecord, ScenarioRegistry};
 use crate::config::ServeArgs;
-use crate::jobs::Jobs;
-use crate::queries::QueryPool;
+use crate::ids::ScenarioId;
 use crate::store::{self, redis::Cluster};
+use answers::AnswerCache;
+use cache::{MapCache, MapDisk};
 use identity::{Caller, Tokens};
 use irs_answers::scenario::BUILTIN;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
+use jobs::Jobs;
 use metrics_exporter_prometheus::PrometheusHandle;
+use queries::QueryPool;
+use registry::{ScenarioRecord, ScenarioRegistry, ScenarioSource, StoredScenario};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -164,9 +171,9 @@ impl App {
     pub(crate) fn register_scenario(
         &self,
         scenario: Scenario,
-        source: &'static str,
+        source: ScenarioSource,
         caller: &Caller,
-    ) -> Result<(Arc<cache::StoredScenario>, bool), Error> {
+    ) -> Result<(Arc<StoredScenario>, bool), Error> {
         self.registry()
             .register(scenario, source, caller.owner(), || {
                 let mut needed = self.cache().scenario_ids();
@@ -214,7 +221,7 @@ pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_json(text).map_err(|e| format!("built-in scenario {name}: {e}"))?;
         state
-            .register_scenario(scenario, "builtin", &Caller::Open)
+            .register_scenario(scenario, ScenarioSource::Builtin, &Caller::Open)
             .map_err(|e| e.to_string())?;
     }
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -231,7 +238,7 @@ pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
         let scenario =
             Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let (stored, created) = state
-            .register_scenario(scenario, "file", &Caller::Open)
+            .register_scenario(scenario, ScenarioSource::File, &Caller::Open)
             .map_err(|e| e.to_string())?;
         tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
     }
@@ -250,7 +257,7 @@ pub fn restore(state: &App) {
     for (id, record) in disk.load_json::<ScenarioRecord>(store::Kind::Scenario) {
         let parsed = Scenario::from_json(&record.document.to_string());
         let scenario = match parsed {
-            Ok(scenario) if scenario.content_hash() == id => scenario,
+            Ok(scenario) if ScenarioId::of(&scenario).as_str() == id => scenario,
             Ok(_) => {
                 tracing::warn!(scenario_id = %id, "recorded scenario has another id in this build; skipped");
                 continue;
@@ -261,7 +268,7 @@ pub fn restore(state: &App) {
             }
         };
         for owner in registrants(record.owners) {
-            if let Err(e) = state.register_scenario(scenario.clone(), "api", &owner) {
+            if let Err(e) = state.register_scenario(scenario.clone(), ScenarioSource::Api, &owner) {
                 tracing::warn!(scenario_id = %id, error = %e, "recorded scenario not registered");
             }
         }

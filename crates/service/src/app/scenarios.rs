@@ -6,21 +6,22 @@
 
 use super::identity::Caller;
 use super::{App, Error, registrants};
-use crate::cache::StoredScenario;
+use crate::app::registry::{ScenarioRecord, ScenarioSource, StoredScenario};
+use crate::ids::ScenarioId;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
 use std::sync::Arc;
 
 /// A scenario as a request names it: a registered one by id, or an inline document.
 pub(crate) struct ScenarioRef {
-    pub id: Option<String>,
+    pub id: Option<ScenarioId>,
     pub document: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
 /// The scenario a request named, found: its id, the scenario, and whether it came inline (it
 /// is then registered only once the whole request has been validated).
 pub(crate) struct Named {
-    pub id: String,
+    pub id: ScenarioId,
     pub scenario: Arc<Scenario>,
     pub inline: bool,
 }
@@ -34,26 +35,32 @@ impl App {
     /// A scenario by id: registered here, or (in a cluster) registered on another replica,
     /// which registers it here too with its owners. `Ok(None)`: nowhere; unavailable while the
     /// shared store is down and the scenario is not here.
-    pub(crate) async fn scenario(&self, id: &str) -> Result<Option<Arc<StoredScenario>>, Error> {
+    pub(crate) async fn scenario(
+        &self,
+        id: &ScenarioId,
+    ) -> Result<Option<Arc<StoredScenario>>, Error> {
         if let Some(stored) = self.registry().get(id) {
             return Ok(Some(stored));
         }
         let Some(cluster) = self.cluster() else {
             return Ok(None);
         };
-        let Some(record) = cluster.scenario(id).await? else {
+        let Some(record) = cluster.scenario::<ScenarioRecord>(id).await? else {
             return Ok(None);
         };
         let scenario = Scenario::from_json(&record.document.to_string())
             .map_err(|e| Error::internal(format!("shared scenario {id}: {e}")))?;
-        if scenario.content_hash() != id {
+        if ScenarioId::of(&scenario) != *id {
             return Err(Error::internal(format!(
                 "shared scenario {id} has another id in this build"
             )));
         }
         let mut stored = None;
         for owner in registrants(record.owners) {
-            stored = Some(self.register_scenario(scenario.clone(), "api", &owner)?.0);
+            stored = Some(
+                self.register_scenario(scenario.clone(), ScenarioSource::Api, &owner)?
+                    .0,
+            );
         }
         Ok(stored)
     }
@@ -80,7 +87,7 @@ impl App {
             (None, Some(doc)) => {
                 let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
                 Ok(Named {
-                    id: scenario.content_hash(),
+                    id: ScenarioId::of(&scenario),
                     scenario: Arc::new(scenario),
                     inline: true,
                 })
@@ -99,7 +106,7 @@ impl App {
         scenario: Scenario,
         caller: &Caller,
     ) -> Result<(Arc<StoredScenario>, bool), Error> {
-        let (stored, created) = self.register_scenario(scenario, "api", caller)?;
+        let (stored, created) = self.register_scenario(scenario, ScenarioSource::Api, caller)?;
         self.share_scenario(&stored, true).await?;
         Ok((stored, created))
     }
@@ -113,7 +120,7 @@ impl App {
         replace: bool,
     ) -> Result<(), Error> {
         match self.cluster() {
-            Some(cluster) if stored.source == "api" => {
+            Some(cluster) if stored.source == ScenarioSource::Api => {
                 cluster
                     .put_scenario(&stored.id, &stored.record(), replace)
                     .await?;
@@ -126,10 +133,19 @@ impl App {
     /// Deletes the caller's registration of an API scenario; with the last registration the
     /// scenario goes (here and in the shared store), and the cached maps built from it. A
     /// scenario that a queued or running job needs is kept (in use, with the job).
-    pub(crate) async fn delete_scenario(&self, id: &str, caller: &Caller) -> Result<(), Error> {
-        if let Some(job) = self.jobs().live().into_iter().find(|j| j.scenario_id == id) {
+    pub(crate) async fn delete_scenario(
+        &self,
+        id: &ScenarioId,
+        caller: &Caller,
+    ) -> Result<(), Error> {
+        if let Some(job) = self
+            .jobs()
+            .live()
+            .into_iter()
+            .find(|j| j.scenario_id == *id)
+        {
             return Err(Error::ScenarioInUse {
-                id: id.to_string(),
+                id: id.clone(),
                 job_id: job.id.clone(),
             });
         }

@@ -3,41 +3,42 @@
 
 use super::identity::Caller;
 use super::{App, Error};
-use crate::jobs::JobView;
+use crate::app::jobs::{JobRecord, JobView};
+use crate::ids::JobId;
 
 impl App {
     /// A job by id: this replica's, else another replica's as its builder last recorded it.
-    pub(crate) async fn job(&self, id: &str) -> Result<JobView, Error> {
+    pub(crate) async fn job(&self, id: &JobId) -> Result<JobView, Error> {
         if let Some(job) = self.jobs().get(id) {
             return Ok(job.view());
         }
         if let Some(cluster) = self.cluster()
-            && let Some(record) = cluster.job(id).await?
+            && let Some(record) = cluster.job::<JobRecord>(id).await?
         {
-            return Ok(record.view());
+            return Ok(record.view);
         }
         Err(Error::not_found("job", id))
     }
 
     /// Cancels a queued or running job of `caller`'s (a job of another token is not found);
     /// returns it as it was when asked.
-    pub(crate) async fn cancel_job(&self, id: &str, caller: &Caller) -> Result<JobView, Error> {
+    pub(crate) async fn cancel_job(&self, id: &JobId, caller: &Caller) -> Result<JobView, Error> {
         let local = self.jobs().get(id).is_some();
         if let Some(cluster) = self.cluster().filter(|_| !local) {
             // Another replica runs it: it reads the request at its next heartbeat.
             let record = cluster
-                .job(id)
+                .job::<JobRecord>(id)
                 .await?
                 .filter(|r| caller.may_touch(r.owner().as_ref()))
                 .ok_or_else(|| Error::not_found("job", id))?;
-            if record.state.is_terminal() {
+            if record.view.state.is_terminal() {
                 return Err(Error::JobFinished {
-                    job_id: id.to_string(),
-                    state: record.state.label(),
+                    job_id: id.clone(),
+                    state: record.view.state,
                 });
             }
             cluster.request_cancel(id).await?;
-            return Ok(record.view());
+            return Ok(record.view);
         }
         let job = self.jobs().cancel(id, caller)?;
         if let Some(cluster) = self.cluster() {

@@ -5,6 +5,7 @@ use super::problem::ApiError;
 use super::{heavy, only_query};
 use crate::app::App;
 use crate::app::Error;
+use crate::ids::MapId;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
@@ -29,7 +30,7 @@ pub(super) fn query_point(
 /// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
 pub(super) async fn image(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     only_query(&query, &["threshold", "start", "goal", "cell_px"])?;
@@ -107,7 +108,7 @@ pub(super) async fn image(
 /// `best`): its YAML and PGM in one tar archive.
 pub(super) async fn nav2_mask(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     only_query(&query, &["threshold", "mask", "best"])?;
@@ -149,7 +150,7 @@ pub(super) async fn nav2_mask(
 /// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).
 pub(super) async fn values_npy(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     only_query(&query, &[])?;

@@ -5,7 +5,8 @@ use super::Page;
 use super::problem::ApiError;
 use crate::app::App;
 use crate::app::identity::Caller;
-use crate::jobs::JobView;
+use crate::app::jobs::JobView;
+use crate::ids::JobId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
@@ -43,7 +44,7 @@ pub(super) async fn list_jobs(
 
 pub(super) async fn get_job(
     State(state): State<App>,
-    Path(id): Path<String>,
+    Path(id): Path<JobId>,
 ) -> Result<Json<JobView>, ApiError> {
     Ok(Json(state.job(&id).await?))
 }
@@ -51,7 +52,7 @@ pub(super) async fn get_job(
 pub(super) async fn cancel_job(
     State(state): State<App>,
     caller: Caller,
-    Path(id): Path<String>,
+    Path(id): Path<JobId>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
     Ok((
         StatusCode::ACCEPTED,

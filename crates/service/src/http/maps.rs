@@ -9,6 +9,7 @@ use crate::app::Error;
 use crate::app::identity::Caller;
 use crate::app::maps::{MapSpec, Obtained};
 use crate::app::scenarios::ScenarioRef;
+use crate::ids::{MapId, ScenarioId};
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::{StatusCode, header};
@@ -28,7 +29,7 @@ use std::time::Instant;
 #[serde(deny_unknown_fields)]
 pub(super) struct MapRequest {
     #[serde(default, deserialize_with = "present")]
-    scenario_id: Option<String>,
+    scenario_id: Option<ScenarioId>,
     #[serde(default, deserialize_with = "present")]
     scenario: Option<serde_json::Map<String, serde_json::Value>>,
     kind: MapKind,
@@ -42,7 +43,7 @@ pub(super) struct MapRequest {
 
 #[derive(Debug, Serialize)]
 pub(super) struct MapSummary {
-    map_id: String,
+    map_id: MapId,
     state: &'static str,
     key: MapKey,
     unit: &'static str,
@@ -52,9 +53,9 @@ pub(super) struct MapSummary {
 }
 
 pub(super) fn summary(map: &RadioMap) -> MapSummary {
-    let map_id = map.id.clone();
+    let map_id = MapId::of_map(map);
     MapSummary {
-        href: format!("/v1/maps/{map_id}"),
+        href: map_id.href(),
         map_id,
         state: "ready",
         key: map.key.clone(),
@@ -111,7 +112,12 @@ pub(super) async fn list_maps(
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MapList>, ApiError> {
     let page = Page::of(&query)?;
-    let mut entries = state.cache().entries();
+    let mut entries: Vec<(String, _)> = state
+        .cache()
+        .entries()
+        .into_iter()
+        .map(|(id, map)| (id.to_string(), map))
+        .collect();
     entries.sort_by(|a, b| a.0.cmp(&b.0));
     let (maps, next_cursor) = page.cut(entries, |key, cursor| key > cursor);
     Ok(Json(MapList {
@@ -124,7 +130,7 @@ pub(super) async fn list_maps(
 /// 409 with its job: cancel the job instead.
 pub(super) async fn delete_map(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
 ) -> Result<StatusCode, ApiError> {
     state.delete_map(&map_id).await?;
     Ok(StatusCode::NO_CONTENT)
@@ -132,7 +138,7 @@ pub(super) async fn delete_map(
 
 pub(super) async fn get_map(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
     let map = state.map(&map_id).await?;

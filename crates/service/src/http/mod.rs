@@ -20,7 +20,7 @@ mod scenarios;
 
 use crate::app::App;
 use crate::app::Error;
-use crate::jobs::JobView;
+use crate::app::jobs::JobView;
 use axum::extract::{DefaultBodyLimit, MatchedPath, State};
 use axum::extract::{FromRequest, Request};
 use axum::http::{HeaderValue, Method};
@@ -210,7 +210,7 @@ impl Page {
 }
 
 fn accepted(view: JobView) -> Response {
-    let location = view.href.clone();
+    let location = view.job_id.href();
     (
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],
@@ -220,7 +220,7 @@ fn accepted(view: JobView) -> Response {
 }
 
 /// Work on a map with more cells than this (path and sweep searches, map bodies, exports) is a
-/// heavy query, run on the query pool under its admission control (`super::queries`). A
+/// heavy query, run on the query pool under its admission control (`app::queries`). A
 /// search or a serialisation touches every cell at a few tens of nanoseconds each, so past
 /// ~10 000 cells it would hold an async worker thread for longer than the ~0.1–1 ms tokio
 /// budgets between awaits, and every other request on that thread (health checks included)

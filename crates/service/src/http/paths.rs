@@ -5,11 +5,12 @@ use super::json::{self, serialize_sized};
 use super::maps::MapRequest;
 use super::problem::ApiError;
 use super::{Body, accepted, heavy, only_query};
-use crate::answers::{OpenAnswer, PathQuery};
 use crate::app::App;
 use crate::app::Error;
+use crate::app::answers::{OpenAnswer, PathQuery};
 use crate::app::identity::Caller;
 use crate::app::maps::{Obtained, check_budget};
+use crate::ids::MapId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::response::{IntoResponse, Response};
@@ -28,7 +29,7 @@ use std::time::Instant;
 
 #[derive(Serialize)]
 pub(super) struct Coverage {
-    map_id: String,
+    map_id: MapId,
     unit: &'static str,
     threshold: f64,
     /// η(γ), paper eq. 44.
@@ -39,7 +40,7 @@ pub(super) struct Coverage {
 
 pub(super) async fn coverage(
     State(state): State<App>,
-    Path(map_id): Path<String>,
+    Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
     only_query(&query, &["threshold"])?;
@@ -68,7 +69,7 @@ pub(super) const MAX_JSON_SAFE_INTEGER: u64 = (1 << 53) - 1;
 #[serde(deny_unknown_fields)]
 pub(super) struct PathRequest {
     #[serde(default, deserialize_with = "present")]
-    map_id: Option<String>,
+    map_id: Option<MapId>,
     #[serde(default, deserialize_with = "present")]
     map: Option<MapRequest>,
     start: [f64; 2],
@@ -91,7 +92,7 @@ pub(super) struct PathRequest {
 pub(super) async fn map_for_query(
     state: &App,
     caller: &Caller,
-    map_id: Option<String>,
+    map_id: Option<MapId>,
     map: Option<MapRequest>,
 ) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, Error> {
     match (map_id, map) {
@@ -153,8 +154,8 @@ pub(super) async fn plan_path(
         Ok(found) => found,
         Err(accepted) => return Ok(accepted),
     };
-    let map_id = map.id.clone();
-    // A plain query asked before is answered from the answer cache (service::answers).
+    let map_id = MapId::of_map(&map);
+    // A plain query asked before is answered from the answer cache (`app::answers`).
     let query = request.monte_carlo_draws.is_none().then(|| {
         PathQuery::new(
             map_id.clone(),
@@ -223,7 +224,7 @@ pub(super) async fn plan_path(
 #[serde(deny_unknown_fields)]
 pub(super) struct SweepRequest {
     #[serde(default, deserialize_with = "present")]
-    map_id: Option<String>,
+    map_id: Option<MapId>,
     #[serde(default, deserialize_with = "present")]
     map: Option<MapRequest>,
     start: [f64; 2],
@@ -261,7 +262,7 @@ pub(super) async fn sweep(
     let work = cells.saturating_mul(thresholds.len());
     let cache = state.cache().clone();
     let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
-        let index = cache.bottlenecks(&map.id, &map);
+        let index = cache.bottlenecks(&MapId::of_map(&map), &map);
         planner::sweep(&map, &index, start, goal, &thresholds, v_max, progress)
     })
     .await?

@@ -6,9 +6,11 @@ use super::{Body, accepted};
 use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
+use crate::app::jobs::{Job, PlacementOutcome, PlacementSearch, Work};
 use crate::app::maps::check_budget;
+use crate::app::registry::ScenarioSource;
 use crate::app::scenarios::{Named, ScenarioRef};
-use crate::jobs::{Job, PlacementOutcome, PlacementSearch, Work};
+use crate::ids::{JobId, ScenarioId};
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::response::{IntoResponse, Response};
@@ -25,7 +27,7 @@ use std::time::Instant;
 #[serde(deny_unknown_fields)]
 pub(super) struct PlacementRequest {
     #[serde(default, deserialize_with = "present")]
-    scenario_id: Option<String>,
+    scenario_id: Option<ScenarioId>,
     #[serde(default, deserialize_with = "present")]
     scenario: Option<serde_json::Map<String, serde_json::Value>>,
     #[serde(default)]
@@ -55,7 +57,7 @@ pub(super) const SYNC_PLACEMENT_MAPS: usize = 4;
 /// ran as and how many of the best candidates are registered with their maps cached.
 #[derive(Serialize)]
 pub(super) struct PlacementBody<'a> {
-    placement_id: &'a str,
+    placement_id: &'a JobId,
     #[serde(flatten)]
     answer: &'a serde_json::Value,
     registered: usize,
@@ -67,7 +69,7 @@ pub(super) fn placement_body<'a>(job: &'a Job, outcome: &'a PlacementOutcome) ->
         placement_id: &job.id,
         answer: &outcome.answer,
         registered: outcome.registered,
-        href: format!("/v1/placements/{}", job.id),
+        href: job.id.placement_href(),
     }
 }
 
@@ -117,7 +119,7 @@ pub(super) async fn place(
         state.limits().max_build_cpu_s,
     )?;
     if inline {
-        state.register_scenario((*scenario).clone(), "api", &caller)?;
+        state.register_scenario((*scenario).clone(), ScenarioSource::Api, &caller)?;
     }
     let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
     let (registrar, owner) = (state.clone(), caller.clone());
@@ -131,7 +133,7 @@ pub(super) async fn place(
         .jobs()
         .place(state.cache(), checked, caller.owner(), move |s| {
             registrar
-                .register_scenario(s, "api", &owner)
+                .register_scenario(s, ScenarioSource::Api, &owner)
                 .inspect_err(
                     |e| tracing::warn!(error = %e, "a placement candidate was not registered"),
                 )
@@ -153,7 +155,7 @@ pub(super) async fn place(
 
 pub(super) async fn get_placement(
     State(state): State<App>,
-    Path(placement_id): Path<String>,
+    Path(placement_id): Path<JobId>,
 ) -> Result<Response, ApiError> {
     let job = state
         .jobs()
@@ -164,7 +166,7 @@ pub(super) async fn get_placement(
         Some(outcome) => Ok(Json(placement_body(&job, &outcome)).into_response()),
         None if job.state().is_terminal() => Err(Error::JobFinished {
             job_id: job.id.clone(),
-            state: job.view().state.label(),
+            state: job.state(),
         }
         .into()),
         None => Err(Error::PlacementNotReady {

@@ -65,8 +65,8 @@ impl ApiError {
         self.problem.limit = Some(limit);
         self
     }
-    fn with_job(mut self, job_id: String) -> Self {
-        self.problem.job_id = Some(job_id);
+    fn with_job(mut self, job_id: crate::ids::JobId) -> Self {
+        self.problem.job_id = Some(job_id.to_string());
         self
     }
 

@@ -6,8 +6,9 @@ use super::{Body, Page};
 use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
+use crate::app::registry::ScenarioSummary;
 use crate::app::scenarios::parse_scenario;
-use crate::cache::ScenarioSummary;
+use crate::ids::ScenarioId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::{StatusCode, header};
@@ -32,7 +33,7 @@ pub(super) async fn list_scenarios(
 ) -> Result<Json<ScenarioList>, ApiError> {
     let page = Page::of(&query)?;
     let listed = state.registry().list(&caller);
-    let keyed = listed.into_iter().map(|s| (s.id.clone(), s)).collect();
+    let keyed = listed.into_iter().map(|s| (s.id.to_string(), s)).collect();
     let (scenarios, next_cursor) = page.cut(keyed, |key, cursor| key > cursor);
     Ok(Json(ScenarioList {
         scenarios,
@@ -70,7 +71,7 @@ pub(super) async fn register_scenario(
 
 pub(super) async fn get_scenario(
     State(state): State<App>,
-    Path(id): Path<String>,
+    Path(id): Path<ScenarioId>,
 ) -> Result<Json<ScenarioDocument>, ApiError> {
     let stored = state
         .scenario(&id)
@@ -88,7 +89,7 @@ pub(super) async fn get_scenario(
 pub(super) async fn delete_scenario(
     State(state): State<App>,
     caller: Caller,
-    Path(id): Path<String>,
+    Path(id): Path<ScenarioId>,
 ) -> Result<StatusCode, ApiError> {
     state.delete_scenario(&id, &caller).await?;
     Ok(StatusCode::NO_CONTENT)

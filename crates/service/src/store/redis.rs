@@ -22,11 +22,14 @@
 //! answers 503 with the reason, a request that needs Redis answers 503 with `Retry-After`,
 //! maps already in a replica's cache still answer path queries, and everything resumes when
 //! the ping succeeds again (the client reconnects by itself).
+//!
+//! The records are the application's (its scenario and job records); the store keeps them
+//! as JSON text and reads them back as the type it is asked for, so it depends on no type
+//! above it.
 
 use super::Error;
 use super::disk as store;
-use crate::cache::ScenarioRecord;
-use crate::jobs::JobRecord;
+use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
 use redis::streams::{
@@ -34,6 +37,8 @@ use redis::streams::{
     StreamReadReply,
 };
 use redis::{AsyncCommands, ExistenceCheck, SetExpiry, SetOptions};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 use std::sync::{Mutex, RwLock};
 use std::time::Duration;
 
@@ -58,19 +63,19 @@ const RESPONSE_TIMEOUT: Duration = Duration::from_secs(3);
 /// Cancellation requests and job records outlive any job: a day.
 const RECORD_TTL_S: u64 = 86_400;
 
-fn scenario_key(id: &str) -> String {
+fn scenario_key(id: &ScenarioId) -> String {
     format!("irs:scenario:{id}")
 }
-fn map_key(id: &str) -> String {
+fn map_key(id: &MapId) -> String {
     format!("irs:map:{id}")
 }
-fn job_key(id: &str) -> String {
+fn job_key(id: &JobId) -> String {
     format!("irs:job:{id}")
 }
-fn cancel_key(id: &str) -> String {
+fn cancel_key(id: &JobId) -> String {
     format!("irs:cancel:{id}")
 }
-fn lock_key(map_id: &str) -> String {
+fn lock_key(map_id: &MapId) -> String {
     format!("irs:building:{map_id}")
 }
 
@@ -78,8 +83,8 @@ fn lock_key(map_id: &str) -> String {
 #[derive(Debug, Clone)]
 pub(crate) struct BuildEntry {
     pub stream_id: String,
-    pub job_id: String,
-    pub map_id: String,
+    pub job_id: JobId,
+    pub map_id: MapId,
     pub key: MapKey,
 }
 
@@ -89,10 +94,10 @@ impl BuildEntry {
         let map_id: String = entry.get("map_id")?;
         let key: String = entry.get("key")?;
         let key: MapKey = serde_json::from_str(&key).ok()?;
-        (irs_answers::map::map_id(&key) == map_id).then(|| BuildEntry {
+        (MapId::of(&key).as_str() == map_id).then(|| BuildEntry {
             stream_id: entry.id.clone(),
-            job_id,
-            map_id,
+            job_id: JobId::given(job_id),
+            map_id: MapId::given(map_id),
             key,
         })
     }
@@ -222,8 +227,8 @@ impl Cluster {
     /// map request must make its scenario readable, not upload a floor plan each time).
     pub async fn put_scenario(
         &self,
-        id: &str,
-        record: &ScenarioRecord,
+        id: &ScenarioId,
+        record: &impl Serialize,
         replace: bool,
     ) -> Result<(), Error> {
         let mut conn = self.conn()?;
@@ -242,7 +247,7 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn scenario(&self, id: &str) -> Result<Option<ScenarioRecord>, Error> {
+    pub async fn scenario<R: DeserializeOwned>(&self, id: &ScenarioId) -> Result<Option<R>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn
             .get(scenario_key(id))
@@ -251,7 +256,7 @@ impl Cluster {
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn delete_scenario(&self, id: &str) -> Result<(), Error> {
+    pub async fn delete_scenario(&self, id: &ScenarioId) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.del::<_, ()>(scenario_key(id))
             .await
@@ -259,7 +264,7 @@ impl Cluster {
     }
 
     /// Stores a map's encoded bytes, framed with their digest.
-    pub async fn put_map(&self, id: &str, encoded: &[u8]) -> Result<(), Error> {
+    pub async fn put_map(&self, id: &MapId, encoded: &[u8]) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
             .await
@@ -267,46 +272,46 @@ impl Cluster {
     }
 
     /// A map's encoded bytes, if Redis has it and its digest checks out.
-    pub async fn map(&self, id: &str) -> Result<Option<Vec<u8>>, Error> {
+    pub async fn map(&self, id: &MapId) -> Result<Option<Vec<u8>>, Error> {
         let mut conn = self.conn()?;
         let framed: Option<Vec<u8>> = conn.get(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(framed.and_then(|bytes| match store::unframe(&bytes) {
             Ok(payload) => Some(payload.to_vec()),
             Err(reason) => {
-                tracing::warn!(map_id = id, reason, "map in Redis ignored");
+                tracing::warn!(map_id = %id, reason, "map in Redis ignored");
                 None
             }
         }))
     }
 
-    pub async fn delete_map(&self, id: &str) -> Result<bool, Error> {
+    pub async fn delete_map(&self, id: &MapId) -> Result<bool, Error> {
         let mut conn = self.conn()?;
         let removed: usize = conn.del(map_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(removed > 0)
     }
 
-    pub async fn put_job(&self, record: &JobRecord) -> Result<(), Error> {
+    pub async fn put_job(&self, id: &JobId, record: &impl Serialize) -> Result<(), Error> {
         let mut conn = self.conn()?;
         let json = serde_json::to_string(record).expect("records serialise");
-        conn.set_ex::<_, _, ()>(job_key(&record.job_id), json, RECORD_TTL_S)
+        conn.set_ex::<_, _, ()>(job_key(id), json, RECORD_TTL_S)
             .await
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn job(&self, id: &str) -> Result<Option<JobRecord>, Error> {
+    pub async fn job<R: DeserializeOwned>(&self, id: &JobId) -> Result<Option<R>, Error> {
         let mut conn = self.conn()?;
         let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
         Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
     }
 
-    pub async fn request_cancel(&self, id: &str) -> Result<(), Error> {
+    pub async fn request_cancel(&self, id: &JobId) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set_ex::<_, _, ()>(cancel_key(id), 1, RECORD_TTL_S)
             .await
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn cancel_requested(&self, id: &str) -> bool {
+    pub async fn cancel_requested(&self, id: &JobId) -> bool {
         let Ok(mut conn) = self.conn() else {
             return false;
         };
@@ -314,9 +319,13 @@ impl Cluster {
     }
 
     /// The job building `map_id` somewhere in the cluster, if one is.
-    pub async fn building(&self, map_id: &str) -> Result<Option<String>, Error> {
+    pub async fn building(&self, map_id: &MapId) -> Result<Option<JobId>, Error> {
         let mut conn = self.conn()?;
-        conn.get(lock_key(map_id)).await.map_err(|e| self.error(&e))
+        let holder: Option<String> = conn
+            .get(lock_key(map_id))
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(holder.map(JobId::given))
     }
 
     /// Single flight across replicas: the id of the job building `map_id`, and whether it was
@@ -324,11 +333,11 @@ impl Cluster {
     /// `queue_limit` bounds the builds queued or running in the whole cluster (503 past it).
     pub async fn enqueue(
         &self,
-        map_id: &str,
+        map_id: &MapId,
         key: &MapKey,
-        queued: JobRecord,
+        (job_id, queued): (&JobId, &impl Serialize),
         queue_limit: usize,
-    ) -> Result<(String, bool), Error> {
+    ) -> Result<(JobId, bool), Error> {
         let mut conn = self.conn()?;
         for _ in 0..3 {
             let existing: Option<String> = conn
@@ -336,7 +345,7 @@ impl Cluster {
                 .await
                 .map_err(|e| self.error(&e))?;
             if let Some(job_id) = existing {
-                return Ok((job_id, false));
+                return Ok((JobId::given(job_id), false));
             }
             let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
             if waiting >= queue_limit {
@@ -346,21 +355,21 @@ impl Cluster {
                 .conditional_set(ExistenceCheck::NX)
                 .with_expiration(SetExpiry::PX(LEASE.as_millis() as u64));
             let taken: Option<String> = conn
-                .set_options(lock_key(map_id), &queued.job_id, options)
+                .set_options(lock_key(map_id), job_id.as_str(), options)
                 .await
                 .map_err(|e| self.error(&e))?;
             if taken.is_none() {
                 continue; // another replica took it between the GET and the SET: read it
             }
             let key_json = serde_json::to_string(key).expect("keys serialise");
-            let recorded = match self.put_job(&queued).await {
+            let recorded = match self.put_job(job_id, queued).await {
                 Ok(()) => conn
                     .xadd::<_, _, _, _, ()>(
                         STREAM,
                         "*",
                         &[
-                            ("job_id", queued.job_id.as_str()),
-                            ("map_id", map_id),
+                            ("job_id", job_id.as_str()),
+                            ("map_id", map_id.as_str()),
                             ("key", key_json.as_str()),
                         ],
                     )
@@ -374,7 +383,7 @@ impl Cluster {
                 let _: redis::RedisResult<()> = conn.del(lock_key(map_id)).await;
                 return Err(e);
             }
-            return Ok((queued.job_id, true));
+            return Ok((job_id.clone(), true));
         }
         Err(Error::unavailable(
             "the build lock changed hands three times in a row; retry",

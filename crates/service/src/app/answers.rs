@@ -13,6 +13,7 @@
 //! took, a lookup for a kept answer) is appended per request.
 
 use crate::app::Error;
+use crate::ids::MapId;
 use bytes::Bytes;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_model::planner::Threshold;
@@ -21,7 +22,7 @@ use irs_model::planner::Threshold;
 /// fields, the coordinates as their exact bits (an answer repeats the requested points).
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub(crate) struct PathQuery {
-    map_id: String,
+    map_id: MapId,
     start: [u64; 2],
     goal: [u64; 2],
     /// `None` for `"max"`.
@@ -32,7 +33,7 @@ pub(crate) struct PathQuery {
 
 impl PathQuery {
     pub fn new(
-        map_id: String,
+        map_id: MapId,
         start: [f64; 2],
         goal: [f64; 2],
         threshold: Threshold,
@@ -54,7 +55,7 @@ impl PathQuery {
 
     /// Bytes the key holds, for the weigher.
     fn bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.map_id.len()
+        std::mem::size_of::<Self>() + self.map_id.as_str().len()
     }
 }
 

@@ -54,7 +54,7 @@ impl QueryPool {
         let threads = rayon::ThreadPoolBuilder::new()
             .num_threads(workers)
             .thread_name(|k| format!("irs-query-{k}"))
-            .start_handler(|_| super::priority::lower_this_thread())
+            .start_handler(|_| crate::priority::lower_this_thread())
             .build()
             .map_err(|e| format!("query pool: {e}"))?;
         Ok(QueryPool {

@@ -1,28 +1,60 @@
-//! What the service keeps in memory: the scenario registry (bounded by count and by bytes,
-//! least recently used API scenarios evicted first) and the map cache (moka, bounded by bytes
-//! through a weigher, keyed by the map id = hash of the map key).
+//! The scenario registry: the scenarios this replica knows, by content hash, bounded by count
+//! and by bytes (least recently used API scenarios evicted first), with where each came from
+//! and who registered it; and [`ScenarioRecord`], what the data directory and the shared store
+//! keep of an API scenario.
 
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner};
+use crate::ids::ScenarioId;
 use crate::store::{DataDir, Kind};
 use irs_answers::scenario::ScenarioDocument as _;
-use irs_answers::scenario::hash_hex;
-use irs_model::planner::{self, Bottlenecks};
-use irs_model::radiomap::RadioMap;
 use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 
+/// Where a registered scenario came from. Only API scenarios are evicted or deleted: the
+/// others are the server's configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScenarioSource {
+    /// Built into the binary.
+    Builtin,
+    /// A file of the scenarios directory, read at start-up.
+    File,
+    /// Sent to the API (registered, inline in a request, or a placement's candidate).
+    Api,
+}
+
+impl ScenarioSource {
+    /// Its name in listings (`source`) and error details.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ScenarioSource::Builtin => "builtin",
+            ScenarioSource::File => "file",
+            ScenarioSource::Api => "api",
+        }
+    }
+}
+
+impl std::fmt::Display for ScenarioSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Serialize for ScenarioSource {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
 /// A registered scenario.
 #[derive(Debug)]
 pub struct StoredScenario {
-    pub id: String,
+    pub id: ScenarioId,
     pub scenario: Arc<Scenario>,
-    /// Where it came from: "builtin", "file", or "api". Only "api" scenarios are evicted or
-    /// deleted: the others are the server's configuration.
-    pub source: &'static str,
+    pub source: ScenarioSource,
     /// Its weight in the registry's byte budget: its canonical document and decoded raster.
     bytes: usize,
     /// The tokens that registered it (empty when authentication is off): each may delete its
@@ -34,9 +66,9 @@ pub struct StoredScenario {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct ScenarioSummary {
-    pub id: String,
+    pub id: ScenarioId,
     pub name: Option<String>,
-    pub source: &'static str,
+    pub source: ScenarioSource,
     pub href: String,
 }
 
@@ -63,13 +95,13 @@ impl StoredScenario {
             id: self.id.clone(),
             name: self.scenario.name.clone(),
             source: self.source,
-            href: format!("/v1/scenarios/{}", self.id),
+            href: self.id.href(),
         }
     }
 
     /// May `caller` see it in a listing? The server's own scenarios are everybody's.
     fn visible_to(&self, caller: &Caller) -> bool {
-        self.source != "api"
+        self.source != ScenarioSource::Api
             || *caller == Caller::Open
             || caller
                 .owner()
@@ -86,7 +118,7 @@ impl StoredScenario {
 pub struct ScenarioRegistry {
     limit: usize,
     budget_bytes: usize,
-    by_id: RwLock<HashMap<String, Arc<StoredScenario>>>,
+    by_id: RwLock<HashMap<ScenarioId, Arc<StoredScenario>>>,
     clock: AtomicU64,
     /// With `--data-dir`: API scenarios are written there (with their owners) and removed when
     /// they are deleted or evicted, so the directory mirrors the registry.
@@ -95,7 +127,9 @@ pub struct ScenarioRegistry {
     disk_writes: Mutex<()>,
 }
 
-/// A scenario as the data directory keeps it.
+/// A scenario as the data directory (`scenarios/<id>.rec`) and the shared store
+/// (`irs:scenario:<id>`) keep it. Persisted: a field added must default when absent, so that
+/// records written before it stay readable.
 #[derive(Serialize, Deserialize)]
 pub(crate) struct ScenarioRecord {
     /// The canonical document (its hash is the file's name).
@@ -119,7 +153,7 @@ impl ScenarioRegistry {
     /// Writes an API scenario's record (its document and current owners) to the data directory.
     fn persist(&self, stored: &StoredScenario) {
         let Some(disk) = &self.disk else { return };
-        if stored.source != "api" {
+        if stored.source != ScenarioSource::Api {
             return;
         }
         let _serial = self.disk_writes.lock().expect("registry disk lock");
@@ -130,13 +164,13 @@ impl ScenarioRegistry {
             return;
         }
         let record = stored.record();
-        disk.save_json(Kind::Scenario, &stored.id, &record);
+        disk.save_json(Kind::Scenario, stored.id.as_str(), &record);
     }
 
     /// Removes a scenario's record; called under the registry's write lock.
-    fn unpersist(&self, id: &str) {
+    fn unpersist(&self, id: &ScenarioId) {
         if let Some(disk) = &self.disk {
-            disk.remove_json(Kind::Scenario, id);
+            disk.remove_json(Kind::Scenario, id.as_str());
         }
     }
 
@@ -150,13 +184,13 @@ impl ScenarioRegistry {
     pub fn register(
         &self,
         scenario: Scenario,
-        source: &'static str,
+        source: ScenarioSource,
         owner: Option<Owner>,
-        in_use: impl FnOnce() -> HashSet<String>,
+        in_use: impl FnOnce() -> HashSet<ScenarioId>,
     ) -> Result<(Arc<StoredScenario>, bool), Error> {
         // One canonical form for both the id and the weight (a floor plan's is megabytes).
         let canonical = scenario.canonical_json();
-        let id = hash_hex(canonical.as_bytes());
+        let id = ScenarioId::of_canonical(&canonical);
         let bytes = canonical.len() + scenario.raster_bytes();
         let mut by_id = self.by_id.write().expect("registry lock");
         if let Some(existing) = by_id.get(&id) {
@@ -179,9 +213,9 @@ impl ScenarioRegistry {
         let mut held: usize = by_id.values().map(|s| s.bytes).sum();
         if by_id.len() >= self.limit || held + bytes > self.budget_bytes {
             let needed = in_use();
-            let mut victims: Vec<(u64, String, usize)> = by_id
+            let mut victims: Vec<(u64, ScenarioId, usize)> = by_id
                 .values()
-                .filter(|s| s.source == "api" && !needed.contains(&s.id))
+                .filter(|s| s.source == ScenarioSource::Api && !needed.contains(&s.id))
                 .map(|s| (s.last_used.load(Ordering::Relaxed), s.id.clone(), s.bytes))
                 .collect();
             victims.sort_unstable();
@@ -220,7 +254,7 @@ impl ScenarioRegistry {
         Ok((stored, true))
     }
 
-    pub fn get(&self, id: &str) -> Option<Arc<StoredScenario>> {
+    pub fn get(&self, id: &ScenarioId) -> Option<Arc<StoredScenario>> {
         let found = self.by_id.read().expect("registry lock").get(id).cloned();
         if let Some(s) = &found {
             s.last_used.store(self.tick(), Ordering::Relaxed);
@@ -231,14 +265,14 @@ impl ScenarioRegistry {
     /// Removes `caller`'s registration of an API scenario; the scenario goes with its last
     /// registration (true then). Built-in and preloaded files stay (409); a scenario the caller
     /// did not register is not found (404), as if it were not there.
-    pub fn delete(&self, id: &str, caller: &Caller) -> Result<bool, Error> {
+    pub fn delete(&self, id: &ScenarioId, caller: &Caller) -> Result<bool, Error> {
         let mut by_id = self.by_id.write().expect("registry lock");
         let Some(stored) = by_id.get(id) else {
             return Err(Error::not_found("scenario", id));
         };
-        if stored.source != "api" {
+        if stored.source != ScenarioSource::Api {
             return Err(Error::ScenarioProtected {
-                id: id.to_string(),
+                id: id.clone(),
                 origin: stored.source,
             });
         }
@@ -285,170 +319,5 @@ impl ScenarioRegistry {
 
     pub fn len(&self) -> usize {
         self.by_id.read().expect("registry lock").len()
-    }
-}
-
-/// Built maps by map id, weighed in KiB so the budget is in bytes, not entries; with
-/// `--data-dir`, backed by the maps on disk (a memory miss reads the disk, a new map is written
-/// to both, a deleted one leaves both).
-#[derive(Clone)]
-pub struct MapCache {
-    maps: moka::future::Cache<String, Arc<RadioMap>>,
-    /// Each queried map's widest-path index ([`Bottlenecks`], 8 bytes a cell), built by its
-    /// first path or sweep query. Its own budget, a quarter of the maps', holds the indexes of
-    /// the maps being queried (an index is at most as big as its map); an evicted one is rebuilt
-    /// on demand (≈ 0.1 s for 1001² cells). Map ids hash the map's inputs, so an index can never
-    /// outlive the map it describes.
-    indexes: moka::sync::Cache<String, Arc<Bottlenecks>>,
-    disk: Option<MapDisk>,
-}
-
-/// The disk behind the cache, and the registry that decodes its maps (a stored map is read
-/// against its scenario).
-#[derive(Clone)]
-pub struct MapDisk {
-    pub dir: Arc<DataDir>,
-    pub scenarios: Arc<ScenarioRegistry>,
-}
-
-impl MapCache {
-    pub fn new(budget_bytes: u64, disk: Option<MapDisk>) -> Self {
-        // Least recently used, not moka's default TinyLFU: TinyLFU may refuse a new entry it
-        // has seen once, and a map is requested once before it is built, so a map that was
-        // just built (minutes of CPU) could be dropped at once while old ones stay.
-        let maps = moka::future::Cache::builder()
-            .eviction_policy(moka::policy::EvictionPolicy::lru())
-            .max_capacity((budget_bytes / 1024).max(1))
-            .weigher(|_id: &String, map: &Arc<RadioMap>| {
-                (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
-            })
-            .build();
-        let indexes = moka::sync::Cache::builder()
-            .eviction_policy(moka::policy::EvictionPolicy::lru())
-            .max_capacity((budget_bytes / 4 / 1024).max(1))
-            .weigher(|_id: &String, index: &Arc<Bottlenecks>| {
-                (index.bytes() / 1024).clamp(1, u32::MAX as usize) as u32
-            })
-            .build();
-        MapCache {
-            maps,
-            indexes,
-            disk,
-        }
-    }
-
-    /// Looks a map up in memory, then on disk, counting hits (memory or disk) and misses.
-    pub async fn get(&self, map_id: &str) -> Option<Arc<RadioMap>> {
-        if let Some(map) = self.maps.get(map_id).await {
-            metrics::counter!("irs_map_cache_requests_total", "outcome" => "hit").increment(1);
-            return Some(map);
-        }
-        let loaded = match &self.disk {
-            Some(disk) if disk.dir.has_map(map_id) => {
-                let disk = disk.clone();
-                let id = map_id.to_string();
-                // Reading and checking a map of megabytes is blocking work.
-                crate::tasks::spawn_blocking(move || {
-                    disk.dir.load_map(&id, |sid| {
-                        disk.scenarios.get(sid).map(|s| s.scenario.clone())
-                    })
-                })
-                .await
-                .ok()
-                .flatten()
-            }
-            _ => None,
-        };
-        let outcome = if loaded.is_some() { "disk" } else { "miss" };
-        metrics::counter!("irs_map_cache_requests_total", "outcome" => outcome).increment(1);
-        let map = Arc::new(loaded?);
-        self.maps.insert(map_id.to_string(), map.clone()).await;
-        self.record_size();
-        Some(map)
-    }
-
-    /// Caches a new map, and writes it to the data directory (before returning: a finished
-    /// job's map is on disk by the time the job says `done`).
-    pub async fn insert(&self, map_id: String, map: Arc<RadioMap>) {
-        if let Some(disk) = &self.disk {
-            let (dir, id, to_save) = (disk.dir.clone(), map_id.clone(), map.clone());
-            let _ = crate::tasks::spawn_blocking(move || dir.save_map(&id, &to_save)).await;
-        }
-        self.maps.insert(map_id, map).await;
-        self.maps.run_pending_tasks().await;
-        self.record_size();
-    }
-
-    /// The widest-path index of a cached map, built on first use by the calling thread (a query
-    /// worker; concurrent first queries wait for one build).
-    pub fn bottlenecks(&self, map_id: &str, map: &RadioMap) -> Arc<Bottlenecks> {
-        self.indexes
-            .get_with_by_ref(map_id, || Arc::new(planner::bottlenecks(map)))
-    }
-
-    /// Fills memory from the disk, most recently written first, up to `budget_bytes`: a
-    /// restarted server answers its listing and its first queries from memory.
-    pub async fn warm(&self, budget_bytes: u64) {
-        let Some(disk) = &self.disk else { return };
-        let mut loaded = 0usize;
-        let mut held = 0u64;
-        for map_id in disk.dir.map_ids() {
-            let Some(map) = self.get(&map_id).await else {
-                continue;
-            };
-            held += map.size_bytes() as u64;
-            loaded += 1;
-            if held >= budget_bytes {
-                break;
-            }
-        }
-        tracing::info!(
-            maps = loaded,
-            bytes = held,
-            "maps loaded from the data directory"
-        );
-    }
-
-    pub fn record_size(&self) {
-        metrics::gauge!("irs_map_cache_entries").set(self.maps.entry_count() as f64);
-        metrics::gauge!("irs_map_cache_bytes").set((self.maps.weighted_size() * 1024) as f64);
-    }
-
-    /// The cached maps (id and map), for listing.
-    pub fn entries(&self) -> Vec<(String, Arc<RadioMap>)> {
-        self.maps.iter().map(|(k, v)| ((*k).clone(), v)).collect()
-    }
-
-    /// Drops a map from memory and disk; true if it was held.
-    pub async fn remove(&self, map_id: &str) -> bool {
-        let mut removed = self.maps.remove(map_id).await.is_some();
-        self.indexes.invalidate(map_id);
-        if let Some(disk) = &self.disk {
-            removed |= disk.dir.remove_map(map_id);
-        }
-        self.record_size();
-        removed
-    }
-
-    /// Drops every map of a deleted scenario, from memory and disk.
-    pub async fn remove_scenario_maps(&self, scenario_id: &str) {
-        for (map_id, map) in self.entries() {
-            if map.key.scenario_id == scenario_id {
-                self.maps.remove(&map_id).await;
-                self.indexes.invalidate(&map_id);
-            }
-        }
-        if let Some(disk) = &self.disk {
-            disk.dir.remove_maps_of(scenario_id);
-        }
-        self.record_size();
-    }
-
-    /// The scenarios the cached maps were built from.
-    pub fn scenario_ids(&self) -> HashSet<String> {
-        self.maps
-            .iter()
-            .map(|(_, m)| m.key.scenario_id.clone())
-            .collect()
     }
 }

@@ -1,0 +1,260 @@
+//! One job: its state, its kind, what it does ([`Work`]), its times and error, how a map job
+//! delivers its map to the requests waiting for it, and waiting for it to end.
+
+use super::placements::PlacementOutcome;
+use crate::app::identity::Owner;
+use crate::ids::{JobId, MapId, ScenarioId};
+use irs_model::radiomap::{MapKey, Progress, RadioMap};
+use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use tokio::sync::{Notify, watch};
+
+/// Where a job is in its life; shown and recorded as its name ([`JobState::as_str`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JobState {
+    Queued,
+    Running,
+    Done,
+    Failed,
+    Cancelled,
+}
+
+impl JobState {
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobState::Done | JobState::Failed | JobState::Cancelled
+        )
+    }
+    const ALL: [JobState; 5] = [
+        JobState::Queued,
+        JobState::Running,
+        JobState::Done,
+        JobState::Failed,
+        JobState::Cancelled,
+    ];
+
+    /// Its name: in views, records, error details and metric labels.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+}
+
+impl std::fmt::Display for JobState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Serialize for JobState {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> Deserialize<'de> for JobState {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        JobState::ALL
+            .into_iter()
+            .find(|state| state.as_str() == name)
+            .ok_or_else(|| {
+                serde::de::Error::invalid_value(serde::de::Unexpected::Str(&name), &"a job state")
+            })
+    }
+}
+
+/// What kind of job it is: shown as `kind` and labels its metrics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JobKind {
+    /// Builds a map.
+    Map,
+    /// Ranks placement candidates.
+    Placement,
+}
+
+impl JobKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::Map => "map",
+            JobKind::Placement => "placement",
+        }
+    }
+}
+
+impl Serialize for JobKind {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+/// What a job does.
+pub enum Work {
+    /// Builds one map (single flight by map id); `delivery` passes it to the waiters.
+    Map {
+        map_id: MapId,
+        key: MapKey,
+        delivery: Mutex<MapDelivery>,
+    },
+    /// Ranks placement candidates; the answer is kept here once the job is done.
+    Placement {
+        outcome: OnceLock<Arc<PlacementOutcome>>,
+    },
+}
+
+/// How a map job delivers its built map to the requests waiting for it.
+#[derive(Default)]
+pub struct MapDelivery {
+    /// Requests waiting for the map.
+    waiters: usize,
+    /// The map, held while waiters remain.
+    map: Option<Arc<RadioMap>>,
+    /// Set when the build finished: the map for whoever comes late, while anything holds it.
+    built: Option<std::sync::Weak<RadioMap>>,
+}
+
+/// One request waiting for a map job; the last to go lets the job drop the map.
+struct Waiter<'a>(&'a Mutex<MapDelivery>);
+
+impl Drop for Waiter<'_> {
+    fn drop(&mut self) {
+        let mut h = self.0.lock().expect("job lock");
+        h.waiters -= 1;
+        if h.waiters == 0 {
+            h.map = None;
+        }
+    }
+}
+
+/// One job.
+pub struct Job {
+    pub id: JobId,
+    /// Order of creation, for listings (newest first) and their cursors.
+    pub seq: u64,
+    /// The token that started it (`None` with authentication off); only it may cancel.
+    pub owner: Option<Owner>,
+    /// The scenario the job works on (a live job keeps it registered).
+    pub scenario_id: ScenarioId,
+    pub work: Work,
+    pub progress: Arc<Progress>,
+    pub(super) state: watch::Sender<JobState>,
+    pub(super) cancel: Notify,
+    pub(super) times: Mutex<JobTimes>,
+    pub(super) error: Mutex<Option<String>>,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct JobTimes {
+    pub created: Option<SystemTime>,
+    pub started: Option<SystemTime>,
+    pub finished: Option<SystemTime>,
+}
+
+pub(super) fn from_unix(t: f64) -> Option<SystemTime> {
+    (t.is_finite() && t >= 0.0).then(|| UNIX_EPOCH + Duration::from_secs_f64(t))
+}
+
+pub(super) fn unix(t: Option<SystemTime>) -> Option<f64> {
+    t.map(|t| {
+        t.duration_since(UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64())
+    })
+}
+
+impl Job {
+    pub fn state(&self) -> JobState {
+        *self.state.borrow()
+    }
+
+    pub fn kind(&self) -> JobKind {
+        match &self.work {
+            Work::Map { .. } => JobKind::Map,
+            Work::Placement { .. } => JobKind::Placement,
+        }
+    }
+
+    /// The map a map job builds.
+    pub fn map_id(&self) -> Option<&MapId> {
+        match &self.work {
+            Work::Map { map_id, .. } => Some(map_id),
+            Work::Placement { .. } => None,
+        }
+    }
+
+    /// Waits for a map job and takes its map: `None` if the build failed or was cancelled.
+    pub async fn wait_for_map(&self) -> Option<Arc<RadioMap>> {
+        let Work::Map { delivery, .. } = &self.work else {
+            return None;
+        };
+        {
+            let mut h = delivery.lock().expect("job lock");
+            if let Some(built) = &h.built {
+                return built.upgrade();
+            }
+            h.waiters += 1;
+        }
+        // Counted out on drop too: a waiter whose client left must not pin the map.
+        let waiter = Waiter(delivery);
+        self.finished().await;
+        let map = {
+            let h = delivery.lock().expect("job lock");
+            h.map.clone().or_else(|| h.built.as_ref()?.upgrade())
+        };
+        drop(waiter);
+        map
+    }
+
+    /// Hands the built map to the waiters (held only if there are some).
+    pub(super) fn deliver(&self, map: &Arc<RadioMap>) {
+        if let Work::Map { delivery, .. } = &self.work {
+            let mut h = delivery.lock().expect("job lock");
+            h.built = Some(Arc::downgrade(map));
+            if h.waiters > 0 {
+                h.map = Some(map.clone());
+            }
+        }
+    }
+
+    /// A placement job's outcome, once it is done.
+    pub fn placement(&self) -> Option<Arc<PlacementOutcome>> {
+        match &self.work {
+            Work::Placement { outcome } => outcome.get().cloned(),
+            Work::Map { .. } => None,
+        }
+    }
+
+    /// Waits until the job ends.
+    pub async fn finished(&self) -> JobState {
+        let mut rx = self.state.subscribe();
+        // The guard `wait_for` returns borrows `rx`; copy the state out before `rx` drops.
+        #[allow(clippy::let_and_return)]
+        let state = rx
+            .wait_for(|s| s.is_terminal())
+            .await
+            .map(|s| *s)
+            .unwrap_or(JobState::Failed);
+        state
+    }
+
+    pub(super) fn set_state(&self, next: JobState) {
+        let previous = self.state.send_replace(next);
+        if previous != next {
+            metrics::gauge!("irs_jobs", "state" => previous.as_str()).decrement(1.0);
+            metrics::gauge!("irs_jobs", "state" => next.as_str()).increment(1.0);
+        }
+        let mut times = self.times.lock().expect("job lock");
+        match next {
+            JobState::Running => times.started = Some(SystemTime::now()),
+            s if s.is_terminal() => times.finished = Some(SystemTime::now()),
+            _ => {}
+        }
+    }
+}

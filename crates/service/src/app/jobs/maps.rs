@@ -1,0 +1,124 @@
+//! Map jobs and their single flight: while a map id is being built, every request for it gets
+//! the same job; the finished map enters the cache *before* the job leaves the in-flight
+//! table, so a request that arrives in between finds the map, never a second build. The
+//! requests that wait for a job take the map from the job itself ([`Job::wait_for_map`]), not
+//! from the cache, so a cache that evicts it at once (full of other maps) cannot fail them; the
+//! job lets go of the map as soon as the last of them has it. Cancellation sets the build's
+//! flag, which [`irs_model::radiomap::build`] checks once per grid row.
+
+use super::Jobs;
+use super::job::{Job, MapDelivery, Work};
+use crate::app::Error;
+use crate::app::cache::MapCache;
+use crate::app::identity::Owner;
+use crate::ids::{JobId, MapId, ScenarioId};
+use irs_model::radiomap::{MapKey, RadioMap, WorkError};
+use irs_model::scenario::Scenario;
+use std::sync::{Arc, Mutex};
+use tracing::Instrument;
+
+/// The outcome of asking for a map.
+pub enum MapRequestOutcome {
+    Ready(Arc<RadioMap>),
+    Building(Arc<Job>),
+}
+
+impl Jobs {
+    /// The job building `map_id`, if one is queued or running.
+    pub async fn building(&self, map_id: &MapId) -> Option<Arc<Job>> {
+        self.in_flight.lock().await.get(map_id).cloned()
+    }
+
+    /// The map if cached, else the job building it (started now unless one is in flight).
+    pub async fn request(
+        self: &Arc<Self>,
+        cache: &MapCache,
+        scenario: Arc<Scenario>,
+        key: MapKey,
+        owner: Option<Owner>,
+    ) -> Result<MapRequestOutcome, Error> {
+        let map_id = MapId::of(&key);
+        let mut in_flight = self.in_flight.lock().await;
+        if let Some(map) = cache.get(&map_id).await {
+            return Ok(MapRequestOutcome::Ready(map));
+        }
+        if let Some(job) = in_flight.get(&map_id) {
+            return Ok(MapRequestOutcome::Building(job.clone()));
+        }
+        self.check_room()?;
+        let job = self.admit_map(JobId::random(), &key, owner);
+        in_flight.insert(map_id.clone(), job.clone());
+        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id);
+        let progress = job.progress.clone();
+        let cache = cache.clone();
+        let work =
+            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let finish = move |job: Arc<Job>, map: RadioMap| async move {
+            let map = Arc::new(map);
+            job.deliver(&map);
+            cache.insert(map_id, map).await;
+        };
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        Ok(MapRequestOutcome::Building(job))
+    }
+
+    /// Builds a map another replica (or this one) queued in the cluster's stream, as the local
+    /// job `job_id` (so this replica shows its live progress). When it is done, `publish`
+    /// gets the map before the job says `done`, then the map enters `cache`. Counted in
+    /// `irs_map_builds_total`, which in a cluster counts builds, not requests.
+    pub(crate) fn build_shared<P, Fut>(
+        self: &Arc<Self>,
+        job_id: JobId,
+        scenario: Arc<Scenario>,
+        key: MapKey,
+        owner: Option<Owner>,
+        cache: &MapCache,
+        publish: P,
+    ) -> Arc<Job>
+    where
+        P: FnOnce(Arc<RadioMap>) -> Fut + Send + 'static,
+        Fut: std::future::Future<Output = Result<(), String>> + Send,
+    {
+        let map_id = MapId::of(&key);
+        let job = self.admit_map(job_id, &key, owner);
+        let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
+        let progress = job.progress.clone();
+        let cache = cache.clone();
+        let work =
+            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let built_id = map_id.clone();
+        let finish = move |job: Arc<Job>, map: RadioMap| async move {
+            let map = Arc::new(map);
+            job.deliver(&map);
+            if let Err(e) = publish(map.clone()).await {
+                tracing::warn!(error = %e, "built map not shared: other replicas will build it again");
+            }
+            cache.insert(built_id, map).await;
+        };
+        let runner = self.clone();
+        let handle = job.clone();
+        crate::tasks::spawn(
+            async move {
+                runner.in_flight.lock().await.insert(map_id, handle.clone());
+                runner.run(handle, work, finish).await;
+            }
+            .instrument(span),
+        );
+        job
+    }
+
+    /// A map build admitted as job `id`, counted in `irs_map_builds_total`.
+    fn admit_map(&self, id: JobId, key: &MapKey, owner: Option<Owner>) -> Arc<Job> {
+        metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
+        self.admit_as(
+            id,
+            ScenarioId::of_key(key),
+            owner,
+            Work::Map {
+                map_id: MapId::of(key),
+                key: key.clone(),
+                delivery: Mutex::new(MapDelivery::default()),
+            },
+        )
+    }
+}

@@ -1,0 +1,301 @@
+//! Jobs: map builds and placement searches. Every job runs on tokio's blocking pool (never on
+//! the async runtime's threads), at most `workers` at once behind one semaphore, with at most
+//! `queue` more waiting. This file holds the table of jobs (admission, running, history,
+//! listing, cancellation); [`job`] one job, [`record`] its view and record, [`maps`] the map
+//! builds' single flight, [`placements`] the placement searches.
+
+mod job;
+mod maps;
+mod placements;
+mod record;
+
+use job::JobTimes;
+pub use job::{Job, JobState, Work};
+pub use maps::MapRequestOutcome;
+pub use placements::{PlacementOutcome, PlacementSearch};
+pub(crate) use record::{JobRecord, JobView};
+
+use crate::app::Error;
+use crate::app::identity::{Caller, Owner};
+use crate::ids::{JobId, MapId, ScenarioId};
+use crate::store::{DataDir, Kind};
+use irs_model::radiomap::{Cancelled, Progress, WorkError};
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Instant, SystemTime};
+use tokio::sync::{Notify, Semaphore, watch};
+
+pub struct Jobs {
+    next_seq: AtomicU64,
+    workers: Arc<Semaphore>,
+    queue_limit: usize,
+    queued: Arc<AtomicUsize>,
+    history_limit: usize,
+    by_id: Mutex<HashMap<JobId, Arc<Job>>>,
+    finished_order: Mutex<VecDeque<JobId>>,
+    in_flight: tokio::sync::Mutex<HashMap<MapId, Arc<Job>>>,
+    /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
+    disk: Option<Arc<DataDir>>,
+}
+
+impl Jobs {
+    pub fn new(
+        workers: usize,
+        queue_limit: usize,
+        history_limit: usize,
+        disk: Option<Arc<DataDir>>,
+    ) -> Self {
+        Jobs {
+            next_seq: AtomicU64::new(0),
+            workers: Arc::new(Semaphore::new(workers)),
+            queue_limit,
+            queued: Arc::new(AtomicUsize::new(0)),
+            history_limit,
+            by_id: Mutex::new(HashMap::new()),
+            finished_order: Mutex::new(VecDeque::new()),
+            in_flight: tokio::sync::Mutex::new(HashMap::new()),
+            disk,
+        }
+    }
+
+    /// Takes back the finished jobs the data directory recorded (oldest first, the newest
+    /// `history_limit` kept); new jobs are numbered after them. Returns how many.
+    pub fn restore(&self) -> usize {
+        let Some(disk) = &self.disk else { return 0 };
+        let mut jobs: Vec<Job> = disk
+            .load_json::<JobRecord>(Kind::Job)
+            .into_iter()
+            .filter_map(|(file_id, record)| {
+                (record.view.job_id.as_str() == file_id)
+                    .then_some(record)
+                    .and_then(Job::restore)
+            })
+            .collect();
+        jobs.sort_by_key(|job| job.seq);
+        let surplus = jobs.len().saturating_sub(self.history_limit);
+        for old in jobs.drain(..surplus) {
+            disk.remove_json(Kind::Job, old.id.as_str());
+        }
+        let next = jobs.last().map_or(0, |job| job.seq + 1);
+        self.next_seq.fetch_max(next, Ordering::Relaxed);
+        let mut by_id = self.by_id.lock().expect("jobs lock");
+        let mut order = self.finished_order.lock().expect("jobs lock");
+        let restored = jobs.len();
+        for job in jobs {
+            order.push_back(job.id.clone());
+            by_id.insert(job.id.clone(), Arc::new(job));
+        }
+        restored
+    }
+
+    pub fn get(&self, id: &JobId) -> Option<Arc<Job>> {
+        self.by_id.lock().expect("jobs lock").get(id).cloned()
+    }
+
+    /// Cancels every queued and running job (shutdown); returns their ids.
+    pub fn cancel_all(&self) -> Vec<JobId> {
+        self.live()
+            .into_iter()
+            .map(|job| {
+                job.progress.cancel();
+                job.cancel.notify_one();
+                job.id.clone()
+            })
+            .collect()
+    }
+
+    /// The jobs that are queued or running.
+    pub fn live(&self) -> Vec<Arc<Job>> {
+        self.by_id
+            .lock()
+            .expect("jobs lock")
+            .values()
+            .filter(|j| !j.state().is_terminal())
+            .cloned()
+            .collect()
+    }
+
+    /// The jobs `caller` may see, newest first, with their sequence numbers (for cursors).
+    pub fn list(&self, caller: &Caller) -> Vec<(u64, JobView)> {
+        let mut all: Vec<(u64, JobView)> = self
+            .by_id
+            .lock()
+            .expect("jobs lock")
+            .values()
+            .filter(|j| caller.may_touch(j.owner.as_ref()))
+            .map(|j| (j.seq, j.view()))
+            .collect();
+        all.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
+        all
+    }
+
+    /// Asks a local job to stop (a cancellation that came through the shared store).
+    pub(crate) fn cancel_local(&self, job: &Job) {
+        job.progress.cancel();
+        job.cancel.notify_one();
+    }
+
+    /// Workers free now (the cluster's builder reads the stream only when one is).
+    pub(crate) fn free_workers(&self) -> usize {
+        self.workers.available_permits()
+    }
+
+    /// Refuses a new job while `queue` jobs already wait beyond the free workers.
+    fn check_room(&self) -> Result<(), Error> {
+        if self.queued.load(Ordering::SeqCst) >= self.queue_limit + self.workers.available_permits()
+        {
+            return Err(Error::QueueFull {
+                limit: self.queue_limit,
+            });
+        }
+        Ok(())
+    }
+
+    /// Creates a queued job and records it.
+    fn admit(&self, scenario_id: ScenarioId, owner: Option<Owner>, work: Work) -> Arc<Job> {
+        self.admit_as(JobId::random(), scenario_id, owner, work)
+    }
+
+    /// [`Jobs::admit`] under a given id (a cluster job keeps the id its record has).
+    fn admit_as(
+        &self,
+        id: JobId,
+        scenario_id: ScenarioId,
+        owner: Option<Owner>,
+        work: Work,
+    ) -> Arc<Job> {
+        let (state, _) = watch::channel(JobState::Queued);
+        let job = Arc::new(Job {
+            id,
+            seq: self.next_seq.fetch_add(1, Ordering::Relaxed),
+            owner,
+            scenario_id,
+            work,
+            progress: Arc::new(Progress::default()),
+            state,
+            cancel: Notify::new(),
+            times: Mutex::new(JobTimes {
+                created: Some(SystemTime::now()),
+                ..Default::default()
+            }),
+            error: Mutex::new(None),
+        });
+        metrics::gauge!("irs_jobs", "state" => JobState::Queued.as_str()).increment(1.0);
+        self.by_id
+            .lock()
+            .expect("jobs lock")
+            .insert(job.id.clone(), job.clone());
+        self.queued.fetch_add(1, Ordering::SeqCst);
+        job
+    }
+
+    /// Runs `work` on the blocking pool once a worker is free, then `finish` with its result.
+    async fn run<T, W, F, Fut>(self: Arc<Self>, job: Arc<Job>, work: W, finish: F)
+    where
+        T: Send + 'static,
+        W: FnOnce() -> Result<T, WorkError> + Send + 'static,
+        F: FnOnce(Arc<Job>, T) -> Fut,
+        Fut: std::future::Future<Output = ()>,
+    {
+        let queued_at = Instant::now();
+        let permit = tokio::select! {
+            permit = self.workers.clone().acquire_owned() => permit.ok(),
+            _ = job.cancel.notified() => None,
+        };
+        self.queued.fetch_sub(1, Ordering::SeqCst);
+        let Some(permit) = permit.filter(|_| !job.progress.is_cancelled()) else {
+            job.set_state(JobState::Cancelled);
+            tracing::info!("cancelled while queued");
+            self.retire(&job).await;
+            return;
+        };
+        job.set_state(JobState::Running);
+        let waited = queued_at.elapsed().as_secs_f64();
+        tracing::info!(queued_s = waited, "job started");
+        let started = Instant::now();
+        let result = crate::tasks::spawn_blocking(|| {
+            // The job's own sequential parts yield to the runtime as the pools' threads do. The
+            // blocking pool runs nothing latency-bound (builds, map encoding, disk writes), so
+            // a thread that stays lowered for its next task costs nothing.
+            crate::priority::lower_this_thread();
+            work()
+        })
+        .await;
+        drop(permit);
+        let seconds = started.elapsed().as_secs_f64();
+        match result {
+            Ok(Ok(output)) => {
+                metrics::histogram!("irs_job_seconds", "kind" => job.kind().as_str())
+                    .record(seconds);
+                finish(job.clone(), output).await;
+                job.set_state(JobState::Done);
+                tracing::info!(run_s = seconds, "job done");
+            }
+            Ok(Err(WorkError::Cancelled(Cancelled))) => {
+                job.set_state(JobState::Cancelled);
+                tracing::info!(
+                    run_s = seconds,
+                    cells_done = job.progress.cells_done(),
+                    "job cancelled"
+                );
+            }
+            Ok(Err(WorkError::Invalid(e))) => {
+                // Checked before the job was created; kept for completeness.
+                *job.error.lock().expect("job lock") = Some(e.to_string());
+                job.set_state(JobState::Failed);
+                tracing::error!(error = %e, "job failed");
+            }
+            Err(panic) => {
+                *job.error.lock().expect("job lock") = Some(format!("the job panicked: {panic}"));
+                job.set_state(JobState::Failed);
+                tracing::error!(error = %panic, "job panicked");
+            }
+        }
+        self.retire(&job).await;
+    }
+
+    /// Removes a finished job from the in-flight table and forgets the oldest finished jobs
+    /// beyond the history limit.
+    async fn retire(&self, job: &Arc<Job>) {
+        if let Some(map_id) = job.map_id() {
+            self.in_flight.lock().await.remove(map_id);
+        }
+        if let Some(disk) = self.disk.clone() {
+            let (id, record) = (job.id.clone(), job.record());
+            // A small file, but flushed to disk: off the async threads.
+            let _ = crate::tasks::spawn_blocking(move || {
+                disk.save_json(Kind::Job, id.as_str(), &record)
+            })
+            .await;
+        }
+        let mut order = self.finished_order.lock().expect("jobs lock");
+        order.push_back(job.id.clone());
+        while order.len() > self.history_limit {
+            if let Some(old) = order.pop_front() {
+                self.by_id.lock().expect("jobs lock").remove(&old);
+                if let Some(disk) = &self.disk {
+                    disk.remove_json(Kind::Job, old.as_str());
+                }
+            }
+        }
+    }
+
+    /// Cancels a queued or running job; a job of another token is not found (404).
+    pub fn cancel(&self, id: &JobId, caller: &Caller) -> Result<Arc<Job>, Error> {
+        let job = self
+            .get(id)
+            .filter(|job| caller.may_touch(job.owner.as_ref()))
+            .ok_or_else(|| Error::not_found("job", id))?;
+        let state = job.state();
+        if state.is_terminal() {
+            return Err(Error::JobFinished {
+                job_id: id.clone(),
+                state,
+            });
+        }
+        job.progress.cancel();
+        job.cancel.notify_one();
+        Ok(job)
+    }
+}

@@ -1,0 +1,107 @@
+//! Placement jobs: a checked search ranked on the blocking pool, its best candidates
+//! registered with their maps cached, and the answer kept in the job.
+
+use super::Jobs;
+use super::job::{Job, Work};
+use crate::app::Error;
+use crate::app::cache::MapCache;
+use crate::app::identity::Owner;
+use crate::ids::{MapId, ScenarioId};
+use irs_model::placement::{self, Candidate, Placement, Search};
+use irs_model::radiomap::{Cancelled, MapKey, Progress, RadioMap, WorkError};
+use irs_model::scenario::Scenario;
+use std::sync::{Arc, OnceLock};
+use tracing::Instrument;
+
+/// A checked placement search, ready to run.
+pub struct PlacementSearch {
+    pub scenario: Arc<Scenario>,
+    pub search: Search,
+    /// Its candidates, checked by [`placement::candidates`].
+    pub candidates: Vec<Candidate>,
+    /// How many of the best to register with their maps.
+    pub keep: usize,
+}
+
+/// A finished placement search: the answer, and how many of its best candidates were
+/// registered with their maps cached (fewer than asked only if the registry refused some).
+pub struct PlacementOutcome {
+    /// The [`placement::PlacementAnswer`] as JSON: what the API answers, and what a data
+    /// directory keeps.
+    pub answer: serde_json::Value,
+    pub registered: usize,
+}
+
+impl Jobs {
+    /// Starts a placement search as a job (503 when the queue is full). When it is done, the
+    /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
+    /// answer's map ids answer path queries at once; then the answer is kept in the job.
+    pub fn place(
+        self: &Arc<Self>,
+        cache: &MapCache,
+        search: PlacementSearch,
+        owner: Option<Owner>,
+        register: impl Fn(Scenario) -> bool + Send + 'static,
+    ) -> Result<Arc<Job>, Error> {
+        let PlacementSearch {
+            scenario,
+            search,
+            candidates,
+            keep,
+        } = search;
+        self.check_room()?;
+        let job = self.admit(
+            ScenarioId::of(&scenario),
+            owner,
+            Work::Placement {
+                outcome: OnceLock::new(),
+            },
+        );
+        metrics::counter!("irs_placements_total").increment(1);
+        let span = tracing::info_span!("job", job_id = %job.id, kind = "placement", scenario_id = %job.scenario_id);
+        let progress = job.progress.clone();
+        let work = move || -> Result<(Placement, Vec<RadioMap>), WorkError> {
+            let placement = placement::rank_candidates(
+                &scenario,
+                &search,
+                candidates,
+                &irs_answers::map::ContentIds,
+                &progress,
+            )?;
+            let phases = placement.answer.phases;
+            // The best candidates' maps, built now so their ids answer at once (gain maps of
+            // the search's floor: milliseconds each).
+            let maps = placement
+                .scenarios
+                .iter()
+                .take(keep)
+                .map(|s| {
+                    if progress.is_cancelled() {
+                        return Err(Cancelled.into());
+                    }
+                    let key = MapKey::gain(ScenarioId::of(s).as_str(), s, phases)?;
+                    Ok(irs_answers::map::build(s, &key, &Progress::default())?)
+                })
+                .collect::<Result<Vec<_>, WorkError>>()?;
+            Ok((placement, maps))
+        };
+        let cache = cache.clone();
+        let finish = move |job: Arc<Job>, (placement, maps): (Placement, Vec<RadioMap>)| async move {
+            let mut registered = 0;
+            for (scenario, map) in placement.scenarios.into_iter().zip(maps) {
+                if register(scenario) {
+                    cache.insert(MapId::of_map(&map), Arc::new(map)).await;
+                    registered += 1;
+                }
+            }
+            if let Work::Placement { outcome } = &job.work {
+                let _ = outcome.set(Arc::new(PlacementOutcome {
+                    answer: serde_json::to_value(&placement.answer).expect("answers serialise"),
+                    registered,
+                }));
+            }
+        };
+        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
+        Ok(job)
+    }
+}

@@ -1,0 +1,247 @@
+//! A job as the API shows it ([`JobView`]) and as the data directory and Redis keep it
+//! ([`JobRecord`], persisted: records written by earlier releases must stay readable, so a
+//! field added must default when absent); and a [`Job`] turned into each and back.
+
+use super::job::{Job, JobKind, JobState, JobTimes, MapDelivery, Work, from_unix, unix};
+use super::placements::PlacementOutcome;
+use crate::app::identity::Owner;
+use crate::ids::{JobId, MapId, ScenarioId};
+use irs_model::radiomap::{MapKey, Progress};
+use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::SystemTime;
+use tokio::sync::{Notify, watch};
+
+/// A job as the API shows it, and the part of its record that says so: the fields here are
+/// the facts a record keeps (read back with serde's derive, so a record from any release that
+/// has them is readable); what follows from them (`kind`, `map_id`, `progress` and the links)
+/// is added when the view is written (its `Serialize`, below).
+#[derive(Debug, Clone, Deserialize)]
+pub struct JobView {
+    pub job_id: JobId,
+    pub scenario_id: ScenarioId,
+    /// Map jobs: the key of the map being built (null for placements; its hash is the map id).
+    pub key: Option<MapKey>,
+    pub state: JobState,
+    pub cells_done: usize,
+    pub cells_total: usize,
+    pub created_at: f64,
+    pub started_at: Option<f64>,
+    pub finished_at: Option<f64>,
+    pub error: Option<String>,
+}
+
+impl JobView {
+    pub fn kind(&self) -> JobKind {
+        match self.key {
+            Some(_) => JobKind::Map,
+            None => JobKind::Placement,
+        }
+    }
+
+    /// cells_done / cells_total (0 before the build starts).
+    pub fn progress(&self) -> f64 {
+        if self.cells_total == 0 {
+            0.0
+        } else {
+            self.cells_done as f64 / self.cells_total as f64
+        }
+    }
+}
+
+/// The API's `Job` (openapi.yaml): the view's fields with what follows from them, in this order.
+impl Serialize for JobView {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct as _;
+        let map_id = self.key.as_ref().map(MapId::of);
+        let result_href = match &map_id {
+            Some(map_id) => map_id.href(),
+            None => self.job_id.placement_href(),
+        };
+        let mut job = serializer.serialize_struct("JobView", 15)?;
+        job.serialize_field("job_id", &self.job_id)?;
+        job.serialize_field("kind", &self.kind())?;
+        job.serialize_field("scenario_id", &self.scenario_id)?;
+        job.serialize_field("map_id", &map_id)?;
+        job.serialize_field("key", &self.key)?;
+        job.serialize_field("state", &self.state)?;
+        job.serialize_field("cells_done", &self.cells_done)?;
+        job.serialize_field("cells_total", &self.cells_total)?;
+        job.serialize_field("progress", &self.progress())?;
+        job.serialize_field("created_at", &self.created_at)?;
+        job.serialize_field("started_at", &self.started_at)?;
+        job.serialize_field("finished_at", &self.finished_at)?;
+        job.serialize_field("error", &self.error)?;
+        job.serialize_field("href", &self.job_id.href())?;
+        // Where the result is read once the job is done: the map, or the placement answer.
+        job.serialize_field("result_href", &result_href)?;
+        job.end()
+    }
+}
+
+/// A job as the data directory (`serve --data-dir`, finished jobs) and Redis (a cluster's map
+/// builds, while they run and after) keep it: its view, and what it takes to list, authorise
+/// and, for a placement, answer it again.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct JobRecord {
+    #[serde(flatten)]
+    pub view: JobView,
+    pub seq: u64,
+    /// The owner's digest (never the token).
+    pub owner: Option<String>,
+    /// Placement jobs that finished: the answer and how many candidates were registered.
+    pub placement: Option<(serde_json::Value, usize)>,
+}
+
+impl JobRecord {
+    /// A map job not started yet, as the replica that takes a request records it.
+    pub(crate) fn queued(key: &MapKey, owner: Option<&Owner>) -> JobRecord {
+        JobRecord {
+            view: JobView {
+                job_id: JobId::random(),
+                scenario_id: ScenarioId::of_key(key),
+                key: Some(key.clone()),
+                state: JobState::Queued,
+                cells_done: 0,
+                cells_total: 0,
+                created_at: unix(Some(SystemTime::now())).unwrap_or(0.0),
+                started_at: None,
+                finished_at: None,
+                error: None,
+            },
+            seq: 0,
+            owner: owner.map(|o| o.to_string()),
+            placement: None,
+        }
+    }
+
+    /// The owner, as [`Caller::may_touch`] takes it.
+    pub(crate) fn owner(&self) -> Option<Owner> {
+        self.owner.clone().map(Owner::from_digest)
+    }
+}
+
+impl Job {
+    pub fn view(&self) -> JobView {
+        let times = *self.times.lock().expect("job lock");
+        JobView {
+            job_id: self.id.clone(),
+            scenario_id: self.scenario_id.clone(),
+            key: match &self.work {
+                Work::Map { key, .. } => Some(key.clone()),
+                Work::Placement { .. } => None,
+            },
+            state: self.state(),
+            cells_done: self.progress.cells_done(),
+            cells_total: self.progress.cells_total(),
+            created_at: unix(times.created).unwrap_or(0.0),
+            started_at: unix(times.started),
+            finished_at: unix(times.finished),
+            error: self.error.lock().expect("job lock").clone(),
+        }
+    }
+
+    /// The record a data directory keeps of a finished job (and Redis of a cluster's build).
+    pub(crate) fn record(&self) -> JobRecord {
+        JobRecord {
+            view: self.view(),
+            seq: self.seq,
+            owner: self.owner.as_ref().map(|o| o.to_string()),
+            placement: self
+                .placement()
+                .map(|outcome| (outcome.answer.clone(), outcome.registered)),
+        }
+    }
+
+    /// A finished job again, from its record; `None` for a record that is not of a finished
+    /// job (the store only writes finished ones) or whose map key does not match its kind.
+    pub(super) fn restore(record: JobRecord) -> Option<Job> {
+        let JobRecord {
+            view,
+            seq,
+            owner,
+            placement,
+        } = record;
+        if !view.state.is_terminal() {
+            return None;
+        }
+        let work = match (view.key, placement) {
+            (Some(key), None) => Work::Map {
+                map_id: MapId::of(&key),
+                key,
+                delivery: Mutex::new(MapDelivery::default()),
+            },
+            (None, placement) => {
+                let outcome = OnceLock::new();
+                if let Some((answer, registered)) = placement {
+                    let _ = outcome.set(Arc::new(PlacementOutcome { answer, registered }));
+                }
+                Work::Placement { outcome }
+            }
+            (Some(_), Some(_)) => return None,
+        };
+        let progress = Progress::default();
+        progress.start(view.cells_total);
+        progress.advance(view.cells_done.min(view.cells_total));
+        let (state, _) = watch::channel(view.state);
+        Some(Job {
+            id: view.job_id,
+            seq,
+            owner: owner.map(Owner::from_digest),
+            scenario_id: view.scenario_id,
+            work,
+            progress: Arc::new(progress),
+            state,
+            cancel: Notify::new(),
+            times: Mutex::new(JobTimes {
+                created: from_unix(view.created_at),
+                started: view.started_at.and_then(from_unix),
+                finished: view.finished_at.and_then(from_unix),
+            }),
+            error: Mutex::new(view.error),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A finished map job's record as the data directory and Redis hold it.
+    const MAP_RECORD: &str = r#"{"job_id":"0123456789abcdef0123456789abcdef","seq":7,"owner":"d1gest","scenario_id":"5c3na410","key":{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null},"state":"done","cells_done":40,"cells_total":40,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"placement":null}"#;
+
+    /// A finished placement job's record.
+    const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
+
+    /// A record reads back as the record it was, and carries every field of today's format
+    /// (so the release before this one reads it too).
+    fn round_trip(record: &JobRecord, today: &str) {
+        let written = serde_json::to_value(record).unwrap();
+        let again: JobRecord = serde_json::from_value(written.clone()).unwrap();
+        assert_eq!(serde_json::to_value(&again).unwrap(), written);
+        let today: serde_json::Value = serde_json::from_str(today).unwrap();
+        for (field, value) in today.as_object().unwrap() {
+            assert_eq!(&written[field], value, "{field}");
+        }
+    }
+
+    #[test]
+    fn records_of_today_are_read_and_shown_as_before() {
+        let map: JobRecord = serde_json::from_str(MAP_RECORD).unwrap();
+        let map_id = irs_answers::map::map_id(map.view.key.as_ref().unwrap());
+        let expected = format!(
+            r#"{{"job_id":"0123456789abcdef0123456789abcdef","kind":"map","scenario_id":"5c3na410","map_id":"{map_id}","key":{{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null}},"state":"done","cells_done":40,"cells_total":40,"progress":1.0,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"href":"/v1/jobs/0123456789abcdef0123456789abcdef","result_href":"/v1/maps/{map_id}"}}"#
+        );
+        assert_eq!(serde_json::to_string(&map.view).unwrap(), expected);
+        let job = Job::restore(map).unwrap();
+        assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
+        round_trip(&job.record(), MAP_RECORD);
+
+        let placement: JobRecord = serde_json::from_str(PLACEMENT_RECORD).unwrap();
+        let expected = r#"{"job_id":"fedcba9876543210fedcba9876543210","kind":"placement","scenario_id":"5c3na410","map_id":null,"key":null,"state":"failed","cells_done":3,"cells_total":12,"progress":0.25,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","href":"/v1/jobs/fedcba9876543210fedcba9876543210","result_href":"/v1/placements/fedcba9876543210fedcba9876543210"}"#;
+        assert_eq!(serde_json::to_string(&placement.view).unwrap(), expected);
+        let job = Job::restore(placement).unwrap();
+        assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
+        round_trip(&job.record(), PLACEMENT_RECORD);
+    }
+}
