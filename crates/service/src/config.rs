@@ -71,6 +71,10 @@ pub struct ServeArgs {
     /// Finished jobs kept for inspection (oldest forgotten first).
     #[arg(long, env = "IRS_JOB_HISTORY", default_value_t = 1000)]
     pub job_history: usize,
+    /// Memory in MiB the finished jobs' answers may hold (a placement's ranking is megabytes);
+    /// past it the oldest finished jobs are forgotten, whatever `--job-history` allows.
+    #[arg(long, env = "IRS_JOB_HISTORY_MB", default_value_t = 64)]
+    pub job_history_mb: u64,
     /// Memory budget of the scenario registry in MiB (scenarios weighed by their canonical
     /// document and decoded floor plan; least recently used API scenarios evicted, 507 when
     /// nothing can go).

@@ -131,6 +131,7 @@ impl App {
                     args.workers(),
                     args.queue,
                     args.job_history,
+                    args.job_history_mb.saturating_mul(1 << 20),
                     disk.clone(),
                 )),
                 queries: QueryPool::new(args.query_workers(), args.query_queue)?,

@@ -31,19 +31,21 @@ pub struct Jobs {
     workers: Arc<Semaphore>,
     queue_limit: usize,
     queued: Arc<AtomicUsize>,
-    history_limit: usize,
+    history: Mutex<History>,
     by_id: Mutex<HashMap<JobId, Arc<Job>>>,
-    finished_order: Mutex<VecDeque<JobId>>,
     in_flight: tokio::sync::Mutex<HashMap<MapId, Arc<Job>>>,
     /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
     disk: Option<Arc<DataDir>>,
 }
 
 impl Jobs {
+    /// `history_limit` finished jobs are kept, their answers weighing at most
+    /// `history_bytes` (the newest one is kept whatever it weighs).
     pub fn new(
         workers: usize,
         queue_limit: usize,
         history_limit: usize,
+        history_bytes: u64,
         disk: Option<Arc<DataDir>>,
     ) -> Self {
         Jobs {
@@ -51,16 +53,21 @@ impl Jobs {
             workers: Arc::new(Semaphore::new(workers)),
             queue_limit,
             queued: Arc::new(AtomicUsize::new(0)),
-            history_limit,
+            history: Mutex::new(History {
+                order: VecDeque::new(),
+                bytes: 0,
+                limit: history_limit,
+                budget: history_bytes,
+            }),
             by_id: Mutex::new(HashMap::new()),
-            finished_order: Mutex::new(VecDeque::new()),
             in_flight: tokio::sync::Mutex::new(HashMap::new()),
             disk,
         }
     }
 
     /// Takes back the finished jobs the data directory recorded (oldest first, the newest
-    /// `history_limit` kept); new jobs are numbered after them. Returns how many.
+    /// within the history's count and bytes kept); new jobs are numbered after them. Returns
+    /// how many.
     pub fn restore(&self) -> usize {
         let Some(disk) = &self.disk else { return 0 };
         let mut jobs: Vec<Job> = disk
@@ -73,20 +80,19 @@ impl Jobs {
             })
             .collect();
         jobs.sort_by_key(|job| job.seq);
-        let surplus = jobs.len().saturating_sub(self.history_limit);
-        for old in jobs.drain(..surplus) {
-            disk.remove_json(Kind::Job, old.id.as_str());
-        }
         let next = jobs.last().map_or(0, |job| job.seq + 1);
         self.next_seq.fetch_max(next, Ordering::Relaxed);
         let mut by_id = self.by_id.lock().expect("jobs lock");
-        let mut order = self.finished_order.lock().expect("jobs lock");
-        let restored = jobs.len();
+        let mut history = self.history.lock().expect("jobs lock");
         for job in jobs {
-            order.push_back(job.id.clone());
+            history.push(&job);
             by_id.insert(job.id.clone(), Arc::new(job));
         }
-        restored
+        for old in history.trim() {
+            by_id.remove(&old);
+            disk.remove_json(Kind::Job, old.as_str());
+        }
+        history.order.len()
     }
 
     pub fn get(&self, id: &JobId) -> Option<Arc<Job>> {
@@ -256,7 +262,7 @@ impl Jobs {
     }
 
     /// Removes a finished job from the in-flight table and forgets the oldest finished jobs
-    /// beyond the history limit.
+    /// beyond the history's count or bytes.
     async fn retire(&self, job: &Arc<Job>) {
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
@@ -269,14 +275,15 @@ impl Jobs {
             })
             .await;
         }
-        let mut order = self.finished_order.lock().expect("jobs lock");
-        order.push_back(job.id.clone());
-        while order.len() > self.history_limit {
-            if let Some(old) = order.pop_front() {
-                self.by_id.lock().expect("jobs lock").remove(&old);
-                if let Some(disk) = &self.disk {
-                    disk.remove_json(Kind::Job, old.as_str());
-                }
+        let forgotten = {
+            let mut history = self.history.lock().expect("jobs lock");
+            history.push(job);
+            history.trim()
+        };
+        for old in forgotten {
+            self.by_id.lock().expect("jobs lock").remove(&old);
+            if let Some(disk) = &self.disk {
+                disk.remove_json(Kind::Job, old.as_str());
             }
         }
     }
@@ -297,5 +304,92 @@ impl Jobs {
         job.progress.cancel();
         job.cancel.notify_one();
         Ok(job)
+    }
+}
+
+/// The finished jobs kept for inspection, oldest first, with the bytes their answers weigh
+/// (a placement's ranking is megabytes; a map job's record, nothing worth counting).
+struct History {
+    order: VecDeque<(JobId, usize)>,
+    bytes: usize,
+    /// `--job-history`.
+    limit: usize,
+    /// `--job-history-mb`, in bytes.
+    budget: u64,
+}
+
+impl History {
+    fn push(&mut self, job: &Job) {
+        let weight = job.placement().map_or(0, |outcome| outcome.bytes);
+        self.push_weighed(job.id.clone(), weight);
+    }
+
+    fn push_weighed(&mut self, id: JobId, weight: usize) {
+        self.order.push_back((id, weight));
+        self.bytes += weight;
+    }
+
+    /// Forgets the oldest jobs until the rest fit the count and the bytes (the newest stays,
+    /// so a placement's client can read its answer once it is done); returns their ids.
+    fn trim(&mut self) -> Vec<JobId> {
+        let mut forgotten = Vec::new();
+        while self.order.len() > 1
+            && (self.order.len() > self.limit || self.bytes as u64 > self.budget)
+        {
+            let Some((old, weight)) = self.order.pop_front() else {
+                break;
+            };
+            self.bytes -= weight;
+            forgotten.push(old);
+        }
+        if self.limit == 0 {
+            // `--job-history 0`: nothing is kept, not even the newest.
+            forgotten.extend(self.order.drain(..).map(|(id, _)| id));
+            self.bytes = 0;
+        }
+        forgotten
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn history(limit: usize, budget: u64) -> History {
+        History {
+            order: VecDeque::new(),
+            bytes: 0,
+            limit,
+            budget,
+        }
+    }
+
+    fn ids(forgotten: Vec<JobId>) -> Vec<String> {
+        forgotten.iter().map(|id| id.as_str().to_string()).collect()
+    }
+
+    #[test]
+    fn the_history_keeps_its_count_and_bytes_and_always_the_newest() {
+        let mut h = history(3, 10);
+        for (id, weight) in [("a", 4), ("b", 4)] {
+            h.push_weighed(JobId::given(id), weight);
+            assert!(h.trim().is_empty());
+        }
+        h.push_weighed(JobId::given("c"), 4);
+        assert_eq!(ids(h.trim()), ["a"], "12 bytes > 10: the oldest goes");
+        assert_eq!(h.bytes, 8);
+        h.push_weighed(JobId::given("d"), 0);
+        h.push_weighed(JobId::given("e"), 0);
+        assert_eq!(ids(h.trim()), ["b"], "four jobs > 3");
+        h.push_weighed(JobId::given("huge"), 50);
+        assert_eq!(
+            ids(h.trim()),
+            ["c", "d", "e"],
+            "heavier than the budget: kept alone"
+        );
+        assert_eq!(h.bytes, 50);
+        let mut none = history(0, 10);
+        none.push_weighed(JobId::given("x"), 1);
+        assert_eq!(ids(none.trim()), ["x"], "--job-history 0 keeps nothing");
     }
 }

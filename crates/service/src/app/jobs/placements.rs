@@ -30,6 +30,20 @@ pub struct PlacementOutcome {
     /// directory keeps.
     pub answer: serde_json::Value,
     pub registered: usize,
+    /// What the answer weighs in the job history (`--job-history-mb`): its JSON text's length,
+    /// about what the JSON value holds in memory.
+    pub bytes: usize,
+}
+
+impl PlacementOutcome {
+    pub fn new(answer: serde_json::Value, registered: usize) -> Self {
+        let bytes = serde_json::to_vec(&answer).map_or(0, |text| text.len());
+        PlacementOutcome {
+            answer,
+            registered,
+            bytes,
+        }
+    }
 }
 
 impl Jobs {
@@ -95,10 +109,8 @@ impl Jobs {
                 }
             }
             if let Work::Placement { outcome } = &job.work {
-                let _ = outcome.set(Arc::new(PlacementOutcome {
-                    answer: serde_json::to_value(&placement.answer).expect("answers serialise"),
-                    registered,
-                }));
+                let answer = serde_json::to_value(&placement.answer).expect("answers serialise");
+                let _ = outcome.set(Arc::new(PlacementOutcome::new(answer, registered)));
             }
         };
         crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));

@@ -174,7 +174,7 @@ impl Job {
             (None, placement) => {
                 let outcome = OnceLock::new();
                 if let Some((answer, registered)) = placement {
-                    let _ = outcome.set(Arc::new(PlacementOutcome { answer, registered }));
+                    let _ = outcome.set(Arc::new(PlacementOutcome::new(answer, registered)));
                 }
                 Work::Placement { outcome }
             }
