@@ -26,14 +26,7 @@ pub const MAX_SCENARIO_FILE_BYTES: u64 = MAX_IMAGE_FILE_BYTES.div_ceil(3) * 4 + 
 /// read stops one byte past the cap (so a file that grows while it is read is refused too).
 /// The error's text says why, for the caller to prefix with the path.
 pub fn read_regular(path: &Path, max_bytes: u64) -> io::Result<Vec<u8>> {
-    let file = open_without_blocking(path)?;
-    let meta = file.metadata()?;
-    if !meta.is_file() {
-        return Err(refused(format!(
-            "not a regular file (a {}); only regular files are read",
-            file_kind(&meta.file_type())
-        )));
-    }
+    let (file, meta) = open_regular(path)?;
     if meta.len() > max_bytes {
         return Err(refused(too_large(meta.len(), max_bytes)));
     }
@@ -54,9 +47,10 @@ pub fn read_regular_text(path: &Path, max_bytes: u64) -> io::Result<String> {
         .map_err(|_| refused("not UTF-8 text".to_string()))
 }
 
-/// Opens for reading without waiting: opening a FIFO that no one writes to blocks until a
-/// writer comes, so it is opened non-blocking and then refused by its type.
-fn open_without_blocking(path: &Path) -> io::Result<File> {
+/// Opens `path` for reading if it is a regular file, with its metadata (taken from the open
+/// file). Opening a FIFO that no one writes to blocks until a writer comes, so the file is
+/// opened non-blocking and then refused by its type; a regular file reads as usual.
+pub fn open_regular(path: &Path) -> io::Result<(File, std::fs::Metadata)> {
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
     #[cfg(unix)]
@@ -64,7 +58,15 @@ fn open_without_blocking(path: &Path) -> io::Result<File> {
         use std::os::unix::fs::OpenOptionsExt;
         options.custom_flags(libc::O_NONBLOCK);
     }
-    options.open(path)
+    let file = options.open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(refused(format!(
+            "not a regular file (a {}); only regular files are read",
+            file_kind(&meta.file_type())
+        )));
+    }
+    Ok((file, meta))
 }
 
 /// What a file that is not a regular file is, in words.
