@@ -153,9 +153,11 @@ fn warehouse_document(resolution_m: f64) -> serde_json::Value {
     let mut document: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     document["grid"]["resolution_m"] = resolution_m.into();
-    irs_answers::mapfile::resolve_map_reference(&mut document, path.parent().unwrap(), &|p| {
-        std::fs::read(p)
-    })
+    irs_answers::mapfile::resolve_map_reference(
+        &mut document,
+        path.parent().unwrap(),
+        &irs_answers::files::read_regular,
+    )
     .unwrap();
     document
 }

@@ -310,7 +310,9 @@ pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
     let path = &source.scenario;
     let fail =
         |e: &dyn std::fmt::Display| Failure::input(format!("--scenario {}: {e}", path.display()));
-    let text = std::fs::read_to_string(path).map_err(|e| fail(&e))?;
+    let text =
+        irs_answers::files::read_regular_text(path, irs_answers::files::MAX_SCENARIO_FILE_BYTES)
+            .map_err(|e| fail(&e))?;
     let mut document = irs_answers::scenario::document(&text).map_err(|e| fail(&e))?;
     if let Some(map_yaml) = &source.floor_plan {
         let absolute = std::path::absolute(map_yaml)

@@ -262,8 +262,9 @@ fn bad_input_exits_2_and_names_the_field() {
     }
 }
 
-/// A server that cannot run is a runtime failure (exit 1), not bad input; an invalid scenario
-/// file in the preload directory is the operator's input (exit 2, naming the file).
+/// A server that cannot run is a runtime failure (exit 1), not bad input; a setting that is
+/// wrong is the operator's input (exit 2, naming it). (An invalid file in the scenarios
+/// directory is skipped with a log line, not fatal: tests/service.rs.)
 #[test]
 fn serve_failures_are_runtime_errors_unless_the_input_is_bad() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
@@ -272,19 +273,17 @@ fn serve_failures_are_runtime_errors_unless_the_input_is_bad() {
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("--bind"), "{err}");
 
-    let dir = std::env::temp_dir().join(format!("irs-bad-preload-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("broken.json"), r#"{"room": 1}"#).unwrap();
     let (code, _, err) = run(&[
         "serve",
         "--bind",
         "127.0.0.1:0",
         "--scenarios",
-        dir.to_str().unwrap(),
+        "no-such-dir",
+        "--cors-origin",
+        "ftp://example.org",
     ]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("broken.json") && err.contains("room"), "{err}");
-    std::fs::remove_dir_all(dir).unwrap();
+    assert!(err.contains("--cors-origin"), "{err}");
 }
 
 const WAREHOUSE: &str = "scenarios/warehouse/warehouse.json";
@@ -370,6 +369,49 @@ fn floor_plans_come_from_scenario_files_or_the_flag() {
     );
 }
 
+/// A 120 × 80 RGB PNG (every pixel 254, 254, 254): a map saved in colour.
+static RGB_PNG_120_BY_80: std::sync::LazyLock<Vec<u8>> = std::sync::LazyLock::new(|| {
+    use base64::Engine;
+    base64::engine::general_purpose::STANDARD
+        .decode(
+            "iVBORw0KGgoAAAANSUhEUgAAAHgAAABQCAIAAABd+SbeAAAAfUlEQVR42u3QMQ0AAAwDoPoX3dTFsgMkkHIiC\
+             kSLRrRo0YgWjWjRohEtGtGiRSNaNKJFi0a0aESLFo1o0YgWLRrRohEtWjSiRSNatGhEi0a0aNGIFo1o0a\
+             IRLRrRokUjWjSiRYtGtGhEixaNaNGIFi0a0aIRLVo0okUj+o8BCF6lgohDpfAAAAAASUVORK5CYII=",
+        )
+        .expect("base64")
+});
+
+/// A scenario file that is not a regular file, or repeats a key, exits 2 naming the reason.
+#[cfg(unix)]
+#[test]
+fn scenario_files_are_regular_files_with_unique_keys() {
+    let dir = scratch("scenario-files");
+    let fifo = dir.join("fifo.json");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    // Opened as a plain file, a FIFO without a writer would block the command for ever.
+    let (code, _, err) = run(&["scenario", "--scenario", fifo.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("fifo.json") && err.contains("not a regular file (a FIFO)"),
+        "{err}"
+    );
+    let (code, _, err) = run(&["scenario", "--scenario", dir.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a regular file (a directory)"), "{err}");
+    let small = std::fs::read_to_string(SMALL).unwrap();
+    let twice = dir.join("twice.json");
+    std::fs::write(&twice, small.replacen("{", "{\"name\": \"a\", ", 1)).unwrap();
+    let text = std::fs::read_to_string(&twice).unwrap();
+    assert!(
+        text.matches("\"name\"").count() == 2,
+        "the file repeats `name`"
+    );
+    let (code, _, err) = run(&["scenario", "--scenario", twice.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("$: duplicate key `name`"), "{err}");
+}
+
 /// Bad map files exit 2 naming the field, whether the scenario names them or the flag does.
 #[test]
 fn bad_map_files_exit_2_naming_the_field() {
@@ -423,6 +465,14 @@ fn bad_map_files_exit_2_naming_the_field() {
             good.clone(),
             yaml("yaw.pgm", "").replace("0.0]", "0.3]"),
         ),
+        // Read as a plain file, /dev/zero would grow without end.
+        ("zero", Vec::new(), yaml("/dev/zero", "")),
+        (
+            "nan",
+            good.clone(),
+            yaml("nan.pgm", "").replace("resolution: 0.5", "resolution: .nan"),
+        ),
+        ("rgb", RGB_PNG_120_BY_80.clone(), yaml("rgb.pgm", "")),
     ];
     let expected = [
         ("truncated", "floor_plan.image"),
@@ -432,6 +482,12 @@ fn bad_map_files_exit_2_naming_the_field() {
         ("small", "floor_plan: the map covers"),
         ("nokey", "resolution"),
         ("yaw", "floor_plan.origin"),
+        ("zero", "/dev/zero (the image named by"),
+        ("nan", "resolution: must be a finite number, got NaN"),
+        (
+            "rgb",
+            "is RGB: a floor plan is 8-bit grey; convert it to grayscale",
+        ),
     ];
     let bare_path = bare_warehouse(&dir, true);
     for ((name, image, text), (_, needle)) in files.iter().zip(expected) {
@@ -454,6 +510,18 @@ fn bad_map_files_exit_2_naming_the_field() {
             "{name}: {err}"
         );
     }
+    // The /dev/zero case names the reason too.
+    let (_, _, err) = run(&[
+        "scenario",
+        "--scenario",
+        bare_path.to_str().unwrap(),
+        "--floor-plan",
+        dir.join("zero.yaml").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("not a regular file (a character device)"),
+        "{err}"
+    );
     // The good image on the same floor works.
     std::fs::write(dir.join("good.pgm"), &good).unwrap();
     std::fs::write(dir.join("good.yaml"), yaml("good.pgm", "")).unwrap();

@@ -65,9 +65,13 @@ struct Flags {
 /// Starts the service in this process (`serve --bind 127.0.0.1:0` with extra flags) through
 /// [`irs_service::run`], on the test's runtime.
 fn start(extra: &[&str]) -> Server {
-    let scenarios = empty_scenarios();
+    start_with_scenarios(&empty_scenarios(), extra)
+}
+
+/// [`start`] with `--scenarios` set to `scenarios`.
+fn start_with_scenarios(scenarios: &str, extra: &[&str]) -> Server {
     let flags = Flags::try_parse_from(
-        ["serve", "--bind", "127.0.0.1:0", "--scenarios", &scenarios]
+        ["serve", "--bind", "127.0.0.1:0", "--scenarios", scenarios]
             .into_iter()
             .chain(extra.iter().copied()),
     )
@@ -2006,6 +2010,169 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
             .exists()
     );
     assert!(!dir.join("scenarios").join(format!("{sid}.rec")).exists());
+    drop(server);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn mkfifo(path: &std::path::Path) {
+    let made = Command::new("mkfifo").arg(path).status().expect("mkfifo");
+    assert!(made.success(), "mkfifo {}", path.display());
+}
+
+/// A request URI past the documented limit, and a JSON body repeating a key (at the top, in a
+/// nested object, in a scenario inside the body), are refused as problem+json naming why.
+#[tokio::test]
+async fn long_uris_and_repeated_keys_are_refused_as_problems() {
+    let server = start(&[]);
+    let long = format!("/v1/maps?cursor={}", "a".repeat(9000));
+    let resp = server
+        .client
+        .get(format!("{}{long}", server.base))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        resp.headers()["content-type"],
+        "application/problem+json",
+        "not hyper's bare 414"
+    );
+    let status = resp.status();
+    let body: Value = resp.json().await.unwrap();
+    problem(status, &body, StatusCode::URI_TOO_LONG, "uri_too_long");
+    assert_eq!(body["limit"], 8192);
+    // Just under the limit, the request is read (and refused for its cursor, not its length).
+    let (s, _) = server
+        .get(&format!("/v1/maps?cursor={}", "a".repeat(8000)))
+        .await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY);
+
+    let small = std::fs::read_to_string(format!("{}/scenarios/small-test.json", root())).unwrap();
+    let id = server.scenario_id("small-test").await;
+    let cases = [
+        (
+            "/v1/scenarios",
+            small.replacen('{', r#"{"name": "first", "#, 1),
+            "$",
+            "name",
+        ),
+        (
+            "/v1/scenarios",
+            small.replacen(r#""irs": {"#, r#""irs": {"nx_sub": 1000, "#, 1),
+            "irs",
+            "nx_sub",
+        ),
+        (
+            "/v1/paths",
+            format!(
+                r#"{{"map": {{"scenario_id": "{id}", "kind": "gain", "kind": "rate"}}, "start": [0.5, 0.5], "goal": [5.5, 3.5], "threshold": "max"}}"#
+            ),
+            "map",
+            "kind",
+        ),
+    ];
+    for (route, body, field, key) in cases {
+        let resp = server
+            .client
+            .post(format!("{}{route}", server.base))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        let status = resp.status();
+        let answer: Value = resp.json().await.unwrap();
+        problem(
+            status,
+            &answer,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+        );
+        assert_eq!(answer["field"], field, "{answer}");
+        assert!(
+            answer["detail"]
+                .as_str()
+                .unwrap()
+                .contains(&format!("duplicate key `{key}`")),
+            "{answer}"
+        );
+    }
+}
+
+/// One bad file in `--scenarios` (invalid, a FIFO, an image that is /dev/zero) is skipped,
+/// not fatal: the others are served.
+#[tokio::test]
+async fn bad_scenario_files_are_skipped_and_the_rest_served() {
+    let dir = std::env::temp_dir().join(format!("irs-preload-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("broken.json"), r#"{"room": 1}"#).unwrap();
+    mkfifo(&dir.join("fifo.json"));
+    std::fs::write(
+        dir.join("zero.yaml"),
+        "image: /dev/zero\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n\
+         occupied_thresh: 0.65\nfree_thresh: 0.25\n",
+    )
+    .unwrap();
+    let zero = scenario("small-test.json", |v| {
+        v["name"] = "zero".into();
+        v["floor_plan"] = json!({"map": "zero.yaml"});
+    });
+    std::fs::write(dir.join("zero.json"), zero.to_string()).unwrap();
+    let good = scenario("small-test.json", |v| v["name"] = "preloaded".into());
+    std::fs::write(dir.join("good.json"), good.to_string()).unwrap();
+    let server = start_with_scenarios(dir.to_str().unwrap(), &[]);
+    let (s, ready) = tokio::time::timeout(Duration::from_secs(20), server.get("/readyz"))
+        .await
+        .expect("start-up does not wait on the FIFO or /dev/zero");
+    assert_eq!(s, StatusCode::OK, "{ready}");
+    assert_eq!(ready["scenarios"], 4, "the built-in three and good.json");
+    server.scenario_id("preloaded").await;
+    drop(server);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A data directory holding FIFOs under record names starts without waiting on them; one that
+/// cannot be written starts too, serves, and `/readyz` says why until it can be written again.
+#[tokio::test]
+async fn an_unwritable_data_dir_starts_and_readyz_says_why() {
+    let dir = std::env::temp_dir().join(format!("irs-unwritable-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    for sub in ["maps", "scenarios"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    mkfifo(&dir.join("maps").join(format!("{}.rec", "ab".repeat(16))));
+    mkfifo(&dir.join("scenarios").join("cd34.rec"));
+    // A file where the jobs directory should be: every write there fails, as on a full disk
+    // (permissions would not stop a test run as root).
+    std::fs::write(dir.join("jobs"), b"in the way").unwrap();
+    let server = start(&["--data-dir", dir.to_str().unwrap()]);
+    let (s, ready) = tokio::time::timeout(Duration::from_secs(20), server.get("/readyz"))
+        .await
+        .expect("start-up does not wait on the FIFOs");
+    problem(
+        s,
+        &ready,
+        StatusCode::SERVICE_UNAVAILABLE,
+        "data_dir_unwritable",
+    );
+    assert!(
+        ready["detail"].as_str().unwrap().contains("jobs"),
+        "{ready}"
+    );
+    let (s, _) = server.get("/v1/scenarios").await;
+    assert_eq!(s, StatusCode::OK, "it serves all the same");
+    // Writable again: ready within a probe period (5 s).
+    std::fs::remove_file(dir.join("jobs")).unwrap();
+    std::fs::create_dir(dir.join("jobs")).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        let (s, ready) = server.get("/readyz").await;
+        if s == StatusCode::OK {
+            break;
+        }
+        assert!(Instant::now() < deadline, "still not ready: {ready}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
     drop(server);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -3,7 +3,7 @@
 case against its own server on a loopback port, with the figure it measured in the log.
 
 Usage: suite.py BINARY [CASE ...]   (cases: overflow cache lost-work starvation slow-loris
-slow-readers ownership shutdown; default all). Exits 1 on the first failed expectation. Bounded: every
+slow-readers ownership shutdown files; default all). Exits 1 on the first failed expectation. Bounded: every
 case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1 only.
 """
 
@@ -12,6 +12,7 @@ import os
 import pathlib
 import signal
 import socket
+import subprocess
 import sys
 import tempfile
 import threading
@@ -467,6 +468,82 @@ def shutdown():
         server.stop()
 
 
+def files():
+    """Files are read only if regular and within their cap: a map image that is /dev/zero,
+    FIFOs in --scenarios and the data dir, a bad scenario file, a 1 GiB map file, a data dir
+    that cannot be written; and a URI past the limit is a problem+json 414."""
+    work = pathlib.Path(tempfile.mkdtemp(prefix="irs-reliability-files-"))
+    scenarios, data = work / "scenarios", work / "data"
+    scenarios.mkdir()
+    (scenarios / "zero.yaml").write_text(
+        "image: /dev/zero\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+        "occupied_thresh: 0.65\nfree_thresh: 0.25\n")
+    zero = scenario("small-test", lambda d: d.update(name="zero", floor_plan={"map": "zero.yaml"}))
+    (scenarios / "zero.json").write_text(json.dumps(zero))
+    (scenarios / "broken.json").write_text('{"room": 1}')
+    os.mkfifo(scenarios / "fifo.json")
+    good = scenario("small-test", lambda d: d.update(name="preloaded"))
+    (scenarios / "good.json").write_text(json.dumps(good))
+    # The CLI on the /dev/zero image: exit 2 at once, memory untouched.
+    started = time.perf_counter()
+    cli = subprocess.run([BINARY, "scenario", "--scenario", str(scenarios / "zero.json")],
+                         capture_output=True, text=True, timeout=30)
+    cli_s = time.perf_counter() - started
+    expect(cli.returncode == 2 and "not a regular file (a character device)" in cli.stderr,
+           f"CLI on /dev/zero: exit {cli.returncode}: {cli.stderr[-300:]}")
+    # The data dir: FIFOs under record names, a sparse 1 GiB map file, and a file where the
+    # jobs directory should be (every write there fails, as on a full disk, even for root).
+    for sub in ("maps", "scenarios"):
+        (data / sub).mkdir(parents=True)
+    os.mkfifo(data / "maps" / f"{'ab' * 16}.rec")
+    os.mkfifo(data / "scenarios" / "cd34.rec")
+    huge = data / "maps" / f"{'ef' * 16}.rec"
+    with open(huge, "wb") as f:
+        f.write(b"IRSREC\x00\x01" + bytes(32))
+        f.truncate(2**30)
+    (data / "jobs").write_text("in the way")
+    started = time.perf_counter()
+    server = kit.Server(BINARY, "--scenarios", str(scenarios), "--data-dir", str(data),
+                        timeout=30, start_timeout=30)
+    try:
+        start_s = time.perf_counter() - started
+        ready = server.get("/readyz")
+        wrong = problem_mismatch(ready, 503, code="data_dir_unwritable")
+        expect(not wrong, f"readyz with an unwritable data dir: {wrong}")
+        status, listing, _ = server.get("/v1/scenarios")
+        names = sorted(s["name"] for s in listing["scenarios"])
+        expect(status == 200 and "preloaded" in names and "zero" not in names, f"{names}")
+        log = server.log_text()
+        skipped = [name for name in ("zero.json", "broken.json", "fifo.json")
+                   if name in log and "scenario file skipped" in log]
+        expect(len(skipped) == 3, f"skipped files logged: {skipped}")
+        expect("loaded=1 skipped=3" in log, "no start-up summary of the scenarios directory")
+        expect("1073741824" in log, "the 1 GiB map file is not reported")
+        started = time.perf_counter()
+        status, _, _ = server.get(f"/v1/maps/{'ef' * 16}")
+        huge_ms = (time.perf_counter() - started) * 1000
+        expect(status == 404, f"the 1 GiB map file: {status}")
+        # Writable again: ready within a probe period (5 s).
+        (data / "jobs").unlink()
+        (data / "jobs").mkdir()
+        started = time.perf_counter()
+        while server.get("/readyz")[0] != 200:
+            expect(time.perf_counter() - started < 15, "not ready 15 s after the repair")
+            time.sleep(0.2)
+        repaired_s = time.perf_counter() - started
+        long = server.get("/v1/maps?cursor=" + "a" * 9000)
+        wrong = problem_mismatch(long, 414, code="uri_too_long")
+        expect(not wrong, f"9 kB URI: {wrong}")
+        figure("files", f"CLI on image /dev/zero: exit 2 in {cli_s:.2f} s; serve with a FIFO, "
+               f"a /dev/zero image and a broken file in --scenarios and FIFOs, a 1 GiB map file "
+               f"and no writable jobs dir in --data-dir: listening in {start_s:.2f} s, 1 loaded "
+               f"3 skipped (logged), /readyz 503 data_dir_unwritable, the 1 GiB map 404 in "
+               f"{huge_ms:.1f} ms unread; ready {repaired_s:.1f} s after the repair; "
+               f"9 kB URI → 414 problem+json")
+    finally:
+        server.stop()
+
+
 CASES = {
     "overflow": overflow,
     "cache": cache,
@@ -476,6 +553,7 @@ CASES = {
     "slow-readers": slow_readers,
     "ownership": ownership,
     "shutdown": shutdown,
+    "files": files,
 }
 
 

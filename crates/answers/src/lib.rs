@@ -24,6 +24,8 @@
 
 pub mod encoding;
 pub mod export;
+pub mod files;
+pub mod json;
 pub mod map;
 pub mod mapfile;
 pub mod path;

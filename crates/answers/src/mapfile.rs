@@ -9,6 +9,7 @@
 //! * Out: [`encode_map`] writes a grid of Nav2 cell values as a PGM and its YAML, so that Nav2
 //!   (and the model's decoder) read back exactly those values.
 
+use crate::files;
 use base64::Engine;
 use irs_model::floorplan::{MapMode, Negate};
 use irs_model::input::FieldError;
@@ -43,8 +44,9 @@ pub fn reject_map_reference(document: &serde_json::Value) -> Result<(), FieldErr
     }
 }
 
-/// Reads a file for [`resolve_map_reference`].
-pub type ReadFile<'a> = &'a dyn Fn(&Path) -> std::io::Result<Vec<u8>>;
+/// Reads a file for [`resolve_map_reference`], refusing one of more than the given number of
+/// bytes ([`crate::files::read_regular`] for files on disk).
+pub type ReadFile<'a> = &'a dyn Fn(&Path, u64) -> std::io::Result<Vec<u8>>;
 
 /// Replaces a file reference `floor_plan.map` in a scenario document by the map's fields and
 /// image, read with `read`: the map YAML relative to `base` (the scenario file's folder), its
@@ -84,11 +86,34 @@ pub fn resolve_map_reference(
         }
     }
     let yaml_path = base.join(name);
-    let text = read(&yaml_path).map_err(|e| field(format!("{}: {e}", yaml_path.display())))?;
+    let text = read(&yaml_path, files::MAX_MAP_YAML_BYTES)
+        .map_err(|e| field(format!("{}: {e}", yaml_path.display())))?;
     let text = String::from_utf8(text)
         .map_err(|_| field(format!("{}: not UTF-8 text", yaml_path.display())))?;
     let yaml: MapYaml = serde_saphyr::from_str(&text)
         .map_err(|e| field(format!("{}: {e}", yaml_path.display())))?;
+    // YAML spells NaN and the infinities `.nan` and `.inf`, which JSON cannot carry: named here,
+    // they would otherwise reach the document as `null` and be reported as a wrong type.
+    let numbers = [
+        ("resolution", yaml.resolution),
+        ("occupied_thresh", yaml.occupied_thresh),
+        ("free_thresh", yaml.free_thresh),
+    ]
+    .into_iter()
+    .chain(yaml.origin.iter().map(|&v| ("origin", v)));
+    for (key, value) in numbers {
+        if !value.is_finite() {
+            let written = if value.is_nan() {
+                "NaN".to_string()
+            } else {
+                format!("{value}")
+            };
+            return Err(field(format!(
+                "{}: {key}: must be a finite number, got {written}",
+                yaml_path.display()
+            )));
+        }
+    }
     let origin: [f64; 3] = yaml.origin.as_slice().try_into().map_err(|_| {
         field(format!(
             "{}: origin must have 3 elements [x, y, yaw], not {}",
@@ -100,7 +125,7 @@ pub fn resolve_map_reference(
         .parent()
         .unwrap_or(Path::new("."))
         .join(&yaml.image);
-    let image = read(&image_path).map_err(|e| {
+    let image = read(&image_path, files::MAX_IMAGE_FILE_BYTES).map_err(|e| {
         field(format!(
             "{} (the image named by {}): {e}",
             image_path.display(),
@@ -234,7 +259,7 @@ mod tests {
             ),
             ("site/maps/img/floor.pgm", P5),
         ]);
-        let read = |p: &Path| {
+        let read = |p: &Path, _: u64| {
             fs.get(p)
                 .cloned()
                 .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
@@ -268,10 +293,22 @@ mod tests {
                 "image: img/floor.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 2\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
                 "negate",
             ),
+            (
+                "image: img/floor.pgm\nresolution: .nan\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
+                "resolution: must be a finite number, got NaN",
+            ),
+            (
+                "image: img/floor.pgm\nresolution: 0.5\norigin: [0, .NaN, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n",
+                "origin: must be a finite number, got NaN",
+            ),
+            (
+                "image: img/floor.pgm\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: -.inf\nfree_thresh: 0.25\n",
+                "occupied_thresh: must be a finite number, got -inf",
+            ),
         ] {
             let mut fs = fs.clone();
             fs.insert("site/maps/floor.yaml".into(), yaml.as_bytes().to_vec());
-            let read = |p: &Path| {
+            let read = |p: &Path, _: u64| {
                 fs.get(p)
                     .cloned()
                     .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::NotFound))
@@ -281,6 +318,31 @@ mod tests {
             assert_eq!(e.field, "floor_plan.map");
             assert!(e.reason.contains(expected), "{expected}: {e}");
         }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn an_image_that_is_not_a_regular_file_is_refused_unread() {
+        let dir = std::env::temp_dir().join(format!("irs-mapfile-zero-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("floor.yaml"),
+            "image: /dev/zero\nresolution: 0.5\norigin: [0, 0, 0]\nnegate: 0\n\
+             occupied_thresh: 0.65\nfree_thresh: 0.25\n",
+        )
+        .unwrap();
+        let mut doc = serde_json::json!({"floor_plan": {"map": "floor.yaml"}});
+        // Read as a plain file, /dev/zero would fill the memory.
+        let e = resolve_map_reference(&mut doc, &dir, &files::read_regular).unwrap_err();
+        assert_eq!(e.field, "floor_plan.map");
+        assert!(
+            e.reason.starts_with("/dev/zero (the image named by")
+                && e.reason.ends_with(
+                    "not a regular file (a character device); only regular files are read"
+                ),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

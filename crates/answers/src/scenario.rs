@@ -10,7 +10,7 @@
 //! The JSON entry points are the methods of [`ScenarioDocument`], implemented for the model's
 //! [`Scenario`], so a caller writes `Scenario::from_json(text)` with this trait in scope.
 
-use crate::mapfile;
+use crate::{files, json, mapfile};
 use base64::Engine;
 use irs_model::input::FieldError;
 use irs_model::scenario::Scenario;
@@ -52,8 +52,9 @@ pub trait ScenarioDocument: Sized {
     /// Validates a scenario that arrived already deserialised (e.g. embedded in a request).
     fn from_value(value: serde_json::Value) -> Result<Self, FieldError>;
 
-    /// Reads a scenario file: a `floor_plan.map` in it names a map YAML relative to the file's
-    /// folder (see [`mapfile::resolve_map_reference`]).
+    /// Reads a scenario file (a regular file of at most [`files::MAX_SCENARIO_FILE_BYTES`]): a
+    /// `floor_plan.map` in it names a map YAML relative to the file's folder (see
+    /// [`mapfile::resolve_map_reference`]).
     fn from_file(path: &Path) -> Result<Self, FieldError>;
 
     /// Validates a document whose file references (`floor_plan.map`) are relative to `base`.
@@ -93,7 +94,8 @@ impl ScenarioDocument for Scenario {
     }
 
     fn from_file(path: &Path) -> Result<Scenario, FieldError> {
-        let text = std::fs::read_to_string(path).map_err(|e| FieldError::new("$", e))?;
+        let text = files::read_regular_text(path, files::MAX_SCENARIO_FILE_BYTES)
+            .map_err(|e| FieldError::new("$", e))?;
         Scenario::from_value_with_files(document(&text)?, path.parent().unwrap_or(Path::new(".")))
     }
 
@@ -101,7 +103,7 @@ impl ScenarioDocument for Scenario {
         mut value: serde_json::Value,
         base: &Path,
     ) -> Result<Scenario, FieldError> {
-        mapfile::resolve_map_reference(&mut value, base, &|p| std::fs::read(p))?;
+        mapfile::resolve_map_reference(&mut value, base, &files::read_regular)?;
         Scenario::from_value(value)
     }
 
@@ -125,10 +127,13 @@ fn image_file(text: &str) -> Result<Vec<u8>, String> {
 }
 
 /// A scenario's text as a JSON value (before any field is looked at), for callers that edit the
-/// document first (the CLI's `--floor-plan`).
+/// document first (the CLI's `--floor-plan`). A key repeated in an object is refused (see
+/// [`json`]): the value would otherwise be the last one, silently.
 pub fn document(text: &str) -> Result<serde_json::Value, FieldError> {
-    serde_json::from_str(text)
-        .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))
+    let value = serde_json::from_str(text)
+        .map_err(|e| FieldError::new("$", format!("not a JSON document: {e}")))?;
+    json::check_unique_keys(text.as_bytes())?;
+    Ok(value)
 }
 
 /// First 128 bits of SHA-256 of `bytes`, as 32 lowercase hex digits.
@@ -388,6 +393,18 @@ mod tests {
 
     /// A surface that just fits (2 × 2 tiles of 1 m around z = 2 m under a 3 m ceiling, 2 m of
     /// a 6 m wall) is valid: the extent check has no margin beyond the wall tolerance.
+    #[test]
+    fn a_repeated_key_is_refused_not_taken_last() {
+        // Written by hand: serde_json would keep the second `nx_sub` silently.
+        let text = SMALL.replacen("\"irs\": {", "\"irs\": {\"nx_sub\": 1000, ", 1);
+        assert_ne!(text, SMALL, "the edit applies");
+        let e = Scenario::from_json(&text).unwrap_err();
+        assert_eq!(
+            (e.field.as_str(), e.reason.as_str()),
+            ("irs", "duplicate key `nx_sub`")
+        );
+    }
+
     #[test]
     fn a_surface_that_just_fits_is_valid() {
         let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();

@@ -156,12 +156,36 @@ pub fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
     // side limits above with a clear message rather than by an allocation failure.
     limits.max_alloc = Some(2 * u64::from(MAX_IMAGE_SIDE).pow(2) + (1 << 20));
     reader.limits(limits);
-    let decoded = reader.decode().map_err(|e| match e {
+    let refusal = |e: image::ImageError| match e {
         image::ImageError::Limits(_) => {
             format!("larger than {MAX_IMAGE_SIDE} × {MAX_IMAGE_SIDE} pixels")
         }
         other => format!("cannot be decoded: {other}"),
-    })?;
+    };
+    let decoder = reader.into_decoder().map_err(refusal)?;
+    // The pixel type is read from the header, before the pixels: a colour image three or four
+    // times the size of a grey one would otherwise pass the side limits and then fail the
+    // allocation limit, refused as too large instead of as colour.
+    use image::{ColorType, ImageDecoder};
+    let colour = match decoder.color_type() {
+        ColorType::L8 => None,
+        ColorType::L16 => {
+            return Err(
+                "16-bit images are not supported; save the map with 8-bit grey pixels".into(),
+            );
+        }
+        ColorType::Rgb8 | ColorType::Rgb16 | ColorType::Rgb32F => Some("RGB"),
+        ColorType::Rgba8 | ColorType::Rgba16 | ColorType::Rgba32F => Some("RGBA"),
+        ColorType::La8 | ColorType::La16 => Some("grey with an alpha channel"),
+        _ => Some("of a colour type other than 8-bit grey"),
+    };
+    if let Some(colour) = colour {
+        return Err(format!(
+            "is {colour}: a floor plan is 8-bit grey; convert it to grayscale (a greyscale \
+             PGM or PNG, 8 bits a pixel, no alpha)"
+        ));
+    }
+    let decoded = image::DynamicImage::from_decoder(decoder).map_err(refusal)?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
     // A header may declare a side of 0 pixels, which decodes to no pixels at all: a map of
     // nothing, refused here rather than divided by later.
@@ -170,20 +194,11 @@ pub fn decode_grey(bytes: &[u8]) -> Result<GreyImage, String> {
             "is {width} × {height} pixels: a map needs at least one"
         ));
     }
-    match decoded {
-        image::DynamicImage::ImageLuma8(grey) => Ok(GreyImage {
-            width,
-            height,
-            pixels: grey.into_raw(),
-        }),
-        image::DynamicImage::ImageLuma16(_) => {
-            Err("16-bit images are not supported; save the map with 8-bit grey pixels".into())
-        }
-        other => Err(format!(
-            "has {:?} pixels; a floor plan is 8-bit grey (save it as a greyscale PGM or PNG)",
-            other.color()
-        )),
-    }
+    Ok(GreyImage {
+        width,
+        height,
+        pixels: decoded.into_luma8().into_raw(),
+    })
 }
 
 /// Decodes a floor plan's image file (`file`: the bytes of the PGM or PNG that `plan.image`
@@ -347,6 +362,32 @@ mod tests {
             let e = reason(bytes);
             assert_eq!(e.field, "floor_plan.image");
             assert!(e.reason.contains(expected), "{expected}: {e}");
+        }
+    }
+
+    #[test]
+    fn colour_images_are_refused_as_colour_not_as_too_large() {
+        let png = |width: u32, height: u32, colour: image::ExtendedColorType| {
+            let channels = colour.channel_count() as usize;
+            let pixels = vec![0u8; width as usize * height as usize * channels];
+            let mut png = Vec::new();
+            image::codecs::png::PngEncoder::new(&mut png)
+                .write_image(&pixels, width, height, colour)
+                .unwrap();
+            png
+        };
+        use image::{ExtendedColorType, ImageEncoder};
+        for (bytes, expected) in [
+            (png(2, 2, ExtendedColorType::Rgb8), "is RGB"),
+            (png(2, 2, ExtendedColorType::Rgba8), "is RGBA"),
+            (png(2, 2, ExtendedColorType::La8), "alpha"),
+            // Within the side limits, but three bytes a pixel pass the allocation limit that
+            // fits a grey image: this one used to be refused as larger than 4096 × 4096.
+            (png(4096, 2900, ExtendedColorType::Rgb8), "is RGB"),
+        ] {
+            let e = decode(&plan(), &bytes, 2.0).unwrap_err();
+            assert!(e.reason.contains(expected), "{expected}: {e}");
+            assert!(e.reason.contains("convert it to grayscale"), "{e}");
         }
     }
 

@@ -94,6 +94,7 @@ impl App {
             Some(dir) => Some(Arc::new(store::DataDir::open(
                 dir,
                 args.data_maps_mb.saturating_mul(1024 * 1024),
+                args.cache_mb.saturating_mul(1024 * 1024),
             )?)),
             None => None,
         };
@@ -192,6 +193,11 @@ impl App {
         self.inner.cluster.as_ref()
     }
 
+    /// `--data-dir`, if set (for its write probe and `/readyz`).
+    pub(crate) fn data_dir(&self) -> Option<&Arc<store::DataDir>> {
+        self.inner.disk.as_ref()
+    }
+
     pub fn is_ready(&self) -> bool {
         self.inner.ready.load(Ordering::Relaxed)
     }
@@ -216,7 +222,8 @@ fn registrants(owners: Vec<String>) -> Vec<Caller> {
 }
 
 /// Loads the built-in scenarios, then every `*.json` in `dir` (a missing directory is fine; an
-/// invalid file is an error naming the file and the field).
+/// invalid or unreadable file is skipped with a warning naming the file and the reason). Only
+/// a built-in scenario that does not register is an error.
 pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
     for (name, text) in BUILTIN {
         let scenario =
@@ -235,14 +242,29 @@ pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
         .filter(|p| p.extension().is_some_and(|x| x == "json"))
         .collect();
     files.sort();
+    // One bad file is the operator's to fix, not a reason to serve none of the others: it is
+    // logged (path and reason) and skipped, and the summary counts it.
+    let (mut loaded, mut skipped) = (0, 0);
     for path in files {
-        let scenario =
-            Scenario::from_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let (stored, created) = state
-            .register_scenario(scenario, ScenarioSource::File, &Caller::Open)
-            .map_err(|e| e.to_string())?;
-        tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
+        let registered = Scenario::from_file(&path)
+            .map_err(|e| e.to_string())
+            .and_then(|scenario| {
+                state
+                    .register_scenario(scenario, ScenarioSource::File, &Caller::Open)
+                    .map_err(|e| e.to_string())
+            });
+        match registered {
+            Ok((stored, created)) => {
+                loaded += 1;
+                tracing::info!(file = %path.display(), scenario_id = %stored.id, new = created, "scenario loaded");
+            }
+            Err(reason) => {
+                skipped += 1;
+                tracing::warn!(file = %path.display(), reason, "scenario file skipped");
+            }
+        }
     }
+    tracing::info!(dir = %dir.display(), loaded, skipped, "scenarios directory read");
     Ok(())
 }
 

@@ -254,6 +254,12 @@ fn only_query(query: &HashMap<String, String>, allowed: &[&str]) -> Result<(), E
 /// with characters outside `[A-Za-z0-9._:-]`, is replaced by a fresh UUID so logs stay clean.
 const MAX_REQUEST_ID_CHARS: usize = 64;
 
+/// Longest request URI (path and query, bytes) the service reads: 8 KiB, the common limit of
+/// proxies and browsers, holds every URI of this API with room to spare (the longest are a
+/// listing's cursor of 128 characters and a coverage query's few numbers). A longer one gets
+/// 414 as problem+json; hyper's own limit (64 KiB) would answer 414 with an empty body.
+pub(crate) const MAX_URI_BYTES: usize = 8 * 1024;
+
 /// The origins CORS allows (`--cors-origin`), checked: each an http(s) origin that is a
 /// valid header value.
 pub(crate) fn cors_origins(origins: &[String]) -> Result<Vec<HeaderValue>, String> {
@@ -305,7 +311,8 @@ pub(crate) fn app(
                     let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
                     tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %request_id)
                 }))
-                .layer(PropagateRequestIdLayer::x_request_id()),
+                .layer(PropagateRequestIdLayer::x_request_id())
+                .layer(middleware::from_fn(refuse_long_uri)),
         );
     let router = match cors {
         Some(cors) => router.layer(cors),
@@ -331,6 +338,18 @@ async fn clean_request_id(mut req: Request, next: Next) -> Response {
         .is_some_and(|v| !acceptable(v))
     {
         req.headers_mut().remove("x-request-id");
+    }
+    next.run(req).await
+}
+
+/// Answers 414 (problem+json) to a request whose URI is longer than [`MAX_URI_BYTES`], before
+/// authentication and routing look at it.
+async fn refuse_long_uri(req: Request, next: Next) -> Response {
+    let uri = req.uri();
+    let length = uri.authority().map_or(0, |a| a.as_str().len())
+        + uri.path_and_query().map_or(0, |pq| pq.as_str().len());
+    if length > MAX_URI_BYTES {
+        return ApiError::uri_too_long(length, MAX_URI_BYTES).into_response();
     }
     next.run(req).await
 }

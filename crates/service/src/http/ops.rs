@@ -1,5 +1,5 @@
-//! The operations endpoints: `/healthz` (the process answers), `/readyz` (ready to serve, and
-//! in a cluster the shared store reachable), `/version` and `/metrics` (Prometheus text).
+//! The operations endpoints: `/healthz` (the process answers), `/readyz` (ready to serve: in a
+//! cluster the shared store reachable, with `--data-dir` the directory writable), `/version` and `/metrics` (Prometheus text).
 
 use super::problem::ApiError;
 use crate::app::App;
@@ -30,6 +30,9 @@ pub(super) async fn readyz(State(state): State<App>) -> Result<Json<Readiness>, 
         return Err(ApiError::not_ready());
     }
     state.store_available()?;
+    if let Some(reason) = state.data_dir().and_then(|dir| dir.unwritable()) {
+        return Err(ApiError::data_dir_unwritable(reason));
+    }
     Ok(Json(Readiness {
         status: "ready",
         scenarios: state.registry().len(),

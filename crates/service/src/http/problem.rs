@@ -87,6 +87,16 @@ impl ApiError {
         )
         .with_limit(limit)
     }
+    /// The request's URI (path and query) is longer than [`super::MAX_URI_BYTES`].
+    pub fn uri_too_long(length: usize, limit: usize) -> Self {
+        Self::new(
+            StatusCode::URI_TOO_LONG,
+            "uri_too_long",
+            "URI too long",
+            format!("the request URI is {length} bytes, more than the limit of {limit} bytes"),
+        )
+        .with_limit(limit as u64)
+    }
     pub fn unsupported_media_type(detail: impl Into<String>) -> Self {
         Self::new(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,
@@ -158,6 +168,18 @@ impl ApiError {
             "Not ready",
             "the service is starting or shutting down",
         )
+    }
+    /// `/readyz` with a data directory that cannot be written (full, read-only): the replica
+    /// still serves what it holds, but should not be sent the writes it would lose.
+    pub fn data_dir_unwritable(reason: String) -> Self {
+        let mut e = Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "data_dir_unwritable",
+            "Data directory not writable",
+            format!("the data directory cannot be written: {reason}"),
+        );
+        e.retry_after_s = Some(5);
+        e
     }
     pub fn status(&self) -> StatusCode {
         StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
@@ -330,16 +352,26 @@ impl IntoResponse for ApiError {
 /// mismatch is 422 naming the field, including arrays of the wrong length, which serde_json's
 /// streaming parser would report as trailing characters, a syntax error).
 ///
+/// A key repeated in an object is refused (422 naming the object's path and the key): serde
+/// keeps the last value of a repeated key in a map or a `Value` (a scenario inside a body),
+/// and refuses it only in a struct, so the check runs on the text whichever way it is read
+/// ([`irs_answers::json::check_unique_keys`], the check scenario files get too).
+///
 /// A body that `T` reads straight from the text is taken as read: building the `Value` first
 /// was a twentieth of a repeated path query's time, and a body the streaming parser accepts
-/// reads the same through a `Value`. Only a body it refuses (or would read differently, such
-/// as one with a repeated key, which it refuses) goes the slower way, for its error or value.
+/// reads the same through a `Value`. Only a body it refuses goes the slower way, for its error.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let unique_keys = || {
+        irs_answers::json::check_unique_keys(bytes)
+            .map_err(|e| ApiError::from(app::Error::invalid(e.field, e.reason)))
+    };
     if let Ok(parsed) = serde_json::from_slice(bytes) {
+        unique_keys()?;
         return Ok(parsed);
     }
     let value: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|e| ApiError::malformed_json(e.to_string()))?;
+    unique_keys()?;
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         app::Error::invalid(

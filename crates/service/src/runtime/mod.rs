@@ -99,7 +99,8 @@ async fn drain(state: &App, connections: &server::OpenConnections, grace: Durati
 /// Why `serve` stopped with an error.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ServeError {
-    /// What the operator gave is wrong: a scenario file in the scenarios directory is invalid.
+    /// What the operator gave is wrong: a setting (a CORS origin, a token file, a data
+    /// directory that cannot be created).
     #[error("{0}")]
     Config(String),
     /// The service could not run: the address is taken, the runtime or the metrics registry
@@ -133,6 +134,10 @@ pub async fn run(
         .scope(serve_app(listener, args, metrics, shutdown))
         .await
 }
+
+/// How often the data directory's write probe runs: a tiny file written, flushed and removed,
+/// cheap enough to run often and soon enough for a readiness probe polled every few seconds.
+const DATA_DIR_PROBE_EVERY: Duration = Duration::from_secs(5);
 
 async fn serve_app(
     listener: TcpListener,
@@ -173,6 +178,17 @@ async fn serve_app(
     let mut background = vec![tasks::spawn(
         async move { app::warm_from_disk(&warming).await },
     )];
+    if let Some(dir) = state.data_dir().cloned() {
+        // `/readyz` reports a data directory that cannot be written (full, read-only) from
+        // this probe's last answer; a failed write reports it at once too (store::disk).
+        background.push(tasks::spawn(async move {
+            loop {
+                tokio::time::sleep(DATA_DIR_PROBE_EVERY).await;
+                let dir = dir.clone();
+                let _ = tasks::spawn_blocking(move || dir.probe()).await;
+            }
+        }));
+    }
     // The registry's histograms are drained into their buckets now and then, as the
     // process-wide exporter's upkeep thread would.
     let upkeep = metrics.handle();

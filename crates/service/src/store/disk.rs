@@ -16,6 +16,17 @@
 //! Maps on disk are bounded by `--data-maps-mb`: past it, the least recently written go first.
 //! The memory cache stays in front (a map read from disk enters it), so the disk is read once
 //! per map and restart, not per query.
+//!
+//! Files are read with their type and size checked first (docs/deployment.md "Data
+//! directory"): only regular files (a FIFO would block start-up, a device never end), no map
+//! file larger than the largest map this server keeps (the smaller of the data directory's
+//! and the memory cache's budgets) and no JSON record larger than the largest scenario file.
+//! A map file found damaged when it is loaded is removed (logged once), so it is not read
+//! again on every request for it; the map is built again instead.
+//!
+//! A directory that cannot be written (read-only, full) does not stop the service: it starts,
+//! serves what it can read, and reports the directory in `/readyz` until a write probe
+//! ([`DataDir::probe`], every few seconds) succeeds again.
 
 use irs_answers::encoding;
 use irs_model::radiomap::RadioMap;
@@ -28,6 +39,11 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::SystemTime;
+
+/// Largest JSON record (a scenario or a job) read back: the largest scenario file, since a
+/// record holds at most one scenario document in its canonical form.
+const MAX_JSON_RECORD_BYTES: u64 =
+    irs_answers::files::MAX_SCENARIO_FILE_BYTES + HEADER_BYTES as u64;
 
 /// The first bytes of every file: the format's name and version.
 const MAGIC: &[u8; 8] = b"IRSREC\x00\x01";
@@ -66,6 +82,11 @@ pub(crate) struct DataDir {
     /// The maps on disk, for the byte budget and for deleting a scenario's maps.
     maps: Mutex<HashMap<String, MapFile>>,
     maps_budget_bytes: u64,
+    /// Largest map file written or read (header included): the smaller of the maps' disk
+    /// budget and the memory cache's, as a larger map is never written and could not be held.
+    max_map_file_bytes: u64,
+    /// Why the directory cannot be written, as the last write probe found; `None` when it can.
+    unwritable: Mutex<Option<String>>,
     /// Distinguishes the temporary files of concurrent writes.
     writes: AtomicU64,
 }
@@ -97,11 +118,19 @@ pub(crate) fn unframe(bytes: &[u8]) -> Result<&[u8], &'static str> {
 }
 
 impl DataDir {
-    /// Opens (creating if needed) the directory; an error names the path and the reason.
-    pub fn open(root: &Path, maps_budget_bytes: u64) -> Result<DataDir, String> {
+    /// Opens (creating if needed) the directory. Maps are kept on disk up to
+    /// `maps_budget_bytes`, none larger than `cache_bytes` (the memory cache's budget). Only a
+    /// root that does not exist and cannot be created is an error (naming the path and the
+    /// reason): one that exists but cannot be written (read-only, full) is opened for reading,
+    /// with a warning, and reported by [`DataDir::unwritable`].
+    pub fn open(root: &Path, maps_budget_bytes: u64, cache_bytes: u64) -> Result<DataDir, String> {
+        fs::create_dir_all(root).map_err(|e| format!("--data-dir {}: {e}", root.display()))?;
         for kind in [Kind::Scenario, Kind::Map, Kind::Job] {
             let dir = root.join(kind.dir());
-            fs::create_dir_all(&dir).map_err(|e| format!("--data-dir {}: {e}", dir.display()))?;
+            if let Err(e) = fs::create_dir_all(&dir) {
+                // The probe below reports it; what can be read is still served.
+                tracing::warn!(dir = %dir.display(), error = %e, "data directory: cannot create");
+            }
             // Temporary files of writes a crash interrupted: never renamed, never valid.
             for entry in fs::read_dir(&dir).into_iter().flatten().flatten() {
                 if entry.file_name().to_string_lossy().starts_with(".tmp-") {
@@ -113,26 +142,36 @@ impl DataDir {
             root: root.to_path_buf(),
             maps: Mutex::new(HashMap::new()),
             maps_budget_bytes,
+            max_map_file_bytes: maps_budget_bytes.min(cache_bytes),
+            unwritable: Mutex::new(None),
             writes: AtomicU64::new(0),
         };
-        // A write test now, so a read-only directory fails at start-up, not at the first map.
-        store
-            .write(Kind::Job, "0", b"probe")
-            .map_err(|e| format!("--data-dir {}: not writable: {e}", root.display()))?;
-        store.remove(Kind::Job, "0");
+        // A write test now, so an operator sees at start-up that writes will fail.
+        if let Err(reason) = store.probe() {
+            tracing::warn!(dir = %root.display(), reason, "data directory not writable: serving what it holds, not ready until it can be written");
+        }
         let mut maps = HashMap::new();
         // Only each file's head (the key) is read now; the digest is checked when a map is
         // loaded, so opening a directory of gigabytes takes milliseconds.
         for (id, path) in store.ids(Kind::Map) {
-            let head = fs::File::open(&path).and_then(|file| {
+            let opened = irs_answers::files::open_regular(&path).and_then(|(file, meta)| {
                 let mut head = Vec::with_capacity(4096);
                 file.take(4096).read_to_end(&mut head)?;
-                Ok(head)
+                Ok((head, meta))
             });
-            let meta = fs::metadata(&path);
-            let (Ok(head), Ok(meta)) = (head, meta) else {
-                continue;
+            let (head, meta) = match opened {
+                Ok(opened) => opened,
+                Err(e) => {
+                    tracing::warn!(file = %path.display(), error = %e, "map file not readable; ignored");
+                    continue;
+                }
             };
+            if meta.len() > store.max_map_file_bytes {
+                // Never written by this configuration (a damaged file, or a lower budget than
+                // the one it was written under): never read whole either.
+                tracing::warn!(file = %path.display(), bytes = meta.len(), limit = store.max_map_file_bytes, "map file larger than the largest map kept; ignored");
+                continue;
+            }
             let key = match head.get(..MAGIC.len()) {
                 Some(magic) if magic == MAGIC => head
                     .get(HEADER_BYTES..)
@@ -168,7 +207,9 @@ impl DataDir {
         self.root.join(kind.dir()).join(format!("{id}.{EXTENSION}"))
     }
 
-    /// The ids of the files of `kind`, with their paths.
+    /// The ids of the record files of `kind`, with their paths. A record name on anything but
+    /// a regular file (a FIFO, a directory, a device) is skipped with a warning: opening a FIFO
+    /// would wait for a writer for ever.
     fn ids(&self, kind: Kind) -> Vec<(String, PathBuf)> {
         let Ok(entries) = fs::read_dir(self.root.join(kind.dir())) else {
             return Vec::new();
@@ -180,9 +221,62 @@ impl DataDir {
                 let id = path.file_stem()?.to_str()?.to_string();
                 (path.extension()? == EXTENSION && valid_id(&id)).then_some((id, path))
             })
+            .filter(|(_, path)| match fs::metadata(path) {
+                Ok(meta) if meta.is_file() => true,
+                Ok(meta) => {
+                    let kind = irs_answers::files::file_kind(&meta.file_type());
+                    tracing::warn!(file = %path.display(), kind, "data directory: not a regular file; skipped");
+                    false
+                }
+                Err(e) => {
+                    tracing::warn!(file = %path.display(), error = %e, "data directory: not readable; skipped");
+                    false
+                }
+            })
             .collect();
         ids.sort();
         ids
+    }
+
+    /// Probes whether the directory takes writes now: a small temporary file written, flushed
+    /// to disk and removed (a full disk fails the write or the flush). The answer is kept for
+    /// [`DataDir::unwritable`]. Blocking: called at open and from a background task.
+    pub fn probe(&self) -> Result<(), String> {
+        let n = self.writes.fetch_add(1, Ordering::Relaxed);
+        let temporary = self
+            .root
+            .join(Kind::Job.dir())
+            .join(format!(".tmp-probe-{}-{n}", std::process::id()));
+        let result = (|| {
+            let mut file = fs::File::create(&temporary)?;
+            file.write_all(&frame(b"probe"))?;
+            file.sync_all()
+        })();
+        let _ = fs::remove_file(&temporary);
+        let result = result.map_err(|e| format!("{}: {e}", temporary.display()));
+        let mut unwritable = self.unwritable.lock().expect("store lock");
+        match (&result, unwritable.is_some()) {
+            (Err(reason), false) => {
+                tracing::warn!(dir = %self.root.display(), reason, "data directory no longer writable")
+            }
+            (Ok(()), true) => {
+                tracing::info!(dir = %self.root.display(), "data directory writable again")
+            }
+            _ => {}
+        }
+        *unwritable = result.clone().err();
+        result
+    }
+
+    /// Why the directory could not be written at the last probe or write, if it could not.
+    pub fn unwritable(&self) -> Option<String> {
+        self.unwritable.lock().expect("store lock").clone()
+    }
+
+    /// A write failed: reported as unwritable at once, until the next probe succeeds.
+    fn write_failed(&self, error: &std::io::Error) {
+        *self.unwritable.lock().expect("store lock") =
+            Some(format!("{}: {error}", self.root.display()));
     }
 
     /// Writes a record atomically: a temporary file, flushed, renamed over the target.
@@ -206,10 +300,15 @@ impl DataDir {
         result
     }
 
-    /// A record's payload, or `None` (with a warning) if it is missing, torn or damaged.
+    /// A record's payload, or `None` (with a warning) if it is missing, not a regular file,
+    /// larger than records of its kind can be, torn or damaged.
     fn read(&self, kind: Kind, id: &str) -> Option<Vec<u8>> {
         let path = self.path(kind, id);
-        let bytes = match fs::read(&path) {
+        let max_bytes = match kind {
+            Kind::Map => self.max_map_file_bytes,
+            Kind::Scenario | Kind::Job => MAX_JSON_RECORD_BYTES,
+        };
+        let bytes = match irs_answers::files::read_regular(&path, max_bytes) {
             Ok(bytes) => bytes,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
             Err(e) => {
@@ -240,6 +339,7 @@ impl DataDir {
         if let Err(e) = self.write(kind, id, &payload) {
             metrics::counter!("irs_store_write_errors_total", "kind" => kind.dir()).increment(1);
             tracing::warn!(id, kind = kind.dir(), error = %e, "could not persist a record");
+            self.write_failed(&e);
         }
     }
 
@@ -267,17 +367,19 @@ impl DataDir {
     /// Saves a built map, then drops the least recently written maps past the budget.
     pub fn save_map(&self, map_id: &str, map: &RadioMap) {
         let payload = encoding::encode(map);
-        if payload.len() as u64 + HEADER_BYTES as u64 > self.maps_budget_bytes {
+        if payload.len() as u64 + HEADER_BYTES as u64 > self.max_map_file_bytes {
             tracing::info!(
                 map_id,
                 bytes = payload.len(),
-                "map larger than the data directory's map budget; kept in memory only"
+                limit = self.max_map_file_bytes,
+                "map larger than the largest map file kept (the data directory's or the cache's budget); not written"
             );
             return;
         }
         if let Err(e) = self.write(Kind::Map, map_id, &payload) {
             metrics::counter!("irs_store_write_errors_total", "kind" => "maps").increment(1);
             tracing::warn!(map_id, error = %e, "could not persist a map");
+            self.write_failed(&e);
             return;
         }
         let mut maps = self.maps.lock().expect("store lock");
@@ -311,7 +413,7 @@ impl DataDir {
     }
 
     /// A stored map, decoded against its scenario (`scenario_of` finds it by id); `None` if
-    /// there is none, or it is damaged, or its scenario is not registered.
+    /// there is none, or it is damaged (then removed), or its scenario is not registered.
     pub fn load_map(
         &self,
         map_id: &str,
@@ -325,15 +427,21 @@ impl DataDir {
             .scenario_id
             .clone();
         let scenario = scenario_of(&scenario_id)?;
-        let payload = self.read(Kind::Map, map_id)?;
-        match encoding::decode(&payload, &scenario) {
+        let decoded = match self.read(Kind::Map, map_id) {
+            Some(payload) => encoding::decode(&payload, &scenario).map_err(|e| e.to_string()),
+            None => Err("not readable (logged above)".to_string()),
+        };
+        match decoded {
             Ok(map) if map.id == map_id => Some(map),
-            Ok(_) => {
-                tracing::warn!(map_id, "map file holds another map; ignored");
-                None
-            }
-            Err(e) => {
-                tracing::warn!(map_id, error = %e, "map file ignored");
+            failed => {
+                let reason = failed.err().unwrap_or_else(|| "holds another map".into());
+                // Removed, so the next request for it builds it instead of reading it again.
+                self.remove_map(map_id);
+                tracing::warn!(
+                    map_id,
+                    reason,
+                    "map file damaged; removed (built again on request)"
+                );
                 None
             }
         }
@@ -392,7 +500,7 @@ mod tests {
     #[test]
     fn a_damaged_or_torn_record_is_never_read() {
         let dir = temporary_dir("damaged");
-        let store = DataDir::open(&dir, 1 << 20).unwrap();
+        let store = DataDir::open(&dir, 1 << 20, 1 << 20).unwrap();
         store.save_json(Kind::Job, "ab12", &serde_json::json!({"state": "done"}));
         let loaded: Vec<(String, serde_json::Value)> = store.load_json(Kind::Job);
         assert_eq!(loaded.len(), 1);
@@ -414,8 +522,107 @@ mod tests {
         // not records are not read.
         fs::write(dir.join("jobs/.tmp-ab12-1-0"), b"half").unwrap();
         fs::write(dir.join("jobs/notes.txt"), b"hello").unwrap();
-        let _ = DataDir::open(&dir, 1 << 20).unwrap();
+        let _ = DataDir::open(&dir, 1 << 20, 1 << 20).unwrap();
         assert!(!dir.join("jobs/.tmp-ab12-1-0").exists());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    fn mkfifo(path: &Path) {
+        let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    }
+
+    /// The small floor's gain map and its scenario.
+    fn small_gain_map() -> (std::sync::Arc<Scenario>, RadioMap) {
+        use irs_answers::scenario::ScenarioDocument;
+        use irs_model::radiomap::{MapKey, MapKind, Progress};
+        let scenario = std::sync::Arc::new(Scenario::builtin("small-test").unwrap());
+        let id = scenario.content_hash();
+        let key = MapKey::new(&id, &scenario, MapKind::Gain, None, None, None).unwrap();
+        let map = irs_answers::map::build(&scenario, &key, &Progress::default()).unwrap();
+        (scenario, map)
+    }
+
+    #[test]
+    fn fifos_and_directories_with_record_names_are_skipped_not_opened() {
+        let dir = temporary_dir("fifo");
+        let store = DataDir::open(&dir, 1 << 20, 1 << 20).unwrap();
+        store.save_json(Kind::Job, "ab12", &serde_json::json!({"state": "done"}));
+        drop(store);
+        // Opened as plain files, the FIFOs would block `open` and `load_json` for ever.
+        mkfifo(&dir.join("jobs/cd34.rec"));
+        mkfifo(&dir.join(format!("maps/{}.rec", "ef".repeat(16))));
+        fs::create_dir(dir.join("scenarios/0123.rec")).unwrap();
+        let store = DataDir::open(&dir, 1 << 20, 1 << 20).unwrap();
+        assert!(store.map_ids().is_empty());
+        let jobs: Vec<(String, serde_json::Value)> = store.load_json(Kind::Job);
+        assert_eq!(jobs.len(), 1, "the regular record is still read");
+        let scenarios: Vec<(String, serde_json::Value)> = store.load_json(Kind::Scenario);
+        assert!(scenarios.is_empty());
+        // A FIFO put in place of a known record is refused when read, too.
+        fs::remove_file(store.path(Kind::Job, "ab12")).unwrap();
+        mkfifo(&store.path(Kind::Job, "ab12"));
+        assert!(store.read(Kind::Job, "ab12").is_none());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_damaged_map_is_read_once_then_removed_and_an_oversized_one_never() {
+        let dir = temporary_dir("damaged-map");
+        let (scenario, map) = small_gain_map();
+        let lookup = |_: &str| Some(scenario.clone());
+        let store = DataDir::open(&dir, 1 << 30, 1 << 30).unwrap();
+        store.save_map(&map.id, &map);
+        let path = store.path(Kind::Map, &map.id);
+        let mut bytes = fs::read(&path).unwrap();
+        *bytes.last_mut().unwrap() ^= 1;
+        fs::write(&path, &bytes).unwrap();
+        assert!(store.load_map(&map.id, lookup).is_none());
+        assert!(!path.exists(), "removed once found damaged");
+        assert!(!store.has_map(&map.id), "and forgotten: never read again");
+
+        // A file past the largest map kept (here the cache's budget) is not indexed at open,
+        // so no request reads it; one that grows past it after is refused unread.
+        store.save_map(&map.id, &map);
+        let good = fs::read(&path).unwrap();
+        let small_cache = good.len() as u64 - 1;
+        let store = DataDir::open(&dir, 1 << 30, small_cache).unwrap();
+        assert!(!store.has_map(&map.id));
+        let store = DataDir::open(&dir, 1 << 30, good.len() as u64).unwrap();
+        assert!(store.has_map(&map.id));
+        let mut grown = good.clone();
+        grown.push(0);
+        fs::write(&path, &grown).unwrap();
+        assert!(store.read(Kind::Map, &map.id).is_none());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_directory_that_cannot_be_written_opens_and_says_why() {
+        let dir = temporary_dir("unwritable");
+        let store = DataDir::open(&dir, 1 << 20, 1 << 20).unwrap();
+        store.save_json(Kind::Scenario, "ab12", &serde_json::json!({"kept": true}));
+        assert_eq!(store.unwritable(), None);
+        // A file where the jobs directory should be: every write there fails, whoever runs the
+        // test (permissions do not stop root).
+        fs::remove_dir_all(dir.join("jobs")).unwrap();
+        fs::write(dir.join("jobs"), b"in the way").unwrap();
+        let store = DataDir::open(&dir, 1 << 20, 1 << 20).expect("opens anyway");
+        let reason = store.unwritable().expect("reported");
+        assert!(reason.contains("jobs"), "{reason}");
+        let kept: Vec<(String, serde_json::Value)> = store.load_json(Kind::Scenario);
+        assert_eq!(kept.len(), 1, "what it holds is still read");
+        // Writable again: the next probe says so.
+        fs::remove_file(dir.join("jobs")).unwrap();
+        fs::create_dir(dir.join("jobs")).unwrap();
+        assert_eq!(store.probe(), Ok(()));
+        assert_eq!(store.unwritable(), None);
+        // A failed write reports it at once, before any probe.
+        fs::remove_dir_all(dir.join("jobs")).unwrap();
+        fs::write(dir.join("jobs"), b"in the way").unwrap();
+        store.save_json(Kind::Job, "cd34", &serde_json::json!({}));
+        assert!(store.unwritable().is_some());
         let _ = fs::remove_dir_all(&dir);
     }
 
@@ -449,7 +656,7 @@ mod tests {
         .unwrap();
         let one = encoding::encode(&gain).len() as u64 + HEADER_BYTES as u64;
         // Room for one map and a half: the second write drops the first.
-        let store = DataDir::open(&dir, one * 3 / 2).unwrap();
+        let store = DataDir::open(&dir, one * 3 / 2, u64::MAX).unwrap();
         store.save_map(&gain.id, &gain);
         std::thread::sleep(std::time::Duration::from_millis(20));
         store.save_map(&bits.id, &bits);
@@ -459,7 +666,7 @@ mod tests {
         assert_eq!(back.values.len(), bits.values.len());
         assert!(store.load_map(&gain.id, lookup).is_none());
         // Reopened, the directory knows its maps again.
-        let store = DataDir::open(&dir, one * 3 / 2).unwrap();
+        let store = DataDir::open(&dir, one * 3 / 2, u64::MAX).unwrap();
         assert_eq!(store.map_ids(), vec![bits.id.clone()]);
         assert!(
             store.load_map(&bits.id, |_| None).is_none(),
