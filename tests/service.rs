@@ -1805,7 +1805,9 @@ async fn a_client_that_stops_reading_is_cut_off_and_its_answer_freed() {
         .await
         .unwrap();
     assert_eq!(resp.status(), StatusCode::OK);
-    assert_eq!(resp.bytes().await.unwrap().len(), full);
+    // The whole body again (its `took_ms` may take a digit more or less).
+    let again = resp.bytes().await.unwrap().len();
+    assert!(again.abs_diff(full) < 16, "{again} bytes, {full} before");
     assert_eq!(
         server.metric("irs_connections_stalled_closed_total").await,
         1.0
