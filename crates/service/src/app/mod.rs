@@ -189,6 +189,22 @@ impl App {
             })
     }
 
+    /// Registers a scenario a request sent (or another replica shared) for `caller`: its
+    /// canonical form is hashed and, with a data dir, written, on the query pool when it
+    /// carries a floor plan of more than `queries::INLINE_BYTES`.
+    pub(crate) async fn register_api_scenario(
+        &self,
+        scenario: Arc<Scenario>,
+        caller: &Caller,
+    ) -> Result<(Arc<StoredScenario>, bool), Error> {
+        let (app, caller) = (self.clone(), caller.clone());
+        self.queries()
+            .run_sized("scenario", scenario.raster_bytes(), move || {
+                app.register_scenario(Arc::unwrap_or_clone(scenario), ScenarioSource::Api, &caller)
+            })
+            .await?
+    }
+
     pub(crate) fn cluster(&self) -> Option<&Arc<Cluster>> {
         self.inner.cluster.as_ref()
     }

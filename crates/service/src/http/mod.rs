@@ -108,10 +108,11 @@ pub fn router() -> Router<App> {
 }
 
 /// The JSON body extractor of this API: strict parsing, problem+json on every failure, and the
-/// configured body limit named in the 413.
+/// configured body limit named in the 413. A large body is parsed on the query pool, not on the
+/// async thread that read it (`app::queries::INLINE_BYTES`).
 pub(crate) struct Body<T>(pub T);
 
-impl<T: serde::de::DeserializeOwned> FromRequest<App> for Body<T> {
+impl<T: serde::de::DeserializeOwned + Send + 'static> FromRequest<App> for Body<T> {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &App) -> Result<Self, ApiError> {
@@ -145,7 +146,11 @@ impl<T: serde::de::DeserializeOwned> FromRequest<App> for Body<T> {
                     ApiError::malformed_json(rejection.body_text())
                 }
             })?;
-        parse_json(&bytes).map(Body)
+        let parsed = state
+            .queries()
+            .run_sized("body", bytes.len(), move || parse_json(&bytes))
+            .await?;
+        parsed.map(Body)
     }
 }
 

@@ -119,7 +119,9 @@ pub(super) async fn place(
         state.limits().max_build_cpu_s,
     )?;
     if inline {
-        state.register_scenario((*scenario).clone(), ScenarioSource::Api, &caller)?;
+        state
+            .register_api_scenario(scenario.clone(), &caller)
+            .await?;
     }
     let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
     let (registrar, owner) = (state.clone(), caller.clone());

@@ -6,8 +6,7 @@ use super::{Body, Page};
 use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
-use crate::app::registry::ScenarioSummary;
-use crate::app::scenarios::parse_scenario;
+use crate::app::registry::{ScenarioSummary, StoredScenario};
 use crate::ids::ScenarioId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
@@ -16,6 +15,7 @@ use axum::response::{IntoResponse, Response};
 use irs_model::scenario::Scenario;
 use serde::Serialize;
 use std::collections::HashMap;
+use std::sync::Arc;
 
 #[derive(Serialize)]
 pub(super) struct ScenarioList {
@@ -42,45 +42,56 @@ pub(super) async fn list_scenarios(
 }
 
 #[derive(Serialize)]
-pub(super) struct ScenarioDocument {
+struct ScenarioDocument<'a> {
     #[serde(flatten)]
     summary: ScenarioSummary,
-    scenario: Scenario,
+    scenario: &'a Scenario,
 }
+
+/// A scenario's answer (its summary and document), serialised on the query pool when it
+/// carries a big floor plan (its image is megabytes of base64).
+async fn scenario_answer(state: &App, stored: Arc<StoredScenario>) -> Result<Vec<u8>, ApiError> {
+    let body = state
+        .queries()
+        .run_sized("scenario", stored.scenario.raster_bytes(), move || {
+            serde_json::to_vec(&ScenarioDocument {
+                summary: stored.summary(),
+                scenario: &stored.scenario,
+            })
+        })
+        .await?
+        .map_err(|e| Error::internal(format!("scenario answer: {e}")))?;
+    Ok(body)
+}
+
+const JSON: (header::HeaderName, &str) = (header::CONTENT_TYPE, "application/json");
 
 pub(super) async fn register_scenario(
     State(state): State<App>,
     caller: Caller,
     Body(value): Body<serde_json::Value>,
 ) -> Result<Response, ApiError> {
-    let scenario = parse_scenario(value, "")?;
-    let (stored, created) = state.add_scenario(scenario, &caller).await?;
+    let (stored, created) = state.add_scenario(value, &caller).await?;
     let status = if created {
         StatusCode::CREATED
     } else {
         StatusCode::OK
     };
-    let summary = stored.summary();
-    let location = summary.href.clone();
-    let body = ScenarioDocument {
-        summary,
-        scenario: (*stored.scenario).clone(),
-    };
-    Ok((status, [(header::LOCATION, location)], Json(body)).into_response())
+    let location = stored.summary().href;
+    let body = scenario_answer(&state, stored).await?;
+    Ok((status, [JSON, (header::LOCATION, location.as_str())], body).into_response())
 }
 
 pub(super) async fn get_scenario(
     State(state): State<App>,
     Path(id): Path<ScenarioId>,
-) -> Result<Json<ScenarioDocument>, ApiError> {
+) -> Result<Response, ApiError> {
     let stored = state
         .scenario(&id)
         .await?
         .ok_or_else(|| Error::not_found("scenario", &id))?;
-    Ok(Json(ScenarioDocument {
-        summary: stored.summary(),
-        scenario: (*stored.scenario).clone(),
-    }))
+    let body = scenario_answer(&state, stored).await?;
+    Ok(([JSON], body).into_response())
 }
 
 /// Deletes the caller's registration of an API scenario; with the last registration the
