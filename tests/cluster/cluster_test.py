@@ -14,10 +14,14 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * Redis stopped: /readyz 503 with the reason, a cached map still answers path queries,
     a request that needs Redis gets 503 with Retry-After, no replica dies; Redis restarted
     (its AOF): every replica ready again by itself, the maps still there;
-  * path-query throughput through HAProxy against one replica hit directly (wrk, same run).
+  * path-query throughput through HAProxy against one replica hit directly (wrk, same run);
+  * Redis content this build did not write (a record that is no scenario, a map that does not
+    decode, keys of the wrong type, a lock without expiry, a stream that is not one) repaired
+    where it is met; a map finished while Redis was away shared when it returns, built once.
 Everything binds 127.0.0.1 and stops by itself (about a minute on two cores).
 """
 
+import hashlib
 import json
 import os
 import pathlib
@@ -62,6 +66,31 @@ class Redis:
     def stop(self):
         self.proc.terminate()
         self.proc.wait(10)
+
+    def command(self, *args):
+        """One Redis command (RESP over a socket; arguments as str or bytes): its reply, a
+        bulk string as str when it is UTF-8 (bytes otherwise)."""
+        with socket.create_connection(("127.0.0.1", self.port), timeout=5) as s:
+            parts = [a if isinstance(a, bytes) else str(a).encode() for a in args]
+            s.sendall(b"*%d\r\n" % len(parts) + b"".join(b"$%d\r\n%s\r\n" % (len(p), p) for p in parts))
+            reader = s.makefile("rb")
+            line = reader.readline().rstrip(b"\r\n")
+            kind, rest = line[:1], line[1:]
+            if kind == b"+":
+                return rest.decode()
+            if kind == b"-":
+                raise RuntimeError(f"Redis {args[0]}: {rest.decode()}")
+            if kind == b":":
+                return int(rest)
+            if kind == b"$":
+                if int(rest) < 0:
+                    return None
+                data = reader.read(int(rest) + 2)[:-2]
+                try:
+                    return data.decode()
+                except UnicodeDecodeError:
+                    return data
+            raise RuntimeError(f"Redis {args[0]}: unexpected reply {line!r}")
 
 
 class Replica(kit.Server):
@@ -282,6 +311,78 @@ def main():
     # the machine (reported, not asserted); with real work per query the proxy must not be
     # the bottleneck.
     check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
+
+    repairs(redis, survivors)
+
+
+def repairs(redis, survivors):
+    """Redis content this build did not write heals itself: wrong records and maps are deleted
+    and built or registered again, wrong types repaired, a lock without expiry given one, and a
+    map finished while Redis was away is shared once it returns rather than built twice."""
+    fresh = Replica(redis.port, "fresh")  # nothing cached or registered: it must read Redis
+    wait_until("the fresh replica ready", fresh.ready, 15)
+    owner = survivors[0]
+    plain = scenario("small-test", lambda d: d.__setitem__("name", "repairs"))
+    status, created, _ = request(owner.base, "POST", "/v1/scenarios", plain)
+    plain_id = created["id"]
+    key = f"irs:scenario:{plain_id}"
+    redis.command("SET", key, json.dumps({"document": {"name": "not a scenario"}, "owners": []}))
+    status, _, _ = request(fresh.base, "GET", f"/v1/scenarios/{plain_id}")
+    check(status == 404 and redis.command("EXISTS", key) == 0,
+          f"a scenario record that is no scenario: {status} and deleted (was a 500 on every request)")
+    request(owner.base, "POST", "/v1/scenarios", plain)
+    status, _, _ = request(fresh.base, "GET", f"/v1/scenarios/{plain_id}")
+    check(status == 200, f"registered again by the replica that has it, read back: {status}")
+
+    status, built, _ = request(owner.base, "POST", "/v1/maps", {"scenario_id": plain_id, "kind": "gain"})
+    check(status == 200, f"a small map built ({status})")
+    map_id = built["map_id"]
+    key = f"irs:map:{map_id}"
+    magic = redis.command("GETRANGE", key, 0, 7)  # the frame's magic bytes (store::disk)
+    magic = magic.encode() if isinstance(magic, str) else magic
+    garbage = b"not a map of this build"
+    redis.command("SET", key, magic + hashlib.sha256(garbage).digest() + garbage)
+    status, _, _ = request(fresh.base, "GET", f"/v1/maps/{map_id}")
+    check(status == 404 and redis.command("EXISTS", key) == 0,
+          f"a map that frames but does not decode: {status} and deleted (was a 500 on every request)")
+    redis.command("RPUSH", key, "x")
+    status, _, _ = request(fresh.base, "GET", f"/v1/maps/{map_id}")
+    check(status == 404 and redis.command("EXISTS", key) == 0,
+          f"a map key of the wrong type: {status} and deleted (was a 503 on every request)")
+    redis.command("SET", f"irs:building:{map_id}", "a-job-nobody-runs")
+    started = time.time()
+    status, _, _ = request(fresh.base, "POST", "/v1/maps", {"scenario_id": plain_id, "kind": "gain"})
+    waited = time.time() - started
+    check(status == 200 and waited < 15,
+          f"a build lock without expiry: the map built after {waited:.1f} s (was 120 s, then 504)")
+    check(redis.command("EXISTS", key) == 1, "the map is shared again")
+
+    redis.command("DEL", "irs:builds")
+    redis.command("SET", "irs:builds", "not a stream")
+    wait_until("every replica ready with the stream repaired",
+               lambda: redis.command("TYPE", "irs:builds") == "stream"
+               and all(r.ready() for r in [fresh, *survivors]), 10)
+    repaired = sum(kit.metric(r.base, "irs_redis_repaired_total") for r in [fresh, *survivors])
+    check(repaired >= 5, f"every repair counted (irs_redis_repaired_total {repaired:.0f})")
+
+    # A build that ends while Redis is away: shared when Redis returns, not built again.
+    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.125)))
+    slow_id = request(fresh.base, "POST", "/v1/scenarios", slow)[1]["id"]
+    replicas = [fresh, *survivors]
+    before = sum(r.builds() for r in replicas)
+    status, started, _ = request(fresh.base, "POST", "/v1/maps", {"scenario_id": slow_id, "kind": "rate", "access": "oma"})
+    job_id = started["job_id"]
+    wait_until("the build under way", lambda: request(fresh.base, "GET", f"/v1/jobs/{job_id}")[1]["cells_done"] > 0, 15)
+    redis.stop()
+    time.sleep(8)  # the build (about 4 s) ends while Redis is down
+    redis.start()
+    job = wait_job(fresh.base, job_id, 60)
+    builds_run = sum(r.builds() for r in replicas) - before
+    check(job["state"] == "done" and builds_run == 1,
+          f"a map finished while Redis was away: {job['state']} after {builds_run:.0f} build(s) "
+          f"(was done → running → done, built twice)")
+    status, _, _ = request(survivors[0].base, "GET", f"/v1/maps/{job['map_id']}/coverage?threshold=1")
+    check(status == 200, f"and shared: another replica serves it ({status})")
 
 
 if __name__ == "__main__":

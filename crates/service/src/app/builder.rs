@@ -7,7 +7,7 @@ use crate::app::jobs::{JobRecord, JobState};
 use crate::ids::ScenarioId;
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
 use redis::aio::ConnectionManager;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 /// Reads builds from the stream whenever this replica has a free worker, forever (a task
 /// per replica, started with the server).
@@ -96,14 +96,23 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     };
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
+    // A map whose share failed (Redis down as the build ended) is kept here and shared below
+    // once Redis answers again: its stream entry stays pending meanwhile, and a replica that
+    // claimed it would otherwise build the map a second time under the same job.
+    let unshared: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+    let keep = unshared.clone();
     let publish = move |map: std::sync::Arc<irs_model::radiomap::RadioMap>| async move {
         let encoded = crate::tasks::spawn_blocking(move || irs_answers::encoding::encode(&map))
             .await
             .map_err(|e| e.to_string())?;
-        publisher
-            .put_map(&map_id, &encoded)
-            .await
-            .map_err(|e| super::Error::from(e).to_string())
+        let shared = publisher.put_map(&map_id, &encoded).await;
+        shared.map_err(|e| {
+            *keep.lock().expect("unshared map") = Some(encoded);
+            format!(
+                "{}; kept to share when Redis answers",
+                super::Error::from(e)
+            )
+        })
     };
     let job = state.jobs().build_shared(
         build.job_id.clone(),
@@ -126,6 +135,10 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             }
         }
     }
+    let kept = unshared.lock().expect("unshared map").take();
+    if let Some(encoded) = kept {
+        share_when_redis_answers(&cluster, &build, &encoded).await;
+    }
     // The final record, written until it lands (Redis may be down just now): the job's
     // waiters on other replicas read it.
     let final_record = job.record();
@@ -136,4 +149,29 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
         tokio::time::sleep(HEALTH_PERIOD * (attempt + 1).min(4)).await;
     }
     cluster.finish(&build).await;
+}
+
+/// Stores a built map whose first share failed, retrying until Redis takes it. The builder
+/// keeps its stream entry claimed meanwhile (heartbeats), so no replica that sees Redis again
+/// first takes the entry over and builds the map anew. Bounded in memory: only the builds that
+/// ended while Redis was down wait here (no new build is read from the stream meanwhile).
+async fn share_when_redis_answers(cluster: &Cluster, build: &BuildEntry, encoded: &[u8]) {
+    let mut attempt = 0u32;
+    loop {
+        cluster.heartbeat(build).await;
+        match cluster.put_map(&build.map_id, encoded).await {
+            Ok(()) => {
+                tracing::info!(map_id = %build.map_id, attempts = attempt + 1, "kept map shared");
+                metrics::counter!("irs_maps_shared_late_total").increment(1);
+                return;
+            }
+            Err(e) if attempt.is_multiple_of(20) => {
+                tracing::warn!(map_id = %build.map_id, error = %super::Error::from(e), "sharing the built map again");
+            }
+            Err(_) => {}
+        }
+        attempt += 1;
+        // Every health period: within CLAIM_IDLE of Redis's return (see `Cluster::next_build`).
+        tokio::time::sleep(HEALTH_PERIOD).await;
+    }
 }

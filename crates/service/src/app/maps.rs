@@ -7,7 +7,6 @@ use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
 use crate::app::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
-use crate::app::registry::ScenarioSource;
 use crate::ids::{MapId, ScenarioId};
 use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
@@ -195,8 +194,7 @@ impl App {
             ));
         }
         if inline {
-            let (stored, _) =
-                self.register_scenario((*scenario).clone(), ScenarioSource::Api, caller)?;
+            let (stored, _) = self.register_api_scenario(scenario, caller).await?;
             return Ok((stored.scenario.clone(), key));
         }
         Ok((scenario, key))
@@ -251,43 +249,59 @@ impl App {
             .ok_or_else(|| Error::not_found("scenario", &key.scenario_id))?;
         self.share_scenario(&stored, false).await?;
         let queued = JobRecord::queued(&key, caller.owner().as_ref());
-        let (job_id, _) = cluster
-            .enqueue(
-                &map_id,
-                &key,
-                (&queued.view.job_id, &queued),
-                self.limits().cluster_queue,
-            )
-            .await?;
-        let record = |r: Option<JobRecord>| {
-            r.unwrap_or_else(|| {
-                let mut r = JobRecord::queued(&key, None);
-                r.view.job_id = job_id.clone();
-                r
-            })
-        };
-        if !cheap {
-            return Ok(Err(record(cluster.job(&job_id).await?).view));
-        }
-        loop {
-            let current = record(cluster.job(&job_id).await?);
-            match current.view.state {
-                JobState::Done => {
-                    return match self.shared_map(&map_id).await? {
-                        Some(map) => Ok(Ok(map)),
-                        None => Err(Error::BuildFailed(format!(
-                            "job {job_id} is done but its map is in no store"
-                        ))),
-                    };
+        // A lock can name a job that has no record and no build (its holder died between the
+        // two writes, or the lock was written by hand): once the lock has gone (it always
+        // expires, see `Cluster::building`) the build is queued again, a few times at most.
+        for _ in 0..3 {
+            let (job_id, _) = cluster
+                .enqueue(
+                    &map_id,
+                    &key,
+                    (&queued.view.job_id, &queued),
+                    self.limits().cluster_queue,
+                )
+                .await?;
+            let record = |r: Option<JobRecord>| {
+                r.unwrap_or_else(|| {
+                    let mut r = JobRecord::queued(&key, None);
+                    r.view.job_id = job_id.clone();
+                    r
+                })
+            };
+            if !cheap {
+                return Ok(Err(record(cluster.job(&job_id).await?).view));
+            }
+            loop {
+                let found = cluster.job(&job_id).await?;
+                if found.is_none() && cluster.building(&map_id).await?.as_ref() != Some(&job_id) {
+                    if let Some(map) = self.shared_map(&map_id).await? {
+                        return Ok(Ok(map));
+                    }
+                    tracing::warn!(job_id = %job_id, map_id = %map_id, "build lock named a job without a record; queued again");
+                    break;
                 }
-                s if s.is_terminal() => {
-                    return Err(Error::BuildFailed(current.view.error.unwrap_or_else(
-                        || format!("job {job_id} ended {s} without a map"),
-                    )));
+                let current = record(found);
+                match current.view.state {
+                    JobState::Done => {
+                        return match self.shared_map(&map_id).await? {
+                            Some(map) => Ok(Ok(map)),
+                            None => Err(Error::BuildFailed(format!(
+                                "job {job_id} is done but its map is in no store"
+                            ))),
+                        };
+                    }
+                    s if s.is_terminal() => {
+                        return Err(Error::BuildFailed(current.view.error.unwrap_or_else(
+                            || format!("job {job_id} ended {s} without a map"),
+                        )));
+                    }
+                    _ => tokio::time::sleep(SHARED_POLL).await,
                 }
-                _ => tokio::time::sleep(SHARED_POLL).await,
             }
         }
+        Err(Error::unavailable(
+            "the map's build was lost three times in a row; retry",
+        ))
     }
 
     /// A built map by id: in this replica's cache (or data directory), else (in a cluster) in
@@ -305,23 +319,35 @@ impl App {
         let Some(encoded) = cluster.map(map_id).await? else {
             return Ok(None);
         };
-        let key = irs_answers::encoding::peek_key(&encoded)
-            .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
+        // A map that frames correctly but does not decode to itself was not written by this
+        // build: deleted, so it is built again rather than a 500 on every request.
+        let key = match irs_answers::encoding::peek_key(&encoded) {
+            Ok(key) => key,
+            Err(e) => {
+                cluster.discard_map(map_id, &e.to_string()).await;
+                return Ok(None);
+            }
+        };
         let Some(stored) = self.scenario(&ScenarioId::of_key(&key)).await? else {
             return Ok(None);
         };
         let scenario = stored.scenario.clone();
-        let map = crate::tasks::spawn_blocking(move || {
+        let decoded = crate::tasks::spawn_blocking(move || {
             irs_answers::encoding::decode(&encoded, &scenario)
         })
         .await
-        .map_err(|e| Error::internal(e.to_string()))?
-        .map_err(|e| Error::internal(format!("shared map {map_id}: {e}")))?;
-        if map.id != map_id.as_str() {
-            return Err(Error::internal(format!(
-                "shared map {map_id} holds another map"
-            )));
-        }
+        .map_err(|e| Error::internal(e.to_string()))?;
+        let map = match decoded {
+            Ok(map) if map.id == map_id.as_str() => map,
+            Ok(_) => {
+                cluster.discard_map(map_id, "it holds another map").await;
+                return Ok(None);
+            }
+            Err(e) => {
+                cluster.discard_map(map_id, &e.to_string()).await;
+                return Ok(None);
+            }
+        };
         let map = Arc::new(map);
         self.cache().insert(map_id.clone(), map.clone()).await;
         Ok(Some(map))

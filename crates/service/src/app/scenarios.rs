@@ -5,6 +5,7 @@
 //! by asking in the wrong order.
 
 use super::identity::Caller;
+use super::queries::{INLINE_BYTES, json_weight};
 use super::{App, Error, registrants};
 use crate::app::registry::{ScenarioRecord, ScenarioSource, StoredScenario};
 use crate::ids::ScenarioId;
@@ -48,17 +49,33 @@ impl App {
         let Some(record) = cluster.scenario::<ScenarioRecord>(id).await? else {
             return Ok(None);
         };
-        let scenario = Scenario::from_json(&record.document.to_string())
-            .map_err(|e| Error::internal(format!("shared scenario {id}: {e}")))?;
-        if ScenarioId::of(&scenario) != *id {
-            return Err(Error::internal(format!(
-                "shared scenario {id} has another id in this build"
-            )));
-        }
+        let weight = json_weight(&record.document, INLINE_BYTES);
+        let (document, expected) = (record.document, id.clone());
+        let parsed = self
+            .queries()
+            .run_sized("scenario", weight, move || {
+                let scenario = Scenario::from_json(&document.to_string())
+                    .map_err(|e| format!("not a scenario of this build: {e}"))?;
+                if ScenarioId::of(&scenario) != expected {
+                    return Err("its document has another id in this build".to_string());
+                }
+                Ok(Arc::new(scenario))
+            })
+            .await?;
+        // A record no replica of this build could have written: deleted, so the scenario is
+        // unknown (registered again by whoever has it) rather than a 500 on every request.
+        let scenario = match parsed {
+            Ok(scenario) => scenario,
+            Err(why) => {
+                cluster.discard_scenario(id, &why).await;
+                return Ok(None);
+            }
+        };
         let mut stored = None;
         for owner in registrants(record.owners) {
             stored = Some(
-                self.register_scenario(scenario.clone(), ScenarioSource::Api, &owner)?
+                self.register_api_scenario(scenario.clone(), &owner)
+                    .await?
                     .0,
             );
         }
@@ -85,10 +102,19 @@ impl App {
                 })
             }
             (None, Some(doc)) => {
-                let scenario = parse_scenario(doc.into(), &format!("{prefix}scenario."))?;
+                let document = serde_json::Value::Object(doc);
+                let weight = json_weight(&document, INLINE_BYTES);
+                let prefix = format!("{prefix}scenario.");
+                let (id, scenario) = self
+                    .queries()
+                    .run_sized("scenario", weight, move || {
+                        let scenario = parse_scenario(document, &prefix)?;
+                        Ok::<_, Error>((ScenarioId::of(&scenario), Arc::new(scenario)))
+                    })
+                    .await??;
                 Ok(Named {
-                    id: ScenarioId::of(&scenario),
-                    scenario: Arc::new(scenario),
+                    id,
+                    scenario,
                     inline: true,
                 })
             }
@@ -101,12 +127,20 @@ impl App {
 
     /// Registers a scenario sent to the API for `caller` and, in a cluster, publishes it (its
     /// document and owners) for the other replicas. Returns it and whether it was new.
+    /// The document is parsed (its floor plan decoded) on the query pool when it is big.
     pub(crate) async fn add_scenario(
         &self,
-        scenario: Scenario,
+        document: serde_json::Value,
         caller: &Caller,
     ) -> Result<(Arc<StoredScenario>, bool), Error> {
-        let (stored, created) = self.register_scenario(scenario, ScenarioSource::Api, caller)?;
+        let weight = json_weight(&document, INLINE_BYTES);
+        let scenario = self
+            .queries()
+            .run_sized("scenario", weight, move || parse_scenario(document, ""))
+            .await??;
+        let (stored, created) = self
+            .register_api_scenario(Arc::new(scenario), caller)
+            .await?;
         self.share_scenario(&stored, true).await?;
         Ok((stored, created))
     }

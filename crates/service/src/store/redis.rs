@@ -18,6 +18,12 @@
 //!   reset its idle time, so an entry idle for [`CLAIM_IDLE`] belongs to a dead replica and
 //!   the next replica with a free worker takes it over (`XAUTOCLAIM`) and builds the map.
 //!
+//! Content that is not what this build writes (a record that does not parse, a map whose
+//! digest fails, a key of the wrong Redis type, a lock without an expiry) is repaired where it
+//! is met: the key is deleted (or its expiry set), logged and counted in
+//! `irs_redis_repaired_total{what}`, and treated as missing, so the next request rebuilds or
+//! re-registers it instead of failing on it forever.
+//!
 //! Redis down: a background task pings it every [`HEALTH_PERIOD`]; while it fails, `/readyz`
 //! answers 503 with the reason, a request that needs Redis answers 503 with `Retry-After`,
 //! maps already in a replica's cache still answer path queries, and everything resumes when
@@ -40,7 +46,7 @@ use redis::{AsyncCommands, ExistenceCheck, SetExpiry, SetOptions};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use std::sync::{Mutex, RwLock};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 pub(crate) const STREAM: &str = "irs:builds";
 const GROUP: &str = "builders";
@@ -113,6 +119,8 @@ pub(crate) struct Cluster {
     commands: RwLock<Option<ConnectionManager>>,
     /// `None` while Redis answers; the reason while it does not.
     down: Mutex<Option<String>>,
+    /// When Redis last became available to this replica (see [`Cluster::next_build`]).
+    up_since: Mutex<Option<Instant>>,
 }
 
 fn config() -> ConnectionManagerConfig {
@@ -136,6 +144,7 @@ impl Cluster {
             replica,
             commands: RwLock::new(None),
             down: Mutex::new(Some("not connected to Redis yet".into())),
+            up_since: Mutex::new(None),
         })
     }
 
@@ -159,6 +168,7 @@ impl Cluster {
                 None => tracing::info!("Redis available"),
             }
             metrics::gauge!("irs_redis_up").set(if down.is_none() { 1.0 } else { 0.0 });
+            *self.up_since.lock().expect("cluster lock") = down.is_none().then(Instant::now);
         }
         *state = down;
     }
@@ -173,6 +183,78 @@ impl Cluster {
             self.mark(Some(reason.clone()));
         }
         Error::unavailable(reason)
+    }
+
+    /// Deletes `key`, which held what this build does not write there (`what` names it in the
+    /// counter), so that it is rebuilt or registered again rather than failing forever.
+    async fn discard(
+        &self,
+        conn: &mut ConnectionManager,
+        key: &str,
+        what: &'static str,
+        why: &str,
+    ) {
+        let removed: redis::RedisResult<usize> = conn.del(key).await;
+        tracing::warn!(
+            key,
+            what,
+            why,
+            deleted = removed.is_ok(),
+            "Redis key repaired"
+        );
+        metrics::counter!("irs_redis_repaired_total", "what" => what).increment(1);
+    }
+
+    /// `GET key`: a key of another Redis type (`WRONGTYPE`) is deleted and read as missing.
+    async fn get_or_repair<T: redis::FromRedisValue>(
+        &self,
+        conn: &mut ConnectionManager,
+        key: &str,
+        what: &'static str,
+    ) -> Result<Option<T>, Error> {
+        match conn.get::<_, Option<T>>(key).await {
+            Ok(value) => Ok(value),
+            Err(e) if e.code() == Some("WRONGTYPE") => {
+                self.discard(conn, key, what, "wrong Redis type").await;
+                Ok(None)
+            }
+            Err(e) => Err(self.error(&e)),
+        }
+    }
+
+    /// A JSON record at `key`, or `None`; one that does not parse as `R` is deleted.
+    async fn record<R: DeserializeOwned>(
+        &self,
+        key: &str,
+        what: &'static str,
+    ) -> Result<Option<R>, Error> {
+        let mut conn = self.conn()?;
+        let Some(json) = self.get_or_repair::<String>(&mut conn, key, what).await? else {
+            return Ok(None);
+        };
+        match serde_json::from_str(&json) {
+            Ok(record) => Ok(Some(record)),
+            Err(e) => {
+                self.discard(&mut conn, key, what, &e.to_string()).await;
+                Ok(None)
+            }
+        }
+    }
+
+    /// Deletes a scenario record the application found invalid (it parsed as a record, but
+    /// its document is not a scenario of this build, or not the one its id names).
+    pub async fn discard_scenario(&self, id: &ScenarioId, why: &str) {
+        if let Ok(mut conn) = self.conn() {
+            self.discard(&mut conn, &scenario_key(id), "scenario", why)
+                .await;
+        }
+    }
+
+    /// Deletes a map the application could not decode (its frame was intact).
+    pub async fn discard_map(&self, id: &MapId, why: &str) {
+        if let Ok(mut conn) = self.conn() {
+            self.discard(&mut conn, &map_key(id), "map", why).await;
+        }
     }
 
     /// The command connection, or 503 while Redis is down.
@@ -214,11 +296,22 @@ impl Cluster {
         }
     }
 
-    /// The consumer group, created with the stream if missing (idempotent).
+    /// The consumer group, created with the stream if missing (idempotent). A key of another
+    /// type where the stream belongs holds no build: it is deleted and the stream created.
     async fn ensure_group(&self, conn: &mut ConnectionManager) -> redis::RedisResult<()> {
         let created: redis::RedisResult<()> = conn.xgroup_create_mkstream(STREAM, GROUP, "0").await;
         match created {
             Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
+            Err(e) if e.code() == Some("WRONGTYPE") => {
+                self.discard(conn, STREAM, "stream", "wrong Redis type")
+                    .await;
+                let created: redis::RedisResult<()> =
+                    conn.xgroup_create_mkstream(STREAM, GROUP, "0").await;
+                match created {
+                    Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
+                    other => other,
+                }
+            }
             other => other,
         }
     }
@@ -248,12 +341,7 @@ impl Cluster {
     }
 
     pub async fn scenario<R: DeserializeOwned>(&self, id: &ScenarioId) -> Result<Option<R>, Error> {
-        let mut conn = self.conn()?;
-        let json: Option<String> = conn
-            .get(scenario_key(id))
-            .await
-            .map_err(|e| self.error(&e))?;
-        Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
+        self.record(&scenario_key(id), "scenario").await
     }
 
     pub async fn delete_scenario(&self, id: &ScenarioId) -> Result<(), Error> {
@@ -274,14 +362,20 @@ impl Cluster {
     /// A map's encoded bytes, if Redis has it and its digest checks out.
     pub async fn map(&self, id: &MapId) -> Result<Option<Vec<u8>>, Error> {
         let mut conn = self.conn()?;
-        let framed: Option<Vec<u8>> = conn.get(map_key(id)).await.map_err(|e| self.error(&e))?;
-        Ok(framed.and_then(|bytes| match store::unframe(&bytes) {
-            Ok(payload) => Some(payload.to_vec()),
+        let key = map_key(id);
+        let Some(framed) = self
+            .get_or_repair::<Vec<u8>>(&mut conn, &key, "map")
+            .await?
+        else {
+            return Ok(None);
+        };
+        match store::unframe(&framed) {
+            Ok(payload) => Ok(Some(payload.to_vec())),
             Err(reason) => {
-                tracing::warn!(map_id = %id, reason, "map in Redis ignored");
-                None
+                self.discard(&mut conn, &key, "map", reason).await;
+                Ok(None)
             }
-        }))
+        }
     }
 
     pub async fn delete_map(&self, id: &MapId) -> Result<bool, Error> {
@@ -299,9 +393,7 @@ impl Cluster {
     }
 
     pub async fn job<R: DeserializeOwned>(&self, id: &JobId) -> Result<Option<R>, Error> {
-        let mut conn = self.conn()?;
-        let json: Option<String> = conn.get(job_key(id)).await.map_err(|e| self.error(&e))?;
-        Ok(json.and_then(|j| serde_json::from_str(&j).ok()))
+        self.record(&job_key(id), "job").await
     }
 
     pub async fn request_cancel(&self, id: &JobId) -> Result<(), Error> {
@@ -321,11 +413,28 @@ impl Cluster {
     /// The job building `map_id` somewhere in the cluster, if one is.
     pub async fn building(&self, map_id: &MapId) -> Result<Option<JobId>, Error> {
         let mut conn = self.conn()?;
-        let holder: Option<String> = conn
-            .get(lock_key(map_id))
-            .await
-            .map_err(|e| self.error(&e))?;
-        Ok(holder.map(JobId::given))
+        self.lock_holder(&mut conn, map_id).await
+    }
+
+    /// The job a build lock names. Every lock this build takes expires ([`LEASE`], renewed by
+    /// its builder's heartbeat); one without an expiry (written by hand, or by a foreign
+    /// client) would stall its map's requests forever, so it is given one here.
+    async fn lock_holder(
+        &self,
+        conn: &mut ConnectionManager,
+        map_id: &MapId,
+    ) -> Result<Option<JobId>, Error> {
+        let key = lock_key(map_id);
+        let Some(holder) = self.get_or_repair::<String>(conn, &key, "lock").await? else {
+            return Ok(None);
+        };
+        let ttl_ms: i64 = conn.pttl(&key).await.map_err(|e| self.error(&e))?;
+        if ttl_ms == -1 {
+            let _: redis::RedisResult<bool> = conn.pexpire(&key, LEASE.as_millis() as i64).await;
+            tracing::warn!(key, job_id = %holder, "build lock without expiry given one");
+            metrics::counter!("irs_redis_repaired_total", "what" => "lock").increment(1);
+        }
+        Ok(Some(JobId::given(holder)))
     }
 
     /// Single flight across replicas: the id of the job building `map_id`, and whether it was
@@ -340,12 +449,8 @@ impl Cluster {
     ) -> Result<(JobId, bool), Error> {
         let mut conn = self.conn()?;
         for _ in 0..3 {
-            let existing: Option<String> = conn
-                .get(lock_key(map_id))
-                .await
-                .map_err(|e| self.error(&e))?;
-            if let Some(job_id) = existing {
-                return Ok((JobId::given(job_id), false));
+            if let Some(job_id) = self.lock_holder(&mut conn, map_id).await? {
+                return Ok((job_id, false));
             }
             let waiting: usize = conn.xlen(STREAM).await.map_err(|e| self.error(&e))?;
             if waiting >= queue_limit {
@@ -396,20 +501,16 @@ impl Cluster {
         &self,
         conn: &mut ConnectionManager,
     ) -> redis::RedisResult<Option<BuildEntry>> {
-        let claimed: StreamAutoClaimReply = conn
-            .xautoclaim_options(
-                STREAM,
-                GROUP,
-                &self.replica,
-                CLAIM_IDLE.as_millis() as u64,
-                "0-0",
-                StreamAutoClaimOptions::default().count(1),
-            )
-            .await?;
-        if let Some(entry) = claimed.claimed.first() {
-            tracing::warn!(stream_id = %entry.id, "claimed the build of a replica that stopped");
-            metrics::counter!("irs_builds_claimed_total").increment(1);
-            return Ok(self.accept(conn, entry).await);
+        // While Redis was away no builder could heartbeat, so every entry looks idle the moment
+        // it returns: the live builders get one CLAIM_IDLE to re-claim theirs (and share a map
+        // finished meanwhile) before any entry counts as a dead replica's.
+        let settled = self
+            .up_since
+            .lock()
+            .expect("cluster lock")
+            .is_some_and(|t| t.elapsed() >= CLAIM_IDLE);
+        if settled && let Some(entry) = self.claim_idle(conn).await? {
+            return Ok(self.accept(conn, &entry).await);
         }
         let options = StreamReadOptions::default()
             .group(GROUP, &self.replica)
@@ -423,6 +524,29 @@ impl Cluster {
             Some(entry) => self.accept(conn, &entry).await,
             None => None,
         })
+    }
+
+    /// A pending entry idle for [`CLAIM_IDLE`] (its builder stopped), now this replica's.
+    async fn claim_idle(
+        &self,
+        conn: &mut ConnectionManager,
+    ) -> redis::RedisResult<Option<StreamId>> {
+        let claimed: StreamAutoClaimReply = conn
+            .xautoclaim_options(
+                STREAM,
+                GROUP,
+                &self.replica,
+                CLAIM_IDLE.as_millis() as u64,
+                "0-0",
+                StreamAutoClaimOptions::default().count(1),
+            )
+            .await?;
+        let entry = claimed.claimed.into_iter().next();
+        if let Some(entry) = &entry {
+            tracing::warn!(stream_id = %entry.id, "claimed the build of a replica that stopped");
+            metrics::counter!("irs_builds_claimed_total").increment(1);
+        }
+        Ok(entry)
     }
 
     /// An entry as a build, or (malformed: not ours to build) acknowledged and dropped.

@@ -91,7 +91,7 @@ impl Jobs {
             let map = Arc::new(map);
             job.deliver(&map);
             if let Err(e) = publish(map.clone()).await {
-                tracing::warn!(error = %e, "built map not shared: other replicas will build it again");
+                tracing::warn!(error = %e, "built map not shared yet");
             }
             cache.insert(built_id, map).await;
         };
