@@ -17,7 +17,7 @@ use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, WorkError};
+use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, WorkError, cost};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
@@ -49,6 +49,9 @@ pub enum Command {
     Plan(PlanArgs),
     /// Write a map's Nav2 keep-out and cost masks (PGM + YAML) and its values (.npy) to a folder.
     Export(ExportArgs),
+    /// Print what building a map would cost, as the server estimates it before admitting the
+    /// build: `{"cpu_s", "bytes"}` (one core's seconds; the cache's weight), without building.
+    Estimate(MapArgs),
     /// Print a scenario file as the self-contained JSON document the API takes (POST
     /// /v1/scenarios): a floor plan's map YAML and image read and inlined.
     Scenario(ScenarioArgs),
@@ -335,17 +338,20 @@ pub fn load_scenario(source: &ScenarioSource) -> Result<Scenario, Failure> {
     })
 }
 
-fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
-    let id = scenario.content_hash();
-    let key = MapKey::new(
-        &id,
+fn map_key(args: &MapArgs, scenario: &Scenario) -> Result<MapKey, Failure> {
+    MapKey::new(
+        &scenario.content_hash(),
         scenario,
         args.kind,
         args.phases,
         args.access,
         args.solver,
     )
-    .map_err(|e| Failure::input(format!("--{}", e)))?;
+    .map_err(|e| Failure::input(format!("--{}", e)))
+}
+
+fn build_map(args: &MapArgs, scenario: &Scenario) -> Result<RadioMap, Failure> {
+    let key = map_key(args, scenario)?;
     let progress = Progress::default();
     let result = with_progress_bar(&progress, args.quiet, "map", "cells", || {
         irs_answers::map::build(scenario, &key, &progress)
@@ -424,6 +430,16 @@ pub fn run_map(args: &MapArgs) -> Result<(), Failure> {
     let body = Timed::since(started, irs_answers::map::body(&map));
     write_png(args, &map, &scenario, RenderOptions::default())?;
     print_json(&body)
+}
+
+/// `irs-planner estimate …`
+pub fn run_estimate(args: &MapArgs) -> Result<(), Failure> {
+    let scenario = load_scenario(&args.source)?;
+    let key = map_key(args, &scenario)?;
+    print_json(&serde_json::json!({
+        "cpu_s": cost::build_seconds(&scenario, &key),
+        "bytes": cost::map_bytes(&scenario, &key),
+    }))
 }
 
 /// `irs-planner plan …`

@@ -14,6 +14,7 @@ fn main() -> ExitCode {
         Some(Command::Map(args)) => cli::run_map(&args),
         Some(Command::Plan(args)) => cli::run_plan(&args),
         Some(Command::Export(args)) => cli::run_export(&args),
+        Some(Command::Estimate(args)) => cli::run_estimate(&args),
         Some(Command::Scenario(args)) => cli::run_scenario(&args),
         Some(Command::Place(args)) => cli::run_place(&args),
         Some(Command::Healthcheck(args)) => cli::run_healthcheck(&args),

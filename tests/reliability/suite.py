@@ -3,14 +3,16 @@
 case against its own server on a loopback port, with the figure it measured in the log.
 
 Usage: suite.py BINARY [CASE ...]   (cases: overflow cache lost-work starvation slow-loris
-slow-readers ownership shutdown files big-bodies; default all). Exits 1 on the first failed expectation. Bounded: every
+slow-readers ownership shutdown files big-bodies cpu-budget; default all). Exits 1 on the first failed expectation. Bounded: every
 case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1 only.
 """
 
 import base64
 import json
+import math
 import os
 import pathlib
+import random
 import signal
 import socket
 import subprocess
@@ -628,6 +630,124 @@ def big_bodies():
     finally:
         server.stop()
 
+def floor(name, resolution=0.05, boxes=0, walls=0, plan=0, clutter=0.0, aps=1, elements=False):
+    """The paper's floor at `resolution` (401² cells at 0.05 m) with what drives a build's cost:
+    random 0.3 m boxes, random 1 m walls at any angle, a floor plan of `plan`² pixels with a
+    share `clutter` of occupied pixels, several APs along the north wall, an `elements` IRS."""
+    rnd = random.Random(name)
+
+    def clear(x, y):  # keeps the AP and the IRS in the open
+        return x * x + (y - 10) ** 2 > 4 and x * x + (y + 10) ** 2 > 4
+
+    def edit(d):
+        d.update(name=name, obstacles=[], walls=[])
+        d["grid"]["resolution_m"] = resolution
+        while len(d["obstacles"]) < boxes:
+            x, y = rnd.uniform(-9.5, 9.5), rnd.uniform(-9.5, 9.5)
+            if clear(x, y):
+                d["obstacles"].append({"center": [x, y], "size": [0.3, 0.3], "height_m": 1.3})
+        while len(d["walls"]) < walls:
+            x, y, a = rnd.uniform(-9, 9), rnd.uniform(-9, 9), rnd.uniform(0, math.pi)
+            x2, y2 = x + math.cos(a), y + math.sin(a)
+            if clear(x, y) and clear(x2, y2) and max(abs(x2), abs(y2)) < 9.9:
+                d["walls"].append({"from": [x, y], "to": [x2, y2], "thickness_m": 0.1, "height_m": 2.5})
+        if plan:
+            pixels = bytearray(b"\xff" * plan * plan)
+            for _ in range(int(plan * plan * clutter)):
+                pixels[rnd.randrange(plan * plan)] = 0
+            pgm = f"P5\n{plan} {plan}\n255\n".encode() + bytes(pixels)
+            d["floor_plan"] = {"image": base64.b64encode(pgm).decode(), "resolution": 20 / plan,
+                               "origin": [-10.0, -10.0, 0.0], "negate": 0, "occupied_thresh": 0.65,
+                               "free_thresh": 0.196}
+        if aps > 1:
+            ap = d.pop("ap")
+            d["aps"] = [dict(ap, position=[-6 + 12 * k / (aps - 1), 10.0, 2.0]) for k in range(aps)]
+        if elements:
+            d["irs"]["grouping"] = "elements"
+
+    return scenario("paper-single-user", edit)
+
+
+def cpu_budget():
+    """The CPU estimate a build is admitted by, against the CPU the build takes, on a grid of
+    floors (each term of the estimate driving one of them): within 3× either way. Then the
+    audit's placement of 101 poses over a 4096² floor plan is refused before it starts (it was
+    estimated at 2 s and would take an hour), and a placement over a floor plan stops within a
+    second of its cancel (it took 82 s)."""
+    work = tempfile.mkdtemp(prefix="irs-cpu-budget-")
+    grid = [
+        ("1000 boxes", floor("boxes", boxes=1000), []),
+        ("1000 walls", floor("walls", walls=1000), []),
+        ("empty 2048² plan", floor("plan", plan=2048), []),
+        ("cluttered 2048² plan", floor("clutter", plan=2048, clutter=0.002), []),
+        ("elements IRS (M = 1200)", floor("elements", elements=True), []),
+        ("elements IRS, 1000 walls", floor("elements-walls", elements=True, walls=1000), []),
+        ("4 APs, 500 walls", floor("aps", aps=4, walls=500), []),
+        ("2-bit phases, 1000 walls", floor("bits-walls", walls=1000), ["--phases", "2"]),
+        ("2-bit phases, 1024² plan", floor("bits-plan", plan=1024), ["--phases", "2"]),
+    ]
+    ratios = []
+    for name, doc, flags in grid:
+        path = os.path.join(work, f"{doc['name']}.json")
+        with open(path, "w") as f:
+            json.dump(doc, f)
+        args = ["--scenario", path, "--kind", "gain", *flags]
+        estimate = json.loads(subprocess.run([BINARY, "estimate", *args], capture_output=True,
+                                             text=True, check=True).stdout)["cpu_s"]
+        build = subprocess.Popen([BINARY, "map", "--quiet", *args], stdout=subprocess.DEVNULL)
+        _, status, usage = os.wait4(build.pid, 0)
+        expect(status == 0, f"{name}: the build exited {status}")
+        measured = usage.ru_utime + usage.ru_stime
+        ratios.append((name, estimate, measured))
+        figure("cpu-budget", f"{name}: estimated {estimate:.2f} s, measured {measured:.2f} s of CPU "
+               f"(× {estimate / measured:.2f})")
+    for name, estimate, measured in ratios:
+        expect(1 / 3 <= estimate / measured <= 3,
+               f"{name}: estimated {estimate:.2f} s for {measured:.2f} s measured")
+
+    server = Server("--max-body-kb", "32768")
+    try:
+        south = {"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 0.2}
+        objective = {"kind": "coverage", "threshold": -70}
+        status, problem, _ = server.post("/v1/placements", {
+            "scenario": floor("audit", plan=4096), "candidates": south, "objective": objective})
+        expect(status == 422 and problem.get("code") == "limit_exceeded",
+               f"101 poses over a 4096² plan: {status} {str(problem)[:200]}")
+        figure("cpu-budget", f"101 poses over a 4096² plan refused before any work: {problem['detail'][:90]}")
+        status, job, _ = server.post("/v1/placements", {
+            "scenario": floor("cancelled", plan=2048),
+            "candidates": dict(south, step_m=1.0), "objective": objective})
+        expect(status == 202, f"a placement over a 2048² plan is a job: {status} {str(job)[:200]}")
+        job_id = job["job_id"]
+        kit.wait_until("the search scoring", lambda: server.get(f"/v1/jobs/{job_id}").body["cells_done"] > 0, 60)
+        time.sleep(0.5)
+        asked = time.perf_counter()
+        status, _, _ = server.request("DELETE", f"/v1/jobs/{job_id}")
+        expect(status == 202, f"cancel: {status}")
+        # The work has stopped when the server stops burning CPU: under 10 ms in 100 ms.
+        ticks = os.sysconf("SC_CLK_TCK")
+
+        def cpu_s():
+            with open(f"/proc/{server.proc.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            return (int(fields[11]) + int(fields[12])) / ticks
+
+        last = cpu_s()
+        while True:
+            time.sleep(0.1)
+            now = cpu_s()
+            if now - last <= 0.01:
+                break
+            last = now
+            expect(time.perf_counter() - asked < 120, "the search never stopped")
+        stopped = time.perf_counter() - asked - 0.1
+        final = kit.wait_job(server.base, job_id, 30)
+        expect(final["state"] == "cancelled", f"the search ended {final['state']}")
+        expect(stopped <= 1.0, f"the search stopped {stopped:.2f} s after its cancel")
+        figure("cpu-budget", f"a placement over a 2048² plan stopped {stopped:.2f} s after its cancel")
+    finally:
+        server.stop()
+
 
 CASES = {
     "overflow": overflow,
@@ -640,6 +760,7 @@ CASES = {
     "shutdown": shutdown,
     "files": files,
     "big-bodies": big_bodies,
+    "cpu-budget": cpu_budget,
 }
 
 

@@ -325,12 +325,23 @@ impl Raster {
     /// grazing an edge or a corner does not block. A projection lying exactly on a pixel edge
     /// is inside the region only where the pixels on both sides are occupied.
     pub fn blocks(&self, a: &P3, b: &P3) -> bool {
+        self.trace(a, b).0
+    }
+
+    /// The pixel columns [`Raster::blocks`] walks from a to b before it answers: what a
+    /// blockage test against the floor plan costs (see `radiomap::cost`).
+    pub fn columns_walked(&self, a: &P3, b: &P3) -> usize {
+        self.trace(a, b).1
+    }
+
+    /// [`Raster::blocks`] and the columns walked to answer it.
+    fn trace(&self, a: &P3, b: &P3) -> (bool, usize) {
         // The parameter range where 0 < z(t) < obstacle height.
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
         let dz = b[2] - a[2];
         if dz == 0.0 {
             if a[2] <= 0.0 || a[2] >= self.obstacle_height {
-                return false;
+                return (false, 0);
             }
         } else {
             let (s0, s1) = ((0.0 - a[2]) / dz, (self.obstacle_height - a[2]) / dz);
@@ -338,14 +349,14 @@ impl Raster {
             t1 = t1.min(s0.max(s1));
         }
         if t1 - t0 <= GRAZE_T {
-            return false;
+            return (false, 0);
         }
         let (ua, va) = self.to_pixels(a[0], a[1]);
         let (ub, vb) = self.to_pixels(b[0], b[1]);
         let (du, dv) = (ub - ua, vb - va);
         if du == 0.0 && dv == 0.0 {
             // Vertical: a point in plan view.
-            return self.interior_at(ua, va);
+            return (self.interior_at(ua, va), 1);
         }
         // The clipped part's ends; unclipped ends keep their snapped values exactly.
         let at = |t: f64, s: f64, d: f64, end: f64| {
@@ -371,8 +382,13 @@ impl Raster {
     /// Walks the segment p→q, given as (major, minor) pixel coordinates with |Δmajor| ≥ |Δminor|
     /// and Δmajor ≠ 0, one major-axis column at a time: in each column the segment spans at most
     /// two or three minor-axis pixels. `occupied(major, minor)` looks a pixel up; pixels outside
-    /// the raster are free.
-    fn walk(&self, p: (f64, f64), q: (f64, f64), occupied: impl Fn(i64, i64) -> bool) -> bool {
+    /// the raster are free. Answers whether a pixel blocks, and the columns looked at.
+    fn walk(
+        &self,
+        p: (f64, f64),
+        q: (f64, f64),
+        occupied: impl Fn(i64, i64) -> bool,
+    ) -> (bool, usize) {
         let (p, q) = if p.0 <= q.0 { (p, q) } else { (q, p) };
         let slope = (q.1 - p.1) / (q.0 - p.0);
         let minor_at = |m: f64| p.1 + (m - p.0) * slope;
@@ -389,7 +405,7 @@ impl Raster {
                 // Along a pixel edge: inside only where both sides are occupied.
                 let r = p.1 as i64;
                 if occupied(c, r - 1) && occupied(c, r) {
-                    return true;
+                    return (true, (c - first + 1) as usize);
                 }
                 continue;
             }
@@ -403,10 +419,10 @@ impl Raster {
             let r_first = (m0 + SNAP_PX).floor() as i64;
             let r_last = (m1 - SNAP_PX).ceil() as i64 - 1;
             if (r_first..=r_last).any(|r| occupied(c, r)) {
-                return true;
+                return (true, (c - first + 1) as usize);
             }
         }
-        false
+        (false, (last - first + 1).max(0) as usize)
     }
 }
 
@@ -555,6 +571,33 @@ pub(crate) mod tests {
             r.occupied[row * 4 + c] = true;
         }
         r
+    }
+
+    /// The walk's cost is the columns it looks at: all that the segment crosses when nothing
+    /// blocks it, up to the first blocking column when something does, none when it passes
+    /// above the obstacles.
+    #[test]
+    fn a_raster_walk_stops_at_its_first_occupied_column() {
+        let free = raster(&[], 1.0);
+        let walked = |r: &Raster, a: [f64; 3], b: [f64; 3]| r.columns_walked(&p(a), &p(b));
+        assert_eq!(walked(&free, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 4);
+        assert_eq!(
+            walked(&free, [0.5, 0.5, 0.5], [2.5, 1.5, 0.5]),
+            3,
+            "columns 0, 1, 2"
+        );
+        let wall = raster(&[(1, 1)], 1.0);
+        assert_eq!(walked(&wall, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 2);
+        assert_eq!(
+            walked(&wall, [4.0, 1.5, 0.5], [0.0, 1.5, 0.5]),
+            2,
+            "walked from x = 0"
+        );
+        assert_eq!(
+            walked(&wall, [0.0, 1.5, 2.0], [4.0, 1.5, 2.0]),
+            0,
+            "above the column"
+        );
     }
 
     #[test]

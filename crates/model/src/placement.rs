@@ -600,7 +600,7 @@ pub fn place(
 }
 
 /// Scores the candidates [`candidates`] listed for `search` and ranks them. `progress` counts
-/// cell evaluations; cancellation is checked once per candidate.
+/// cell evaluations; cancellation is checked once per cell.
 pub fn rank_candidates(
     base: &Scenario,
     search: &Search,
@@ -645,6 +645,11 @@ pub fn rank_candidates(
                                 *value = f64::NAN;
                                 continue;
                             }
+                            // One candidate on a big floor plan takes minutes: a cancel is
+                            // honoured per cell (one relaxed load).
+                            if progress.is_cancelled() {
+                                return Err(Cancelled);
+                            }
                             let (i, j) = grid.cell_of(cell);
                             let [x, y] = grid.centre(i, j);
                             let user = [x, y, height];
@@ -677,7 +682,7 @@ pub fn rank_candidates(
                     }
                     let key = MapKey::gain("placement", scenario, mode)?;
                     let map =
-                        radiomap::build(scenario, &key, naming.map_id(&key), &Progress::default())?;
+                        radiomap::build(scenario, &key, naming.map_id(&key), &progress.child())?;
                     progress.advance(grid.cells() * aps);
                     Ok((
                         k,

@@ -88,6 +88,21 @@ impl SightLines {
                 .is_some_and(|r| r.blocks(source, q))
     }
 
+    /// The boxes and walls a link from the source to `q` is tested against (what such a test
+    /// costs; see `radiomap::cost`).
+    pub fn listed_towards(&self, obstructions: &Obstructions, q: &P3) -> (usize, usize) {
+        let (dx, dy) = (q[0] - self.source[0], q[1] - self.source[1]);
+        if dx.abs() + dy.abs() > 0.0 {
+            let s = sector(pseudo_angle(dx, dy));
+            (
+                in_sector(&self.box_start, &self.box_in_sector, s).len(),
+                in_sector(&self.wall_start, &self.wall_in_sector, s).len(),
+            )
+        } else {
+            (obstructions.boxes.len(), obstructions.walls.len())
+        }
+    }
+
     /// Bytes an index of `boxes` boxes and `walls` walls is expected to hold, before it is built:
     /// the sector starts of each kind present and each obstacle listed in 100 sectors (35°): on
     /// the paper's 20 m floor its five 4 m boxes are listed in about 73 sectors per source on

@@ -44,8 +44,8 @@ pub fn best_gain(
 
 /// The map values in dB (NaN where occupied) and, with several APs, the AP serving each cell:
 /// the one whose optimised gain is highest there, all IRSs configured for it (docs/model.md §3).
-/// Rows of the grid are spread over rayon's pool; progress advances and cancellation is checked
-/// once per row. The continuous closed form over `coherent` surfaces is evaluated a row at a
+/// Rows of the grid are spread over rayon's pool; progress advances once per row, and
+/// cancellation is checked once per row (a row at a time) or per cell (cell by cell). The continuous closed form over `coherent` surfaces is evaluated a row at a
 /// time ([`ChannelModel::closed_form_row`]); other modes cell by cell.
 pub(super) fn gain_values(
     models: &[ChannelModel],
@@ -108,6 +108,11 @@ pub(super) fn gain_values(
                 for (j, (value, &occ)) in row.iter_mut().zip(occupied_row).enumerate() {
                     if occ {
                         continue;
+                    }
+                    // A cell of 200 000 elements costs milliseconds, a row of them seconds: a
+                    // cancel is honoured per cell here (one relaxed load).
+                    if progress.is_cancelled() {
+                        return Err(Cancelled);
                     }
                     let [x, y] = grid.centre(i, j);
                     let user = [x, y, height];

@@ -33,7 +33,8 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 pub struct Progress {
     done: AtomicUsize,
     total: AtomicUsize,
-    cancelled: AtomicBool,
+    /// Shared with the [`Progress::child`]ren: a cancel reaches the work nested in this one.
+    cancelled: Arc<AtomicBool>,
 }
 
 impl Progress {
@@ -53,6 +54,14 @@ impl Progress {
     /// True once [`Progress::cancel`] was called.
     pub fn is_cancelled(&self) -> bool {
         self.cancelled.load(Ordering::Relaxed)
+    }
+    /// The progress of a piece of this work that counts its own units (a placement candidate's
+    /// map build) and stops when this one is cancelled.
+    pub fn child(&self) -> Progress {
+        Progress {
+            cancelled: self.cancelled.clone(),
+            ..Progress::default()
+        }
     }
     /// Starts counting: `total` units of work, none done.
     pub fn start(&self, total: usize) {

@@ -52,6 +52,9 @@ pub(super) const MAX_KEEP: usize = 20;
 /// gain maps of up to `sync_cells` cells are; a candidate's cell costs about what a gain-map
 /// cell does, and four maps' worth is still well under a second.
 pub(super) const SYNC_PLACEMENT_MAPS: usize = 4;
+/// ... unless its estimated CPU says otherwise: a floor plan makes each cell's blockage tests
+/// walk thousands of pixels, and a search of few cells then takes minutes.
+const SYNC_PLACEMENT_S: f64 = 2.0;
 
 /// A placement answer as the API returns it: the search's answer (the CLI's body), the job it
 /// ran as and how many of the best candidates are registered with their maps cached.
@@ -112,10 +115,12 @@ pub(super) async fn place(
         .await??;
     let cell_evaluations = candidates.len() as f64 * scenario.grid().cells() as f64;
     let mode = search.phases.unwrap_or(PhaseMode::Continuous);
+    let estimated_s =
+        cost::gain_seconds(&scenario, cell_evaluations, mode, cost::Evaluation::Cells);
     check_budget(
         "candidates",
         "placement search",
-        cost::gain_seconds(&scenario, cell_evaluations, mode),
+        estimated_s,
         state.limits().max_build_cpu_s,
     )?;
     if inline {
@@ -141,7 +146,7 @@ pub(super) async fn place(
                 )
                 .is_ok()
         })?;
-    if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells {
+    if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells || estimated_s > SYNC_PLACEMENT_S {
         return Ok(accepted(job.view()));
     }
     job.finished().await;
