@@ -533,12 +533,15 @@ fn surface_part(
     }
 }
 
+/// Per AP and cell, the direct link's and the other surfaces' part of the gain: the same for
+/// every candidate pose of the moving surface, so computed once (stopped by a cancel).
 fn shared(
     base: &Scenario,
     grid: &Grid,
     occupied: &[bool],
     moving: usize,
     mode: PhaseMode,
+    progress: &Progress,
 ) -> Shared {
     let height = base.mru.antenna_height_m;
     let lengths: Vec<usize> = base.surfaces().iter().map(|s| s.subsurfaces()).collect();
@@ -551,7 +554,9 @@ fn shared(
                 .map_init(
                     || (vec![C64::new(0.0, 0.0); max_n], vec![0.0; max_n]),
                     |(w, theta), k| {
-                        if occupied[k] {
+                        // Once cancelled, the remaining cells are skipped (the caller then
+                        // returns Cancelled): a pass over a big floor plan takes a minute.
+                        if occupied[k] || progress.is_cancelled() {
                             return (C64::new(0.0, 0.0), 0.0);
                         }
                         let (i, j) = grid.cell_of(k);
@@ -621,7 +626,10 @@ pub fn rank_candidates(
     let height = base.mru.antenna_height_m;
     let scores: Vec<(usize, Option<f64>)> = match search.what {
         What::Irs => {
-            let shared = shared(base, &grid, &occupied, search.index, mode);
+            let shared = shared(base, &grid, &occupied, search.index, mode, progress);
+            if progress.is_cancelled() {
+                return Err(Cancelled.into());
+            }
             let n = base.surfaces()[search.index].subsurfaces();
             valid
                 .par_iter()
