@@ -3,7 +3,7 @@
 case against its own server on a loopback port, with the figure it measured in the log.
 
 Usage: suite.py BINARY [CASE ...]   (cases: overflow cache lost-work starvation slow-loris
-slow-readers ownership shutdown files big-bodies cpu-budget; default all). Exits 1 on the first failed expectation. Bounded: every
+slow-readers ownership shutdown files big-bodies cpu-budget memory-rule; default all). Exits 1 on the first failed expectation. Bounded: every
 case stops by itself (about 90 s in all on two cores); traffic goes to 127.0.0.1 only.
 """
 
@@ -749,6 +749,70 @@ def cpu_budget():
         server.stop()
 
 
+def memory_rule():
+    """The sizing rule of docs/api.md under the audit's floods at once: 150 clients that never
+    read a 15.8 MB map body, 60 placements of 2 719 candidates each (a ranking of about half a
+    megabyte kept in the job history) and 200 inline-scenario maps. The process's peak RSS
+    stays under the sum of the memory budgets plus 100 MB."""
+    budgets = {"--cache-mb": 64, "--answer-cache-mb": 16, "--registry-mb": 16,
+               "--answers-in-flight-mb": 32, "--job-history-mb": 8}
+    rule_mb = sum(budgets.values()) + 100
+    flags = [str(x) for kv in budgets.items() for x in kv]
+    server = Server(*flags, "--write-timeout-s", "3", "--sync-cells", "2000000",
+                    "--query-queue", "200")
+    try:
+        fine = scenario("paper-single-user", lambda d: (
+            d.update(name="two-cm"), d["grid"].update(resolution_m=0.02)))
+        status, built, _ = server.post("/v1/maps", {"scenario": fine, "kind": "gain"})
+        expect(status == 200, f"the 1001² map: {status}")
+        path = f"/v1/maps/{built['map_id']}"
+        sockets = []
+        for _ in range(150):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            s.connect(("127.0.0.1", server.port))
+            s.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+            sockets.append(s)
+        small = scenario("small-test")
+        walls = [{"from": [0, 0], "to": [6, 0]}, {"from": [6, 0], "to": [6, 4]},
+                 {"from": [0, 0], "to": [0, 4]}]
+        answers = []
+
+        def place(k):
+            body = {"scenario": small, "candidates": {"walls": walls, "step_m": 0.005},
+                    "objective": {"kind": "coverage", "threshold": -70 - k / 10}}
+            status, job, _ = server.post("/v1/placements", body, parse="bytes")
+            answers.append((status, len(job or b"")))
+
+        def inline_map(k):
+            doc = scenario("small-test", lambda d: d.update(name=f"inline-{k}"))
+            answers.append((server.post("/v1/maps", {"scenario": doc, "kind": "gain"})[0], 0))
+
+        work = [threading.Thread(target=place, args=(k,)) for k in range(60)]
+        work += [threading.Thread(target=inline_map, args=(k,)) for k in range(200)]
+        started = time.time()
+        for k in range(0, len(work), 8):
+            for t in work[k:k + 8]:
+                t.start()
+            for t in work[k:k + 8]:
+                t.join()
+        took = time.time() - started
+        for s in sockets:
+            s.close()
+        statuses = sorted({st for st, _ in answers})
+        expect(set(statuses) <= {200, 202}, f"answers {statuses}")
+        biggest = max(n for _, n in answers) / 1e6
+        peak = server.rss_mb(peak=True)
+        expect(peak <= rule_mb, f"peak RSS {peak:.0f} MB above the rule's {rule_mb} MB")
+        history = server.metric("irs_job_history_bytes") / 1e6
+        figure("memory-rule", f"150 unread 15.8 MB answers, 60 placements (rankings up to "
+               f"{biggest:.2f} MB) and 200 inline-scenario maps in {took:.1f} s: peak RSS "
+               f"{peak:.0f} MB, the rule {rule_mb} MB (budgets {sum(budgets.values())} MB + 100); "
+               f"job history {history:.1f} MB of {budgets['--job-history-mb']}")
+    finally:
+        server.stop()
+
+
 CASES = {
     "overflow": overflow,
     "cache": cache,
@@ -761,6 +825,7 @@ CASES = {
     "files": files,
     "big-bodies": big_bodies,
     "cpu-budget": cpu_budget,
+    "memory-rule": memory_rule,
 }
 
 

@@ -347,6 +347,7 @@ impl History {
             forgotten.extend(self.order.drain(..).map(|(id, _)| id));
             self.bytes = 0;
         }
+        metrics::gauge!("irs_job_history_bytes").set(self.bytes as f64);
         forgotten
     }
 }
