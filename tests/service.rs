@@ -221,9 +221,15 @@ impl Server {
             .sum()
     }
     async fn wait_job(&self, job_id: &str) -> Value {
+        self.wait_job_as(None, job_id).await
+    }
+    /// [`Server::wait_job`] for the owner of `token` (a job is its owners' only).
+    async fn wait_job_as(&self, token: Option<&str>, job_id: &str) -> Value {
         let deadline = Instant::now() + Duration::from_secs(120);
         loop {
-            let (_, job) = self.get(&format!("/v1/jobs/{job_id}")).await;
+            let (_, job) = self
+                .send_as(token, "GET", &format!("/v1/jobs/{job_id}"), None)
+                .await;
             if ["done", "failed", "cancelled"].contains(&job["state"].as_str().unwrap()) {
                 return job;
             }
@@ -884,7 +890,8 @@ async fn every_error_is_a_problem_naming_its_field() {
         }
     }
     // The registry limit (4, three of them built in): one more is fine. The next one evicts the
-    // least recently used API scenario unless a cached map needs it; only then is it 507.
+    // least recently used API scenario with the maps built from it (a cached map no longer
+    // pins its scenario, so nobody can lock the registry with maps).
     let (s, a) = server
         .post(
             "/v1/scenarios",
@@ -898,13 +905,14 @@ async fn every_error_is_a_problem_naming_its_field() {
         .await;
     assert_eq!(s, StatusCode::OK, "{a_map}");
     let b_doc = scenario("small-test.json", |v| v["name"] = "b".into());
-    let (s, b) = server.post("/v1/scenarios", b_doc.clone()).await;
-    problem(s, &b, StatusCode::INSUFFICIENT_STORAGE, "registry_full");
+    let (s, b) = server.post("/v1/scenarios", b_doc).await;
+    assert_eq!(s, StatusCode::CREATED, "a and its map made room: {b}");
     let a_map_path = format!("/v1/maps/{}", a_map["map_id"].as_str().unwrap());
-    let (s, _) = server.send("DELETE", &a_map_path, None).await;
-    assert_eq!(s, StatusCode::NO_CONTENT);
-    let (s, _) = server.post("/v1/scenarios", b_doc).await;
-    assert_eq!(s, StatusCode::CREATED, "a, no longer needed, made room");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while server.get(&a_map_path).await.0 != StatusCode::NOT_FOUND {
+        assert!(Instant::now() < deadline, "a's map went with a");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
     let (s, _) = server.get(&format!("/v1/scenarios/{a_id}")).await;
     assert_eq!(s, StatusCode::NOT_FOUND);
 
@@ -1554,12 +1562,17 @@ async fn tokens_guard_writes_and_records_belong_to_their_token() {
         3,
         "only the built-in scenarios: {anonymous}"
     );
-    // Reads by id stay open: ids are content hashes.
+    // By id, an API scenario is its registrants' only: anybody else is told it does not exist.
+    let path = format!("/v1/scenarios/{id}");
+    assert_eq!(server.get(&path).await.0, StatusCode::NOT_FOUND);
     assert_eq!(
-        server.get(&format!("/v1/scenarios/{id}")).await.0,
+        server.send_as(Some(bob), "GET", &path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
+    assert_eq!(
+        server.send_as(Some(alice), "GET", &path, None).await.0,
         StatusCode::OK
     );
-    let path = format!("/v1/scenarios/{id}");
     let (s, b) = server.send_as(Some(bob), "DELETE", &path, None).await;
     problem(s, &b, StatusCode::NOT_FOUND, "not_found");
 
@@ -1579,14 +1592,23 @@ async fn tokens_guard_writes_and_records_belong_to_their_token() {
     assert_eq!(bobs["jobs"].as_array().unwrap().len(), 0, "{bobs}");
     let (_, alices) = server.send_as(Some(alice), "GET", "/v1/jobs", None).await;
     assert_eq!(alices["jobs"].as_array().unwrap().len(), 1, "{alices}");
-    // Anyone holding the job's id may follow it (identical requests share one job).
-    assert_eq!(server.get(&job_path).await.0, StatusCode::OK);
+    // Only its owners may follow it: the id alone is not enough.
+    assert_eq!(server.get(&job_path).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(
+        server.send_as(Some(bob), "GET", &job_path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
     let (s, _) = server.send_as(Some(alice), "DELETE", &job_path, None).await;
     assert_eq!(s, StatusCode::ACCEPTED);
-    server.wait_job(job["job_id"].as_str().unwrap()).await;
+    server
+        .wait_job_as(Some(alice), job["job_id"].as_str().unwrap())
+        .await;
     let (s, _) = server.send_as(Some(alice), "DELETE", &path, None).await;
     assert_eq!(s, StatusCode::NO_CONTENT);
-    assert_eq!(server.get(&path).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(
+        server.send_as(Some(alice), "GET", &path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
 }
 
 /// Listings come a page at a time; following next_cursor visits every item once.
@@ -1934,7 +1956,7 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
             .await;
         assert!(s.is_success(), "{answer}");
         let map_id = if let Some(job) = answer["job_id"].as_str() {
-            let job = server.wait_job(job).await;
+            let job = server.wait_job_as(Some(alice), job).await;
             assert_eq!(job["state"], "done", "{job}");
             job_id = Some(job["job_id"].as_str().unwrap().to_string());
             job["map_id"].as_str().unwrap().to_string()
@@ -1974,15 +1996,25 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
         "bob still does not: {theirs}"
     );
     for map_id in [&map_ids[0], &map_ids[2]] {
-        let (s, map) = server.get(&format!("/v1/maps/{map_id}")).await;
-        assert_eq!(s, StatusCode::OK, "{map}");
+        let path = format!("/v1/maps/{map_id}");
+        let (s, map) = server.send_as(Some(alice), "GET", &path, None).await;
+        assert_eq!(s, StatusCode::OK, "alice's claim survived: {map}");
+        let (s, map) = server.send_as(Some(bob), "GET", &path, None).await;
+        assert_eq!(s, StatusCode::NOT_FOUND, "bob still has none: {map}");
     }
     let (s, after) = server
         .send_as(Some(alice), "POST", "/v1/paths", Some(path_request))
         .await;
     assert_eq!(s, StatusCode::OK, "{after}");
     assert_eq!(after["waypoints"], before["waypoints"]);
-    let (s, gone) = server.get(&format!("/v1/maps/{}", map_ids[1])).await;
+    let (s, gone) = server
+        .send_as(
+            Some(alice),
+            "GET",
+            &format!("/v1/maps/{}", map_ids[1]),
+            None,
+        )
+        .await;
     assert_eq!(
         s,
         StatusCode::NOT_FOUND,

@@ -71,10 +71,11 @@ pub(super) async fn register_scenario(
 
 pub(super) async fn get_scenario(
     State(state): State<App>,
+    caller: Caller,
     Path(id): Path<ScenarioId>,
 ) -> Result<Json<ScenarioDocument>, ApiError> {
     let stored = state
-        .scenario(&id)
+        .visible_scenario(&caller, &id)
         .await?
         .ok_or_else(|| Error::not_found("scenario", &id))?;
     Ok(Json(ScenarioDocument {
