@@ -175,26 +175,30 @@ impl Shares {
         self.of_holder(holder) > share.max(1)
     }
 
-    /// The scenario to evict: of the API scenarios no live job needs, the one whose heaviest
-    /// holder holds the most, the least recently used first; a scenario only that holder
-    /// holds goes before one it shares with others.
+    /// The scenario to evict for `caller`: of the API scenarios no live job needs, the one
+    /// whose heaviest holder holds the most, the least recently used first; a scenario only
+    /// that holder holds goes before one it shares with others. Never one of a holder that
+    /// holds fewer than the caller: a client over its share makes room from its own.
     fn victim(
         &self,
         by_id: &HashMap<ScenarioId, Arc<StoredScenario>>,
         pinned: &HashSet<ScenarioId>,
+        caller: &Option<Owner>,
     ) -> Option<ScenarioId> {
+        let floor = self.of_holder(caller);
         by_id
             .values()
             .filter(|s| s.source == ScenarioSource::Api && !pinned.contains(&s.id))
-            .map(|s| {
+            .filter_map(|s| {
                 let holders = s.holders();
                 let heaviest = holders.iter().map(|h| self.of_holder(h)).max().unwrap_or(0);
-                (
+                (heaviest >= floor).then_some(s)?;
+                Some((
                     std::cmp::Reverse(heaviest),
                     holders.len(),
                     s.last_used.load(Ordering::Relaxed),
                     s.id.clone(),
-                )
+                ))
             })
             .min()
             .map(|(_, _, _, id)| id)
@@ -293,10 +297,13 @@ impl ScenarioRegistry {
         }
         if bytes > self.budget_bytes {
             metrics::counter!("irs_scenarios_refused_total", "why" => "too_large").increment(1);
-            return Err(Error::RegistryFull(format!(
-                "the scenario takes about {bytes} bytes, more than the registry's whole budget of {} bytes",
-                self.budget_bytes
-            )));
+            return Err(Error::RegistryFull {
+                detail: format!(
+                    "the scenario takes about {bytes} bytes, more than the registry's whole budget of {} bytes",
+                    self.budget_bytes
+                ),
+                retry: false,
+            });
         }
         let mut held: usize = by_id.values().map(|s| s.bytes).sum();
         let mut evicted = Vec::new();
@@ -308,7 +315,7 @@ impl ScenarioRegistry {
                     break;
                 }
                 let shares = Shares::of(&by_id, &holder);
-                match shares.victim(&by_id, &pinned) {
+                match shares.victim(&by_id, &pinned, &holder) {
                     Some(victim) => {
                         if let Some(gone) = by_id.remove(&victim) {
                             held -= gone.bytes;
@@ -333,19 +340,22 @@ impl ScenarioRegistry {
                         let why = if over_share { "over_share" } else { "full" };
                         metrics::counter!("irs_scenarios_refused_total", "why" => why).increment(1);
                         metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
-                        return Err(Error::RegistryFull(format!(
-                            "the registry holds {} scenarios in {held} bytes (limits: {} scenarios, \
+                        return Err(Error::RegistryFull {
+                            detail: format!(
+                                "the registry holds {} scenarios in {held} bytes (limits: {} scenarios, \
                              {} bytes); {} and live jobs need every one that could make room: \
                              retry when a job ends, or delete scenarios you registered",
-                            by_id.len(),
-                            self.limit,
-                            self.budget_bytes,
-                            if over_share {
-                                "you hold more than your fair share"
-                            } else {
-                                "the registry is full"
-                            }
-                        )));
+                                by_id.len(),
+                                self.limit,
+                                self.budget_bytes,
+                                if over_share {
+                                    "you hold more than your fair share"
+                                } else {
+                                    "the registry is full"
+                                }
+                            ),
+                            retry: true,
+                        });
                     }
                 }
             }
