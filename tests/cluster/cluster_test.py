@@ -317,12 +317,11 @@ def tenants(redis):
     check(status == 404, f"the map went with the last claim ({status})")
 
     multi = scenario("paper-multi-user", lambda d: (
-        d.update(name="cluster-shared"), d["grid"].update(resolution_m=0.1)))
-    request(one.base, "POST", "/v1/scenarios", multi, token=alice)
-    status, first, _ = request(one.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate"}, token=alice)
+        d.update(name="cluster-shared"), d["grid"].update(resolution_m=0.2)))
+    status, first, _ = request(one.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate", "access": "noma"}, token=alice)
     check(status == 202, f"alice's rate map is a job on {one.name} ({status})")
-    status, second, _ = request(two.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate"}, token=bob)
-    check(status == 202 and second["job_id"] == first["job_id"], f"bob shares it from {two.name} ({second})")
+    status, second, _ = request(two.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate", "access": "noma"}, token=bob)
+    check(status == 202 and second["job_id"] == first["job_id"], f"bob shares it from {two.name} ({second.get('job_id')})")
     job_path = f"/v1/jobs/{first['job_id']}"
     for base, who in ((two.base, alice), (one.base, bob)):
         status, _, _ = request(base, "GET", job_path, token=who)
