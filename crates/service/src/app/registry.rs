@@ -332,8 +332,8 @@ impl ScenarioRegistry {
                             .filter(|s| pinned.contains(&s.id))
                             .fold((0, 0), |(n, b), s| (n + 1, b + s.bytes));
                         let over_share = shares.over_share(&holder, self.api_limit(&by_id));
-                        let overshoot_left = by_id.len() < self.limit + pinned_count
-                            && held + bytes <= self.budget_bytes + pinned_bytes;
+                        let overshoot_left = by_id.len() < self.limit.saturating_add(pinned_count)
+                            && held + bytes <= self.budget_bytes.saturating_add(pinned_bytes);
                         if !over_share && overshoot_left {
                             break;
                         }
@@ -454,5 +454,89 @@ impl ScenarioRegistry {
 
     pub fn len(&self) -> usize {
         self.by_id.read().expect("registry lock").len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn floor(name: &str) -> Scenario {
+        let mut scenario = Scenario::builtin("small-test").unwrap();
+        scenario.name = Some(name.to_string());
+        scenario
+    }
+
+    fn owner(digest: &str) -> Option<Owner> {
+        Some(Owner::from_digest(digest.into()))
+    }
+
+    /// The registry's API scenarios, by name.
+    fn names(registry: &ScenarioRegistry) -> Vec<String> {
+        let mut names: Vec<String> = registry
+            .list(&Caller::Open)
+            .into_iter()
+            .filter(|s| s.source == ScenarioSource::Api)
+            .filter_map(|s| s.name)
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_flood_evicts_its_own_and_a_full_registry_refuses_only_its_filler() {
+        let registry = ScenarioRegistry::new(4, usize::MAX, None);
+        let none = HashSet::new;
+        let (a, b) = (owner("aaaa"), owner("bbbb"));
+        registry
+            .register(floor("b0"), ScenarioSource::Api, b.clone(), none)
+            .unwrap();
+        for k in 0..10 {
+            let done = registry.register(
+                floor(&format!("a{k}")),
+                ScenarioSource::Api,
+                a.clone(),
+                none,
+            );
+            assert!(done.unwrap().created, "a's flood is admitted: {k}");
+        }
+        assert_eq!(
+            names(&registry),
+            ["a7", "a8", "a9", "b0"],
+            "a evicted its own, oldest first"
+        );
+        // B, under its share, makes room from the heaviest holder.
+        let b1 = registry
+            .register(floor("b1"), ScenarioSource::Api, b.clone(), none)
+            .unwrap();
+        assert_eq!(b1.evicted.len(), 1);
+        assert_eq!(names(&registry), ["a8", "a9", "b0", "b1"]);
+        // Every scenario of a's pinned by live jobs: a, over its share, is refused (and may
+        // not evict b's), b is admitted over the limit by at most the pinned ones.
+        let pinned = || -> HashSet<ScenarioId> {
+            ["a8", "a9"]
+                .iter()
+                .map(|n| ScenarioId::of(&floor(n)))
+                .collect()
+        };
+        let refused = registry.register(floor("a10"), ScenarioSource::Api, a.clone(), pinned);
+        assert!(
+            matches!(refused, Err(Error::RegistryFull { retry: true, .. })),
+            "a is refused"
+        );
+        // b at its share: its own oldest goes first.
+        let b2 = registry
+            .register(floor("b2"), ScenarioSource::Api, b.clone(), pinned)
+            .unwrap();
+        assert_eq!(b2.evicted, [ScenarioId::of(&floor("b0"))]);
+        // The same document is new to another tenant, and not to its registrant.
+        let again = registry
+            .register(floor("b2"), ScenarioSource::Api, a, pinned)
+            .unwrap();
+        assert!(again.created && again.evicted.is_empty());
+        let twice = registry
+            .register(floor("b2"), ScenarioSource::Api, b, pinned)
+            .unwrap();
+        assert!(!twice.created);
     }
 }
