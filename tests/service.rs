@@ -221,9 +221,15 @@ impl Server {
             .sum()
     }
     async fn wait_job(&self, job_id: &str) -> Value {
+        self.wait_job_as(None, job_id).await
+    }
+    /// [`Server::wait_job`] for the owner of `token` (a job is its owners' only).
+    async fn wait_job_as(&self, token: Option<&str>, job_id: &str) -> Value {
         let deadline = Instant::now() + Duration::from_secs(120);
         loop {
-            let (_, job) = self.get(&format!("/v1/jobs/{job_id}")).await;
+            let (_, job) = self
+                .send_as(token, "GET", &format!("/v1/jobs/{job_id}"), None)
+                .await;
             if ["done", "failed", "cancelled"].contains(&job["state"].as_str().unwrap()) {
                 return job;
             }
@@ -884,7 +890,8 @@ async fn every_error_is_a_problem_naming_its_field() {
         }
     }
     // The registry limit (4, three of them built in): one more is fine. The next one evicts the
-    // least recently used API scenario unless a cached map needs it; only then is it 507.
+    // least recently used API scenario with the maps built from it (a cached map no longer
+    // pins its scenario, so nobody can lock the registry with maps).
     let (s, a) = server
         .post(
             "/v1/scenarios",
@@ -898,13 +905,14 @@ async fn every_error_is_a_problem_naming_its_field() {
         .await;
     assert_eq!(s, StatusCode::OK, "{a_map}");
     let b_doc = scenario("small-test.json", |v| v["name"] = "b".into());
-    let (s, b) = server.post("/v1/scenarios", b_doc.clone()).await;
-    problem(s, &b, StatusCode::INSUFFICIENT_STORAGE, "registry_full");
+    let (s, b) = server.post("/v1/scenarios", b_doc).await;
+    assert_eq!(s, StatusCode::CREATED, "a and its map made room: {b}");
     let a_map_path = format!("/v1/maps/{}", a_map["map_id"].as_str().unwrap());
-    let (s, _) = server.send("DELETE", &a_map_path, None).await;
-    assert_eq!(s, StatusCode::NO_CONTENT);
-    let (s, _) = server.post("/v1/scenarios", b_doc).await;
-    assert_eq!(s, StatusCode::CREATED, "a, no longer needed, made room");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while server.get(&a_map_path).await.0 != StatusCode::NOT_FOUND {
+        assert!(Instant::now() < deadline, "a's map went with a");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
     let (s, _) = server.get(&format!("/v1/scenarios/{a_id}")).await;
     assert_eq!(s, StatusCode::NOT_FOUND);
 
@@ -1554,12 +1562,17 @@ async fn tokens_guard_writes_and_records_belong_to_their_token() {
         3,
         "only the built-in scenarios: {anonymous}"
     );
-    // Reads by id stay open: ids are content hashes.
+    // By id, an API scenario is its registrants' only: anybody else is told it does not exist.
+    let path = format!("/v1/scenarios/{id}");
+    assert_eq!(server.get(&path).await.0, StatusCode::NOT_FOUND);
     assert_eq!(
-        server.get(&format!("/v1/scenarios/{id}")).await.0,
+        server.send_as(Some(bob), "GET", &path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
+    assert_eq!(
+        server.send_as(Some(alice), "GET", &path, None).await.0,
         StatusCode::OK
     );
-    let path = format!("/v1/scenarios/{id}");
     let (s, b) = server.send_as(Some(bob), "DELETE", &path, None).await;
     problem(s, &b, StatusCode::NOT_FOUND, "not_found");
 
@@ -1579,14 +1592,23 @@ async fn tokens_guard_writes_and_records_belong_to_their_token() {
     assert_eq!(bobs["jobs"].as_array().unwrap().len(), 0, "{bobs}");
     let (_, alices) = server.send_as(Some(alice), "GET", "/v1/jobs", None).await;
     assert_eq!(alices["jobs"].as_array().unwrap().len(), 1, "{alices}");
-    // Anyone holding the job's id may follow it (identical requests share one job).
-    assert_eq!(server.get(&job_path).await.0, StatusCode::OK);
+    // Only its owners may follow it: the id alone is not enough.
+    assert_eq!(server.get(&job_path).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(
+        server.send_as(Some(bob), "GET", &job_path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
     let (s, _) = server.send_as(Some(alice), "DELETE", &job_path, None).await;
     assert_eq!(s, StatusCode::ACCEPTED);
-    server.wait_job(job["job_id"].as_str().unwrap()).await;
+    server
+        .wait_job_as(Some(alice), job["job_id"].as_str().unwrap())
+        .await;
     let (s, _) = server.send_as(Some(alice), "DELETE", &path, None).await;
     assert_eq!(s, StatusCode::NO_CONTENT);
-    assert_eq!(server.get(&path).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(
+        server.send_as(Some(alice), "GET", &path, None).await.0,
+        StatusCode::NOT_FOUND
+    );
 }
 
 /// Listings come a page at a time; following next_cursor visits every item once.
@@ -1934,7 +1956,7 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
             .await;
         assert!(s.is_success(), "{answer}");
         let map_id = if let Some(job) = answer["job_id"].as_str() {
-            let job = server.wait_job(job).await;
+            let job = server.wait_job_as(Some(alice), job).await;
             assert_eq!(job["state"], "done", "{job}");
             job_id = Some(job["job_id"].as_str().unwrap().to_string());
             job["map_id"].as_str().unwrap().to_string()
@@ -1974,15 +1996,25 @@ async fn a_data_dir_survives_a_kill_and_serves_without_rebuilding() {
         "bob still does not: {theirs}"
     );
     for map_id in [&map_ids[0], &map_ids[2]] {
-        let (s, map) = server.get(&format!("/v1/maps/{map_id}")).await;
-        assert_eq!(s, StatusCode::OK, "{map}");
+        let path = format!("/v1/maps/{map_id}");
+        let (s, map) = server.send_as(Some(alice), "GET", &path, None).await;
+        assert_eq!(s, StatusCode::OK, "alice's claim survived: {map}");
+        let (s, map) = server.send_as(Some(bob), "GET", &path, None).await;
+        assert_eq!(s, StatusCode::NOT_FOUND, "bob still has none: {map}");
     }
     let (s, after) = server
         .send_as(Some(alice), "POST", "/v1/paths", Some(path_request))
         .await;
     assert_eq!(s, StatusCode::OK, "{after}");
     assert_eq!(after["waypoints"], before["waypoints"]);
-    let (s, gone) = server.get(&format!("/v1/maps/{}", map_ids[1])).await;
+    let (s, gone) = server
+        .send_as(
+            Some(alice),
+            "GET",
+            &format!("/v1/maps/{}", map_ids[1]),
+            None,
+        )
+        .await;
     assert_eq!(
         s,
         StatusCode::NOT_FOUND,
@@ -2177,4 +2209,400 @@ async fn an_unwritable_data_dir_starts_and_readyz_says_why() {
     }
     drop(server);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two tenants with tokens.
+const ALICE: &str = "alice-token-0123456789";
+const BOB: &str = "bob-token-0123456789ab";
+
+/// Who calls in the tenants' matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Who {
+    Anonymous,
+    Alice,
+    Bob,
+}
+
+impl Who {
+    fn token(self) -> Option<&'static str> {
+        match self {
+            Who::Anonymous => None,
+            Who::Alice => Some(ALICE),
+            Who::Bob => Some(BOB),
+        }
+    }
+}
+
+/// Tokens on: every route of openapi.yaml (read from it, so a new route cannot be left out),
+/// with every method, called by nobody, by the tenant that made the objects it names (alice)
+/// and by another (bob). Alice gets her answers; bob and anonymous callers get 404 for
+/// alice's objects, exactly as for ids that do not exist (never 403), and anonymous writes 401;
+/// listings show each caller only its own.
+#[tokio::test]
+async fn tenants_see_and_touch_only_their_own() {
+    let server = start(&["--api-tokens", &format!("{ALICE},{BOB}"), "--workers", "1"]);
+    let as_alice = |method: &'static str, path: String, body: Option<Value>| {
+        let server = &server;
+        async move { server.send_as(Some(ALICE), method, &path, body).await }
+    };
+    let doc = scenario("small-test.json", |v| v["name"] = "alice's floor".into());
+    let (s, created) = as_alice("POST", "/v1/scenarios".into(), Some(doc.clone())).await;
+    assert_eq!(s, StatusCode::CREATED, "{created}");
+    let sid = created["id"].as_str().unwrap().to_string();
+    let (s, map) = as_alice(
+        "POST",
+        "/v1/maps".into(),
+        Some(json!({"scenario_id": sid, "kind": "gain"})),
+    )
+    .await;
+    assert_eq!(s, StatusCode::OK, "{map}");
+    let mid = map["map_id"].as_str().unwrap().to_string();
+    let (s, job) = as_alice(
+        "POST",
+        "/v1/maps".into(),
+        Some(long_rate_request(fine_multi_user("alice's job"), "noma")),
+    )
+    .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    let jid = job["job_id"].as_str().unwrap().to_string();
+    let placement = json!({"scenario_id": sid,
+        "candidates": {"walls": [{"from": [0, 0], "to": [6, 0]}], "step_m": 1},
+        "objective": {"kind": "coverage", "threshold": -80}, "keep": 1});
+    let (s, placed) = as_alice("POST", "/v1/placements".into(), Some(placement.clone())).await;
+    assert_eq!(s, StatusCode::OK, "{placed}");
+    let pid = placed["placement_id"].as_str().unwrap().to_string();
+
+    let path_query =
+        json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": "max"});
+    let sweep =
+        json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "thresholds": [-90, -80]});
+    /// What a route is to the matrix: everybody's, a listing, a registration, or a route on
+    /// (or naming) alice's objects.
+    #[derive(Debug, PartialEq)]
+    enum Class {
+        Everybody,
+        Listing,
+        Registration,
+        Alices,
+    }
+    // Reads first, then writes, then deletions, so each call meets alice's objects intact.
+    let mut routes = documented_routes();
+    let phase = |m: &str| {
+        ["get", "post", "delete"]
+            .iter()
+            .position(|p| *p == m)
+            .unwrap()
+    };
+    routes.sort_by_key(|(m, _)| phase(m));
+    for (method, route) in routes {
+        let (class, path, body): (Class, String, Option<Value>) =
+            match (method.as_str(), route.as_str()) {
+                (
+                    "get",
+                    "/" | "/viewer/viewer.js" | "/viewer/viewer.css" | "/healthz" | "/readyz"
+                    | "/version" | "/metrics",
+                ) => (Class::Everybody, route.clone(), None),
+                ("get", "/v1/scenarios" | "/v1/maps" | "/v1/jobs") => {
+                    (Class::Listing, route.clone(), None)
+                }
+                ("post", "/v1/scenarios") => (Class::Registration, route.clone(), None),
+                ("get" | "delete", "/v1/scenarios/{scenario_id}") => {
+                    (Class::Alices, format!("/v1/scenarios/{sid}"), None)
+                }
+                ("post", "/v1/maps") => (
+                    Class::Alices,
+                    route.clone(),
+                    Some(json!({"scenario_id": sid, "kind": "gain"})),
+                ),
+                ("get" | "delete", "/v1/maps/{map_id}") => {
+                    (Class::Alices, format!("/v1/maps/{mid}"), None)
+                }
+                ("get", "/v1/maps/{map_id}/coverage") => (
+                    Class::Alices,
+                    format!("/v1/maps/{mid}/coverage?threshold=-80"),
+                    None,
+                ),
+                ("get", "/v1/maps/{map_id}/image.png") => {
+                    (Class::Alices, format!("/v1/maps/{mid}/image.png"), None)
+                }
+                ("get", "/v1/maps/{map_id}/nav2-mask") => (
+                    Class::Alices,
+                    format!("/v1/maps/{mid}/nav2-mask?threshold=-80"),
+                    None,
+                ),
+                ("get", "/v1/maps/{map_id}/values.npy") => {
+                    (Class::Alices, format!("/v1/maps/{mid}/values.npy"), None)
+                }
+                ("get" | "delete", "/v1/jobs/{job_id}") => {
+                    (Class::Alices, format!("/v1/jobs/{jid}"), None)
+                }
+                ("post", "/v1/placements") => {
+                    (Class::Alices, route.clone(), Some(placement.clone()))
+                }
+                ("get", "/v1/placements/{placement_id}") => {
+                    (Class::Alices, format!("/v1/placements/{pid}"), None)
+                }
+                ("post", "/v1/paths") => (Class::Alices, route.clone(), Some(path_query.clone())),
+                ("post", "/v1/sweeps") => (Class::Alices, route.clone(), Some(sweep.clone())),
+                other => panic!("{other:?}: a route the tenants' matrix does not know; add it"),
+            };
+        let method = method.to_uppercase();
+        // Alice last, so her deletion does not change what the others meet.
+        for who in [Who::Anonymous, Who::Bob, Who::Alice] {
+            let body = match class {
+                // Each registers a document of its own (the same document is checked below).
+                Class::Registration => Some(scenario("small-test.json", |v| {
+                    v["name"] = format!("{who:?}'s own").into()
+                })),
+                _ => body.clone(),
+            };
+            let (status, answer) = server.send_as(who.token(), &method, &path, body).await;
+            let writes = method != "GET";
+            let expected = match (&class, who) {
+                (Class::Everybody | Class::Listing, _) => {
+                    assert!(
+                        status.is_success(),
+                        "{who:?} {method} {path}: {status} {answer}"
+                    );
+                    continue;
+                }
+                (_, Who::Anonymous) if writes => StatusCode::UNAUTHORIZED,
+                // Her job may have finished by now: 409, the state of a job she can see.
+                (Class::Alices, Who::Alice)
+                    if method == "DELETE"
+                        && path.starts_with("/v1/jobs/")
+                        && status == StatusCode::CONFLICT =>
+                {
+                    assert_eq!(answer["code"], "job_finished", "{answer}");
+                    continue;
+                }
+                (Class::Registration, _) | (Class::Alices, Who::Alice) => {
+                    assert!(
+                        status.is_success(),
+                        "{who:?} {method} {path}: {status} {answer}"
+                    );
+                    continue;
+                }
+                (Class::Alices, _) => StatusCode::NOT_FOUND,
+            };
+            assert_eq!(status, expected, "{who:?} {method} {path}: {answer}");
+            let code = if expected == StatusCode::NOT_FOUND {
+                "not_found"
+            } else {
+                "unauthorized"
+            };
+            problem(status, &answer, expected, code);
+        }
+        if class == Class::Listing {
+            let mine = match path.as_str() {
+                "/v1/scenarios" => &sid,
+                "/v1/maps" => &mid,
+                _ => &jid,
+            };
+            for (who, sees) in [
+                (Who::Anonymous, false),
+                (Who::Bob, false),
+                (Who::Alice, true),
+            ] {
+                let (_, list) = server.send_as(who.token(), "GET", &path, None).await;
+                let text = list.to_string();
+                assert_eq!(text.contains(mine.as_str()), sees, "{who:?} {path}: {text}");
+            }
+        }
+    }
+    // The same document registered by bob is new to bob (201, as alice's was to her), and
+    // then his as well as hers.
+    let (s, again) = server
+        .send_as(Some(BOB), "POST", "/v1/scenarios", Some(doc.clone()))
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{again}");
+    let (s, _) = server
+        .send_as(Some(BOB), "POST", "/v1/scenarios", Some(doc))
+        .await;
+    assert_eq!(s, StatusCode::OK, "bob's second registration is not new");
+}
+
+/// Two tenants asking for one map share its build; one tenant's cancel withdraws only its own
+/// interest (the build goes on and the map is the other's), and the build stops only when the
+/// last tenant lets go.
+#[tokio::test]
+async fn a_shared_build_serves_every_tenant_until_the_last_lets_go() {
+    let server = start(&["--api-tokens", &format!("{ALICE},{BOB}"), "--workers", "1"]);
+    let job_path = |id: &str| format!("/v1/jobs/{id}");
+    // The worker is busy with alice's long build, so the shared one waits in the queue.
+    let (s, blocker) = server
+        .send_as(
+            Some(ALICE),
+            "POST",
+            "/v1/maps",
+            Some(long_rate_request(fine_multi_user("blocker"), "noma")),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{blocker}");
+    let shared = json!({"scenario": scenario("paper-multi-user.json", |_| {}), "kind": "rate", "access": "noma"});
+    let (s, for_alice) = server
+        .send_as(Some(ALICE), "POST", "/v1/maps", Some(shared.clone()))
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{for_alice}");
+    let (s, for_bob) = server
+        .send_as(Some(BOB), "POST", "/v1/maps", Some(shared.clone()))
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{for_bob}");
+    assert_eq!(for_alice["job_id"], for_bob["job_id"], "one build for both");
+    let jid = for_alice["job_id"].as_str().unwrap().to_string();
+    let mid = for_alice["map_id"].as_str().unwrap().to_string();
+    for who in [ALICE, BOB] {
+        let (s, job) = server
+            .send_as(Some(who), "GET", &job_path(&jid), None)
+            .await;
+        assert_eq!(s, StatusCode::OK, "{job}");
+    }
+    // Alice lets go: the job is no longer hers, and goes on for bob.
+    let (s, _) = server
+        .send_as(Some(ALICE), "DELETE", &job_path(&jid), None)
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED);
+    let (s, _) = server
+        .send_as(Some(ALICE), "GET", &job_path(&jid), None)
+        .await;
+    assert_eq!(s, StatusCode::NOT_FOUND, "alice withdrew");
+    let (s, _) = server
+        .send_as(Some(ALICE), "DELETE", &job_path(&jid), None)
+        .await;
+    assert_eq!(s, StatusCode::NOT_FOUND, "a withdrawal is made once");
+    let blocker_id = blocker["job_id"].as_str().unwrap();
+    let (s, _) = server
+        .send_as(Some(ALICE), "DELETE", &job_path(blocker_id), None)
+        .await;
+    assert_eq!(
+        s,
+        StatusCode::ACCEPTED,
+        "alice's own build, hers alone: it stops"
+    );
+    let done = server.wait_job_as(Some(BOB), &jid).await;
+    assert_eq!(done["state"], "done", "bob's request was served: {done}");
+    let map_path = format!("/v1/maps/{mid}");
+    assert_eq!(
+        server.send_as(Some(BOB), "GET", &map_path, None).await.0,
+        StatusCode::OK
+    );
+    assert_eq!(
+        server.send_as(Some(ALICE), "GET", &map_path, None).await.0,
+        StatusCode::NOT_FOUND,
+        "alice withdrew her claim with her interest"
+    );
+    let blocker_job = server.wait_job_as(Some(ALICE), blocker_id).await;
+    assert_eq!(blocker_job["state"], "cancelled");
+
+    // Both let go of a shared build: it stops with the last.
+    let long = long_rate_request(fine_multi_user("both"), "noma");
+    let (_, first) = server
+        .send_as(Some(ALICE), "POST", "/v1/maps", Some(long.clone()))
+        .await;
+    let (_, second) = server
+        .send_as(Some(BOB), "POST", "/v1/maps", Some(long))
+        .await;
+    assert_eq!(first["job_id"], second["job_id"]);
+    let jid = first["job_id"].as_str().unwrap().to_string();
+    let (s, _) = server
+        .send_as(Some(BOB), "DELETE", &job_path(&jid), None)
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let (_, still) = server
+        .send_as(Some(ALICE), "GET", &job_path(&jid), None)
+        .await;
+    assert!(
+        ["queued", "running"].contains(&still["state"].as_str().unwrap()),
+        "{still}"
+    );
+    let (s, _) = server
+        .send_as(Some(ALICE), "DELETE", &job_path(&jid), None)
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED);
+    let ended = server.wait_job_as(Some(ALICE), &jid).await;
+    assert_eq!(ended["state"], "cancelled", "{ended}");
+    assert_eq!(
+        server.metric("irs_map_builds_total{kind=\"rate\"}").await,
+        3.0,
+        "one build per map"
+    );
+}
+
+/// One tenant flooding the registry with inline scenarios evicts its own (with their maps);
+/// with every slot pinned by its live jobs it is refused (507 `registry_full`, Retry-After),
+/// and another tenant is still admitted.
+#[tokio::test]
+async fn a_full_registry_refuses_only_the_tenant_that_filled_it() {
+    // Six scenarios, three of them built in: three API slots.
+    let server = start(&[
+        "--api-tokens",
+        &format!("{ALICE},{BOB}"),
+        "--max-scenarios",
+        "6",
+        "--workers",
+        "1",
+    ]);
+    for k in 0..12 {
+        let request = json!({"scenario": scenario("small-test.json", |v| v["name"] = format!("flood-{k}").into()), "kind": "gain"});
+        let (s, answer) = server
+            .send_as(Some(ALICE), "POST", "/v1/maps", Some(request))
+            .await;
+        assert_eq!(s, StatusCode::OK, "map {k} of the flood: {answer}");
+    }
+    assert!(server.metric_total("irs_scenarios_evicted_total").await >= 9.0);
+    // Three long builds of alice's: every API slot is needed by a live job.
+    let mut jobs = Vec::new();
+    for k in 0..3 {
+        let (s, job) = server
+            .send_as(
+                Some(ALICE),
+                "POST",
+                "/v1/maps",
+                Some(long_rate_request(
+                    fine_multi_user(&format!("pinned-{k}")),
+                    "noma",
+                )),
+            )
+            .await;
+        assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+        jobs.push(job["job_id"].as_str().unwrap().to_string());
+    }
+    let one_more = json!({"scenario": scenario("small-test.json", |v| v["name"] = "one more".into()), "kind": "gain"});
+    let refused = server
+        .client
+        .post(format!("{}/v1/maps", server.base))
+        .bearer_auth(ALICE)
+        .header("content-type", "application/json")
+        .body(one_more.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(refused.headers()["retry-after"], "5");
+    let status = refused.status();
+    let body: Value = refused.json().await.unwrap();
+    problem(
+        status,
+        &body,
+        StatusCode::INSUFFICIENT_STORAGE,
+        "registry_full",
+    );
+    let started = Instant::now();
+    let bobs = scenario("small-test.json", |v| v["name"] = "bob's".into());
+    let (s, created) = server
+        .send_as(Some(BOB), "POST", "/v1/scenarios", Some(bobs))
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "bob is not locked out: {created}");
+    assert!(started.elapsed() < Duration::from_secs(2));
+    assert_eq!(
+        server
+            .metric("irs_scenarios_refused_total{why=\"over_share\"}")
+            .await,
+        1.0
+    );
+    for job in jobs {
+        server
+            .send_as(Some(ALICE), "DELETE", &format!("/v1/jobs/{job}"), None)
+            .await;
+    }
 }

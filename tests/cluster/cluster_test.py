@@ -18,6 +18,9 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * Redis content this build did not write (a record that is no scenario, a map that does not
     decode, keys of the wrong type, a lock without expiry, a stream that is not one) repaired
     where it is met; a map finished while Redis was away shared when it returns, built once.
+  * tenants: two more replicas with tokens on the same Redis; a map's claims and a shared
+    build's owners made on one replica are seen on the other (404 to a tenant without a
+    claim, a DELETE withdraws only the caller's claim, a cancel only the caller's interest).
 Everything binds 127.0.0.1 and stops by itself (about a minute on two cores).
 """
 
@@ -94,12 +97,12 @@ class Redis:
 
 
 class Replica(kit.Server):
-    def __init__(self, redis_port, name):
+    def __init__(self, redis_port, name, *flags):
         self.name = name
         empty = os.path.join(WORK, "no-scenarios")
         os.makedirs(empty, exist_ok=True)
         super().__init__(BINARY, "--scenarios", empty, "--redis-url", f"redis://127.0.0.1:{redis_port}/",
-                         "--workers", "1", log_path=os.path.join(WORK, f"{name}.log"),
+                         "--workers", "1", *flags, log_path=os.path.join(WORK, f"{name}.log"),
                          env={**os.environ, "RUST_LOG": "info"})
 
     def builds(self):
@@ -311,8 +314,64 @@ def main():
     # the machine (reported, not asserted); with real work per query the proxy must not be
     # the bottleneck.
     check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
-
+    tenants(redis)
     repairs(redis, survivors)
+
+
+def tenants(redis):
+    """Two replicas with tokens: claims and shared builds' owners live in Redis, so what one
+    replica recorded for a tenant holds on the other."""
+    alice, bob = "alice-cluster-token-01", "bob-cluster-token-0002"
+    one, two = (Replica(redis.port, f"tenant{i}", "--api-tokens", f"{alice},{bob}") for i in range(2))
+    wait_until("the tenants' replicas ready", lambda: one.ready() and two.ready(), 15)
+    small = scenario("small-test", lambda d: d.update(name="cluster-claims"))
+    status, mine, _ = request(one.base, "POST", "/v1/maps", {"scenario": small, "kind": "gain"}, token=alice)
+    check(status == 200, f"alice's map on {one.name} ({status})")
+    map_path = f"/v1/maps/{mine['map_id']}"
+    status, _, _ = request(two.base, "GET", map_path, token=alice)
+    check(status == 200, f"her claim holds on {two.name} ({status})")
+    for who in (bob, None):
+        status, _, _ = request(two.base, "GET", map_path, token=who)
+        check(status == 404, f"no claim, no map on {two.name} ({status})")
+    status, _, _ = request(two.base, "POST", "/v1/maps", {"scenario": small, "kind": "gain"}, token=bob)
+    check(status == 200, f"bob asks for the same map on {two.name} ({status})")
+    status, _, _ = request(two.base, "DELETE", map_path, token=alice)
+    check(status == 204, f"alice withdraws her claim on {two.name} ({status})")
+    status, _, _ = request(one.base, "GET", map_path, token=alice)
+    check(status == 404, f"withdrawn on {one.name} too ({status})")
+    status, _, _ = request(one.base, "GET", map_path, token=bob)
+    check(status == 200, f"still bob's on {one.name} ({status})")
+    status, _, _ = request(one.base, "DELETE", map_path, token=bob)
+    check(status == 204, f"bob's, the last claim ({status})")
+    status, _, _ = request(two.base, "GET", map_path, token=bob)
+    check(status == 404, f"the map went with the last claim ({status})")
+
+    multi = scenario("paper-multi-user", lambda d: (
+        d.update(name="cluster-shared"), d["grid"].update(resolution_m=0.2)))
+    status, first, _ = request(one.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate", "access": "noma"}, token=alice)
+    check(status == 202, f"alice's rate map is a job on {one.name} ({status})")
+    status, second, _ = request(two.base, "POST", "/v1/maps", {"scenario": multi, "kind": "rate", "access": "noma"}, token=bob)
+    check(status == 202 and second["job_id"] == first["job_id"], f"bob shares it from {two.name} ({second.get('job_id')})")
+    job_path = f"/v1/jobs/{first['job_id']}"
+    for base, who in ((two.base, alice), (one.base, bob)):
+        status, _, _ = request(base, "GET", job_path, token=who)
+        check(status == 200, f"an owner follows it on either replica ({status})")
+    status, _, _ = request(one.base, "GET", job_path)
+    check(status == 404, f"an anonymous read of the shared job ({status})")
+    status, _, _ = request(two.base, "DELETE", job_path, token=alice)
+    check(status == 202, f"alice withdraws from {two.name} ({status})")
+    time.sleep(1.0)  # two heartbeats: a cancel would have been seen by now
+    status, job, _ = request(one.base, "GET", job_path, token=bob)
+    check(status == 200 and job["state"] != "cancelled", f"the build goes on for bob ({job.get('state')})")
+    status, _, _ = request(one.base, "GET", job_path, token=alice)
+    check(status == 404, f"alice's interest is gone ({status})")
+    if job["state"] != "done":
+        status, _, _ = request(one.base, "DELETE", job_path, token=bob)
+        check(status == 202, f"bob, the last owner, cancels ({status})")
+        job = wait_job(one.base, first["job_id"], 60, token=bob)
+        check(job["state"] == "cancelled", f"the build stopped with the last owner ({job['state']})")
+    for replica in (one, two):  # the checks after these count builds over the other replicas
+        replica.stop()
 
 
 def repairs(redis, survivors):

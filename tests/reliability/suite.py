@@ -424,9 +424,11 @@ def slow_readers():
 
 
 def ownership():
-    """With tokens, writes need one and jobs belong to their token."""
+    """With tokens, writes need one and everything belongs to the tenants who asked for it:
+    maps (claims), shared builds, jobs and scenarios; and one tenant's flood of inline
+    scenarios cannot lock the registry for the others."""
     alice, bob = "alice-reliability-0001", "bob-reliability-000002"
-    server = Server("--api-tokens", f"{alice},{bob}")
+    server = Server("--api-tokens", f"{alice},{bob}", "--max-scenarios", "103", "--workers", "1")
     try:
         multi = scenario("paper-multi-user", lambda d: (
             d.update(name="owned"), d["grid"].update(resolution_m=0.2)))
@@ -437,13 +439,58 @@ def ownership():
         path = f"/v1/jobs/{job['job_id']}"
         status, _, _ = server.request("DELETE", path, token=bob)
         expect(status == 404, f"bob cancels alice's job: {status}")
+        status, _, _ = server.get(path)
+        expect(status == 404, f"an anonymous read of alice's job: {status}")
         _, bobs, _ = server.get("/v1/jobs", token=bob)
         _, alices, _ = server.get("/v1/jobs", token=alice)
         expect(len(bobs["jobs"]) == 0 and len(alices["jobs"]) == 1, f"{bobs} {alices}")
+        # Bob asks for the same map: one build, both its owners; alice's cancel is hers only.
+        status, shared, _ = server.post("/v1/maps", {"scenario": multi, "kind": "rate"}, token=bob)
+        expect(status == 202 and shared["job_id"] == job["job_id"], f"shared build: {shared}")
         status, _, _ = server.request("DELETE", path, token=alice)
-        expect(status == 202, f"alice cancels her job: {status}")
+        expect(status == 202, f"alice withdraws: {status}")
+        time.sleep(0.3)
+        status, still, _ = server.get(path, token=bob)
+        expect(status == 200 and still["state"] in ("queued", "running", "done"),
+               f"bob's build goes on: {status} {still}")
+        if still["state"] != "done":
+            status, _, _ = server.request("DELETE", path, token=bob)
+            expect(status == 202, f"bob lets go: {status}")
+            final = server.wait_job(job["job_id"], token=bob)
+            expect(final["state"] in ("cancelled", "done"), f"the build stops with the last: {final}")
+        # Maps: a claim per tenant; a DELETE withdraws only the caller's.
+        small = scenario("small-test", lambda d: d.update(name="claimed"))
+        status, mine, _ = server.post("/v1/maps", {"scenario": small, "kind": "gain"}, token=alice)
+        expect(status == 200, f"alice's map: {status} {mine}")
+        map_path = f"/v1/maps/{mine['map_id']}"
+        for who in (None, bob):
+            status, _, _ = server.get(map_path, token=who)
+            expect(status == 404, f"a map read without a claim: {status}")
+        status, _, _ = server.request("DELETE", map_path, token=bob)
+        expect(status == 404, f"bob deletes alice's map: {status}")
+        status, _, _ = server.post("/v1/maps", {"scenario": small, "kind": "gain"}, token=bob)
+        expect(status == 200, f"bob asks for the same map: {status}")
+        status, _, _ = server.request("DELETE", map_path, token=alice)
+        expect(status == 204, f"alice withdraws her claim: {status}")
+        status, _, _ = server.get(map_path, token=bob)
+        expect(status == 200, f"the map is still bob's: {status}")
+        # The registry (100 API slots): alice's flood of inline scenarios evicts her own.
+        started = time.perf_counter()
+        for k in range(300):
+            doc = scenario("small-test", lambda d, k=k: d.update(name=f"flood-{k}"))
+            status, body, _ = server.post("/v1/maps", {"scenario": doc, "kind": "gain"}, token=alice)
+            expect(status == 200, f"flood map {k}: {status} {body}")
+        flood_s = time.perf_counter() - started
+        started = time.perf_counter()
+        status, body, _ = server.post("/v1/scenarios", scenario(
+            "small-test", lambda d: d.update(name="bob's own")), token=bob)
+        bob_ms = (time.perf_counter() - started) * 1000
+        expect(status == 201, f"bob registers after the flood: {status} {body}")
         figure("ownership", "anonymous POST 401; bob's cancel of alice's job 404, his listing "
-               "0 jobs, hers 1; her cancel 202")
+               "0 jobs, hers 1; a shared build outlives alice's cancel; alice's map 404 to bob "
+               "and anonymous until bob asks for it, her DELETE leaves it his; "
+               f"300 inline-scenario maps of alice's all 200 in {flood_s:.1f} s, then bob's "
+               f"registration 201 in {bob_ms:.1f} ms")
     finally:
         server.stop()
 

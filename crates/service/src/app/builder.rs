@@ -46,7 +46,9 @@ pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
 /// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
 async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     let record = cluster.job::<JobRecord>(&build.job_id).await.ok().flatten();
-    let owner = record.as_ref().and_then(|r| r.owner());
+    // The owners the record names when the build starts; owners who join later are in the
+    // store's `irs:job-owners` set, which is what every replica asks.
+    let owners = record.as_ref().map(|r| r.owners()).unwrap_or_default();
     let end = |mut record: JobRecord, state: JobState, error: Option<String>| {
         record.view.state = state;
         record.view.error = error;
@@ -118,7 +120,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
         build.job_id.clone(),
         scenario,
         build.key.clone(),
-        owner,
+        owners,
         state.cache(),
         publish,
     );

@@ -1,12 +1,12 @@
 //! The map cache: built maps by map id in memory (moka, bounded by bytes through a weigher),
 //! backed by the data directory with `--data-dir`, and each queried map's widest-path index.
 
+use super::map_owners::MapOwners;
 use super::registry::ScenarioRegistry;
 use crate::ids::{MapId, ScenarioId};
 use crate::store::DataDir;
 use irs_model::planner::{self, Bottlenecks};
 use irs_model::radiomap::RadioMap;
-use std::collections::HashSet;
 use std::sync::Arc;
 
 /// Built maps by map id, weighed in KiB so the budget is in bytes, not entries; with
@@ -33,7 +33,9 @@ pub struct MapDisk {
 }
 
 impl MapCache {
-    pub fn new(budget_bytes: u64, disk: Option<MapDisk>) -> Self {
+    /// `owners` are the claims on the maps: a map the cache lets go of (evicted, removed) and
+    /// the data directory does not keep takes its claims with it.
+    pub fn new(budget_bytes: u64, disk: Option<MapDisk>, owners: Arc<MapOwners>) -> Self {
         // Least recently used, not moka's default TinyLFU: TinyLFU may refuse a new entry it
         // has seen once, and a map is requested once before it is built, so a map that was
         // just built (minutes of CPU) could be dropped at once while old ones stay.
@@ -42,6 +44,11 @@ impl MapCache {
             .max_capacity((budget_bytes / 1024).max(1))
             .weigher(|_id: &MapId, map: &Arc<RadioMap>| {
                 (map.size_bytes() / 1024).clamp(1, u32::MAX as usize) as u32
+            })
+            .eviction_listener(move |id: Arc<MapId>, _, cause| {
+                if cause != moka::notification::RemovalCause::Replaced {
+                    owners.forget_unless_kept(&id);
+                }
             })
             .build();
         let indexes = moka::sync::Cache::builder()
@@ -165,13 +172,5 @@ impl MapCache {
             disk.dir.remove_maps_of(scenario_id.as_str());
         }
         self.record_size();
-    }
-
-    /// The scenarios the cached maps were built from.
-    pub fn scenario_ids(&self) -> HashSet<ScenarioId> {
-        self.maps
-            .iter()
-            .map(|(_, m)| ScenarioId::of_key(&m.key))
-            .collect()
     }
 }

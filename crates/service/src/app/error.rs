@@ -52,9 +52,11 @@ pub(crate) enum Error {
         "{reason}; maps this replica holds still answer, everything else needs the shared store: retry shortly"
     )]
     Unavailable { reason: String },
-    /// The scenario registry cannot take this scenario.
-    #[error("{0}")]
-    RegistryFull(String),
+    /// The scenario registry cannot take this scenario. `retry`: room comes back by itself
+    /// (live jobs end), so the client is told when to try again; false for a scenario larger
+    /// than the whole registry, which no wait admits.
+    #[error("{detail}")]
+    RegistryFull { detail: String, retry: bool },
     /// A built-in or file scenario: part of the configuration, never deleted.
     #[error("scenario {id} comes from the server's {origin} scenarios and cannot be deleted")]
     ScenarioProtected {

@@ -5,21 +5,24 @@
 //! With tokens set (`--api-tokens`, `--api-tokens-file`), every `POST` and `DELETE` needs
 //! `Authorization: Bearer <token>` (401 otherwise): they start builds and searches, register
 //! scenarios and cancel work, and even a path query may build its map. Reads stay open, as the
-//! ids they take are content hashes or random. Jobs and API-registered scenarios belong to the
-//! token that made them: another token gets 404 when it cancels or deletes them, and listings
-//! show a caller only its own (and the server's built-in and file scenarios).
+//! ids they take are content hashes or random.
+//!
+//! Reads stay open to callers without a token for what belongs to nobody (the built-in and file
+//! scenarios); everything a tenant made — maps it asked for, jobs, placements, API scenarios —
+//! is seen and touched only by the tokens that asked for it ([`Owners`]), and anybody else gets
+//! 404 exactly as for an id that does not exist, so content-hash ids reveal nothing.
 //!
 //! A token is never stored in a record or a log: an owner is named by the first 16 hex digits
 //! of the token's SHA-256.
 
 use super::Error;
 use sha2::{Digest, Sha256};
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 
 /// Who made a record: the digest of a token.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub(crate) struct Owner(Arc<str>);
 
 impl Owner {
@@ -38,6 +41,56 @@ impl Owner {
 impl std::fmt::Display for Owner {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.0)
+    }
+}
+
+/// The owners of something several tenants may ask for (a map, a shared build): each asked for
+/// it, each may withdraw its own interest, and the thing goes with the last of them. Ordered, so
+/// records list them the same way every time.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub(crate) struct Owners(BTreeSet<Owner>);
+
+impl Owners {
+    /// One owner, or nobody (authentication off).
+    pub fn of(owner: Option<Owner>) -> Owners {
+        Owners(owner.into_iter().collect())
+    }
+
+    /// Owners as a record keeps them (digests); an unreadable entry cannot name a token.
+    pub fn from_digests(digests: impl IntoIterator<Item = String>) -> Owners {
+        Owners(digests.into_iter().map(Owner::from_digest).collect())
+    }
+
+    /// The digests, sorted, as records write them.
+    pub fn digests(&self) -> Vec<String> {
+        self.0.iter().map(Owner::to_string).collect()
+    }
+
+    /// Adds an owner; true if it was not one already.
+    pub fn insert(&mut self, owner: Owner) -> bool {
+        self.0.insert(owner)
+    }
+
+    /// Removes an owner; true if it was one.
+    pub fn remove(&mut self, owner: &Owner) -> bool {
+        self.0.remove(owner)
+    }
+
+    pub fn contains(&self, owner: &Owner) -> bool {
+        self.0.contains(owner)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// The first owner (a record's `owner`, kept for readers of the older format).
+    pub fn first(&self) -> Option<&Owner> {
+        self.0.iter().next()
     }
 }
 
@@ -152,13 +205,13 @@ impl Caller {
         }
     }
 
-    /// May this caller see or change a record owned by `owner`? Open servers have no owners;
-    /// with authentication on, only the owner may.
-    pub fn may_touch(&self, owner: Option<&Owner>) -> bool {
+    /// May this caller see or change something `owners` asked for? With authentication on,
+    /// only one of them may: a caller without a claim is told it does not exist.
+    pub fn may_touch_any(&self, owners: &Owners) -> bool {
         match self {
             Caller::Open => true,
             Caller::Anonymous => false,
-            Caller::Owner(me) => owner == Some(me),
+            Caller::Owner(me) => owners.contains(me),
         }
     }
 }

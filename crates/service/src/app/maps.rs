@@ -2,6 +2,13 @@
 //! in flight here, or (in a cluster) the shared store and the builds queued there. Handlers
 //! ask [`App::map`], [`App::map_with_scenario`] or [`App::request_map`] and never choose
 //! between the cache, the disk and Redis themselves.
+//!
+//! With tokens on, every map is reached through the caller's claim (`app::map_owners`, or the
+//! shared store's set in a cluster): a tenant that never asked for a map is told it does not
+//! exist (404, as for an unknown id, never 403), a listing shows only the caller's maps, and a
+//! `DELETE` withdraws the caller's claim, deleting the map only with the last one. Asking for
+//! a map another tenant already has adds a claim and answers as a new request would; only the
+//! time it takes (a 200 at once where a fresh rate map would be a 202) can tell.
 
 use super::identity::Caller;
 use super::scenarios::{Named, ScenarioRef};
@@ -62,9 +69,61 @@ pub(crate) fn check_budget(
 }
 
 impl App {
-    /// A built map by id, from wherever it is; not ready (with its job) while a build of it
-    /// runs here or anywhere in the cluster, else not found.
-    pub(crate) async fn map(&self, map_id: &MapId) -> Result<Arc<RadioMap>, Error> {
+    /// Records that `caller` asked for a map (nothing with authentication off).
+    pub(crate) async fn claim_map(&self, caller: &Caller, map_id: &MapId) -> Result<(), Error> {
+        let Some(owner) = caller.owner() else {
+            return Ok(());
+        };
+        match self.cluster() {
+            Some(cluster) => cluster.claim_map(map_id, &owner.to_string()).await?,
+            None => self.map_owners().claim(map_id, &owner),
+        }
+        Ok(())
+    }
+
+    /// May `caller` see and touch the map? Always with authentication off; with it on, only a
+    /// caller that asked for it.
+    pub(crate) async fn may_see_map(&self, caller: &Caller, map_id: &MapId) -> Result<bool, Error> {
+        Ok(match caller {
+            Caller::Open => true,
+            Caller::Anonymous => false,
+            Caller::Owner(me) => match self.cluster() {
+                Some(cluster) => cluster.map_claimed(map_id, &me.to_string()).await?,
+                None => self.map_owners().has(map_id, me),
+            },
+        })
+    }
+
+    /// A built map by id for `caller` (a map it has no claim on is not found, whether or not
+    /// it exists); not ready (with its job) while a build of it runs here or anywhere in the
+    /// cluster.
+    pub(crate) async fn map(
+        &self,
+        caller: &Caller,
+        map_id: &MapId,
+    ) -> Result<Arc<RadioMap>, Error> {
+        if !self.may_see_map(caller, map_id).await? {
+            return Err(Error::not_found("map", map_id));
+        }
+        self.any_map(map_id).await
+    }
+
+    /// The cached maps `caller` may see, by id.
+    pub(crate) async fn list_maps(
+        &self,
+        caller: &Caller,
+    ) -> Result<Vec<(MapId, Arc<RadioMap>)>, Error> {
+        let mut visible = Vec::new();
+        for (id, map) in self.cache().entries() {
+            if self.may_see_map(caller, &id).await? {
+                visible.push((id, map));
+            }
+        }
+        Ok(visible)
+    }
+
+    /// A built map by id, whoever asked for it.
+    async fn any_map(&self, map_id: &MapId) -> Result<Arc<RadioMap>, Error> {
         if let Some(map) = self.shared_map(map_id).await? {
             return Ok(map);
         }
@@ -88,9 +147,10 @@ impl App {
     /// A built map and the scenario it was built from.
     pub(crate) async fn map_with_scenario(
         &self,
+        caller: &Caller,
         map_id: &MapId,
     ) -> Result<(Arc<RadioMap>, Arc<Scenario>), Error> {
-        let map = self.map(map_id).await?;
+        let map = self.map(caller, map_id).await?;
         let stored = self
             .scenario(&ScenarioId::of_key(&map.key))
             .await?
@@ -120,14 +180,36 @@ impl App {
         })
     }
 
-    /// Drops a built map here and from the shared store (the next request for it builds it
-    /// again). A map being built here is not ready: cancel its job instead.
-    pub(crate) async fn delete_map(&self, map_id: &MapId) -> Result<(), Error> {
+    /// Withdraws `caller`'s claim on a built map; with the last claim (or with authentication
+    /// off) the map is dropped here and from the shared store (the next request for it builds
+    /// it again). A map being built here is not ready: cancel its job instead.
+    pub(crate) async fn delete_map(&self, caller: &Caller, map_id: &MapId) -> Result<(), Error> {
+        if !self.may_see_map(caller, map_id).await? {
+            return Err(Error::not_found("map", map_id));
+        }
         if let Some(job) = self.jobs().building(map_id).await {
             return Err(Error::MapNotReady {
                 map_id: map_id.clone(),
                 job_id: job.id.clone(),
             });
+        }
+        if let Caller::Owner(me) = caller {
+            let left = match self.cluster() {
+                // The last claim deletes the shared copy in the same script.
+                Some(cluster) => cluster.withdraw_map(map_id, &me.to_string()).await?,
+                None => self.map_owners().withdraw(map_id, me),
+            };
+            match left {
+                None => return Err(Error::not_found("map", map_id)),
+                Some(0) => {
+                    self.cache().remove(map_id).await;
+                    tracing::info!(map_id = %map_id, "map deleted with its last claim");
+                }
+                Some(left) => {
+                    tracing::info!(map_id = %map_id, left, "a claim on a map withdrawn");
+                }
+            }
+            return Ok(());
         }
         let mut removed = self.cache().remove(map_id).await;
         if let Some(cluster) = self.cluster() {
@@ -153,7 +235,7 @@ impl App {
             id,
             scenario,
             inline,
-        } = self.named_scenario(spec.scenario, prefix).await?;
+        } = self.named_scenario(caller, spec.scenario, prefix).await?;
         let key = MapKey::new(
             id.as_str(),
             &scenario,
@@ -209,10 +291,12 @@ impl App {
         key: MapKey,
         cheap: bool,
     ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
+        let map_id = MapId::of(&key);
         let outcome = self
             .jobs()
             .request(self.cache(), scenario, key, caller.owner())
             .await?;
+        self.claim_map(caller, &map_id).await?;
         match outcome {
             MapRequestOutcome::Ready(map) => Ok(Ok(map)),
             MapRequestOutcome::Building(job) if cheap => {
@@ -240,6 +324,7 @@ impl App {
     ) -> Result<Result<Arc<RadioMap>, JobView>, Error> {
         let map_id = MapId::of(&key);
         if let Some(map) = self.shared_map(&map_id).await? {
+            self.claim_map(caller, &map_id).await?;
             return Ok(Ok(map));
         }
         // The replica that builds it reads the scenario from the shared store.
@@ -261,6 +346,12 @@ impl App {
                     self.limits().cluster_queue,
                 )
                 .await?;
+            // The build is shared by everyone who asked: each one's cancel withdraws only its
+            // own interest (`irs:job-owners`), and the map is theirs once built.
+            if let Some(owner) = caller.owner() {
+                cluster.join_job(&job_id, &owner.to_string()).await?;
+            }
+            self.claim_map(caller, &map_id).await?;
             let record = |r: Option<JobRecord>| {
                 r.unwrap_or_else(|| {
                     let mut r = JobRecord::queued(&key, None);

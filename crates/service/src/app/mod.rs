@@ -11,6 +11,7 @@ pub(crate) mod cache;
 pub(crate) mod error;
 pub(crate) mod identity;
 pub(crate) mod jobs;
+pub(crate) mod map_owners;
 pub(crate) mod maps;
 pub(crate) mod queries;
 pub(crate) mod registry;
@@ -29,6 +30,7 @@ use irs_answers::scenario::BUILTIN;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
 use jobs::Jobs;
+use map_owners::MapOwners;
 use metrics_exporter_prometheus::PrometheusHandle;
 use queries::QueryPool;
 use registry::{ScenarioRecord, ScenarioRegistry, ScenarioSource, StoredScenario};
@@ -65,6 +67,8 @@ struct Inner {
     limits: Limits,
     registry: Arc<ScenarioRegistry>,
     cache: MapCache,
+    /// Who asked for each map (one replica's; a cluster's are in the shared store).
+    map_owners: Arc<MapOwners>,
     answers: AnswerCache,
     jobs: Arc<Jobs>,
     queries: QueryPool,
@@ -103,12 +107,14 @@ impl App {
             mb(args.registry_mb),
             disk.clone(),
         ));
+        let map_owners = Arc::new(MapOwners::new(disk.clone()));
         let cache = MapCache::new(
             args.cache_mb.saturating_mul(1024 * 1024),
             disk.clone().map(|dir| MapDisk {
                 dir,
                 scenarios: registry.clone(),
             }),
+            map_owners.clone(),
         );
         Ok(App {
             inner: Arc::new(Inner {
@@ -127,6 +133,7 @@ impl App {
                 },
                 registry,
                 cache,
+                map_owners: map_owners.clone(),
                 answers: AnswerCache::new(args.answer_cache_mb.saturating_mul(1024 * 1024)),
                 jobs: Arc::new(Jobs::new(
                     args.workers(),
@@ -134,6 +141,7 @@ impl App {
                     args.job_history,
                     args.job_history_mb.saturating_mul(1 << 20),
                     disk.clone(),
+                    map_owners,
                 )),
                 queries: QueryPool::new(args.query_workers(), args.query_queue)?,
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
@@ -156,6 +164,9 @@ impl App {
     pub(crate) fn cache(&self) -> &MapCache {
         &self.inner.cache
     }
+    pub(crate) fn map_owners(&self) -> &MapOwners {
+        &self.inner.map_owners
+    }
     pub(crate) fn answers(&self) -> &AnswerCache {
         &self.inner.answers
     }
@@ -168,25 +179,37 @@ impl App {
     pub(crate) fn tokens(&self) -> &Tokens {
         &self.inner.tokens
     }
-    /// Registers a scenario for `caller`, evicting the least recently used unneeded ones if the
-    /// registry is full (see [`ScenarioRegistry`]).
+    /// Registers a scenario for `caller` (whether it is new *to the caller*: with tokens on,
+    /// a document another tenant registered is new to this one). When the registry is full,
+    /// API scenarios are evicted by fair share (see [`ScenarioRegistry`]) and the maps built
+    /// from them go with them.
     pub(crate) fn register_scenario(
         &self,
         scenario: Scenario,
         source: ScenarioSource,
         caller: &Caller,
     ) -> Result<(Arc<StoredScenario>, bool), Error> {
-        self.registry()
+        let registered = self
+            .registry()
             .register(scenario, source, caller.owner(), || {
-                let mut needed = self.cache().scenario_ids();
-                needed.extend(
-                    self.jobs()
-                        .live()
-                        .into_iter()
-                        .map(|job| job.scenario_id.clone()),
-                );
-                needed
-            })
+                // Only a live job pins a scenario: a cached map is evicted with it.
+                self.jobs()
+                    .live()
+                    .into_iter()
+                    .map(|job| job.scenario_id.clone())
+                    .collect()
+            })?;
+        if !registered.evicted.is_empty() {
+            let cache = self.cache().clone();
+            // The maps are dropped off the caller's path (memory and disk); until then a map
+            // of an evicted scenario is still served from memory, which is harmless.
+            crate::tasks::spawn(async move {
+                for id in registered.evicted {
+                    cache.remove_scenario_maps(&id).await;
+                }
+            });
+        }
+        Ok((registered.stored, registered.created))
     }
 
     /// Registers a scenario a request sent (or another replica shared) for `caller`: its

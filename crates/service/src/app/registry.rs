@@ -99,8 +99,19 @@ impl StoredScenario {
         }
     }
 
-    /// May `caller` see it in a listing? The server's own scenarios are everybody's.
-    fn visible_to(&self, caller: &Caller) -> bool {
+    /// Who holds it, for the fair share: its owners, or nobody in particular.
+    fn holders(&self) -> Vec<Option<Owner>> {
+        let owners = self.owners.lock().expect("owners lock");
+        if owners.is_empty() {
+            vec![None]
+        } else {
+            owners.iter().cloned().map(Some).collect()
+        }
+    }
+
+    /// May `caller` see it (in a listing, or by id)? The server's own scenarios are
+    /// everybody's; an API scenario only its registrants'.
+    pub fn visible_to(&self, caller: &Caller) -> bool {
         self.source != ScenarioSource::Api
             || *caller == Caller::Open
             || caller
@@ -112,9 +123,10 @@ impl StoredScenario {
 /// Scenarios by content hash; registering the same document twice is idempotent.
 ///
 /// Inline scenarios in map requests are registered too, so without eviction a stream of them
-/// would fill the registry for good. When it is full (by count or by bytes), a new scenario
-/// replaces the least recently used ones registered through the API that no cached map and no
-/// live job needs; only when there are none is the registration refused (507).
+/// would fill the registry for good, and if cached maps pinned their scenarios one client
+/// could lock every other out with a thousand tiny maps. So when it is full (by count or by
+/// bytes), API scenarios are evicted by fair share, together with the maps built from them;
+/// only scenarios live jobs need are kept ([`ScenarioRegistry::register`]).
 pub struct ScenarioRegistry {
     limit: usize,
     budget_bytes: usize,
@@ -125,6 +137,72 @@ pub struct ScenarioRegistry {
     disk: Option<Arc<DataDir>>,
     /// Serialises the writes of one scenario's record, so the last write holds the last owners.
     disk_writes: Mutex<()>,
+}
+
+/// What a registration did: the scenario, whether it is new to the caller, and the scenarios
+/// evicted to make room (their maps are to go too).
+pub struct Registered {
+    pub stored: Arc<StoredScenario>,
+    pub created: bool,
+    pub evicted: Vec<ScenarioId>,
+}
+
+/// Who holds how many API scenarios: each owner of a scenario holds it (`None`: registered
+/// with authentication off, held by nobody in particular).
+struct Shares(HashMap<Option<Owner>, usize>);
+
+impl Shares {
+    /// The holdings now, the caller's counting the scenario it registers.
+    fn of(by_id: &HashMap<ScenarioId, Arc<StoredScenario>>, caller: &Option<Owner>) -> Shares {
+        let mut held: HashMap<Option<Owner>, usize> = HashMap::new();
+        for s in by_id.values().filter(|s| s.source == ScenarioSource::Api) {
+            for holder in s.holders() {
+                *held.entry(holder).or_default() += 1;
+            }
+        }
+        *held.entry(caller.clone()).or_default() += 1;
+        Shares(held)
+    }
+
+    /// A holder's count.
+    fn of_holder(&self, holder: &Option<Owner>) -> usize {
+        self.0.get(holder).copied().unwrap_or(0)
+    }
+
+    /// Whether `holder` holds more than an equal share of `room` among the current holders.
+    fn over_share(&self, holder: &Option<Owner>, room: usize) -> bool {
+        let share = room / self.0.len().max(1);
+        self.of_holder(holder) > share.max(1)
+    }
+
+    /// The scenario to evict for `caller`: of the API scenarios no live job needs, the one
+    /// whose heaviest holder holds the most, the least recently used first; a scenario only
+    /// that holder holds goes before one it shares with others. Never one of a holder that
+    /// holds fewer than the caller: a client over its share makes room from its own.
+    fn victim(
+        &self,
+        by_id: &HashMap<ScenarioId, Arc<StoredScenario>>,
+        pinned: &HashSet<ScenarioId>,
+        caller: &Option<Owner>,
+    ) -> Option<ScenarioId> {
+        let floor = self.of_holder(caller);
+        by_id
+            .values()
+            .filter(|s| s.source == ScenarioSource::Api && !pinned.contains(&s.id))
+            .filter_map(|s| {
+                let holders = s.holders();
+                let heaviest = holders.iter().map(|h| self.of_holder(h)).max().unwrap_or(0);
+                (heaviest >= floor).then_some(s)?;
+                Some((
+                    std::cmp::Reverse(heaviest),
+                    holders.len(),
+                    s.last_used.load(Ordering::Relaxed),
+                    s.id.clone(),
+                ))
+            })
+            .min()
+            .map(|(_, _, _, id)| id)
+    }
 }
 
 /// A scenario as the data directory (`scenarios/<id>.rec`) and the shared store
@@ -178,16 +256,22 @@ impl ScenarioRegistry {
         self.clock.fetch_add(1, Ordering::Relaxed)
     }
 
-    /// Registers a validated scenario for `owner`; returns it and whether it was new. `in_use`
-    /// lists the scenarios that cached maps or live jobs need; it is asked only when the
-    /// registry is full.
+    /// Registers a validated scenario for `owner`. `pinned` lists the scenarios live jobs
+    /// need; it is asked only when the registry is full.
+    ///
+    /// Full (by count or bytes), the registry evicts API scenarios by fair share: the holder
+    /// (an owner, or nobody with authentication off) registered on the most scenarios loses
+    /// its least recently used one first, so one client's flood evicts its own scenarios and
+    /// never locks out the others. Scenarios a live job needs are not evicted; when only those
+    /// are left, a caller over its fair share is refused (507), and one within its share is
+    /// admitted over the limit by at most as many scenarios as are pinned (workers + queue).
     pub fn register(
         &self,
         scenario: Scenario,
         source: ScenarioSource,
         owner: Option<Owner>,
-        in_use: impl FnOnce() -> HashSet<ScenarioId>,
-    ) -> Result<(Arc<StoredScenario>, bool), Error> {
+        pinned: impl FnOnce() -> HashSet<ScenarioId>,
+    ) -> Result<Registered, Error> {
         // One canonical form for both the id and the weight (a floor plan's is megabytes).
         let canonical = scenario.canonical_json();
         let id = ScenarioId::of_canonical(&canonical);
@@ -202,40 +286,78 @@ impl ScenarioRegistry {
             if added {
                 self.persist(&existing);
             }
-            return Ok((existing, false));
+            // A tenant that did not have it is answered as if it were new: content-hash ids must
+            // not tell one tenant what another registered.
+            let created = added && existing.source == ScenarioSource::Api;
+            return Ok(Registered {
+                stored: existing,
+                created,
+                evicted: Vec::new(),
+            });
         }
         if bytes > self.budget_bytes {
-            return Err(Error::RegistryFull(format!(
-                "the scenario takes about {bytes} bytes, more than the registry's whole budget of {} bytes",
-                self.budget_bytes
-            )));
+            metrics::counter!("irs_scenarios_refused_total", "why" => "too_large").increment(1);
+            return Err(Error::RegistryFull {
+                detail: format!(
+                    "the scenario takes about {bytes} bytes, more than the registry's whole budget of {} bytes",
+                    self.budget_bytes
+                ),
+                retry: false,
+            });
         }
         let mut held: usize = by_id.values().map(|s| s.bytes).sum();
+        let mut evicted = Vec::new();
         if by_id.len() >= self.limit || held + bytes > self.budget_bytes {
-            let needed = in_use();
-            let mut victims: Vec<(u64, ScenarioId, usize)> = by_id
-                .values()
-                .filter(|s| s.source == ScenarioSource::Api && !needed.contains(&s.id))
-                .map(|s| (s.last_used.load(Ordering::Relaxed), s.id.clone(), s.bytes))
-                .collect();
-            victims.sort_unstable();
-            let mut victims = victims.into_iter();
-            while by_id.len() >= self.limit || held + bytes > self.budget_bytes {
-                let Some((_, victim, freed)) = victims.next() else {
-                    metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
-                    return Err(Error::RegistryFull(format!(
-                        "the registry holds {} scenarios in {held} bytes (limits: {} scenarios, \
-                         {} bytes) and cached maps or live jobs need every one",
-                        by_id.len(),
-                        self.limit,
-                        self.budget_bytes
-                    )));
-                };
-                by_id.remove(&victim);
-                self.unpersist(&victim);
-                held -= freed;
-                metrics::counter!("irs_scenarios_evicted_total").increment(1);
-                tracing::info!(scenario_id = %victim, "least recently used scenario evicted");
+            let pinned = pinned();
+            let holder = owner.clone();
+            loop {
+                if by_id.len() < self.limit && held + bytes <= self.budget_bytes {
+                    break;
+                }
+                let shares = Shares::of(&by_id, &holder);
+                match shares.victim(&by_id, &pinned, &holder) {
+                    Some(victim) => {
+                        if let Some(gone) = by_id.remove(&victim) {
+                            held -= gone.bytes;
+                        }
+                        self.unpersist(&victim);
+                        metrics::counter!("irs_scenarios_evicted_total").increment(1);
+                        tracing::info!(scenario_id = %victim, "scenario evicted (fair share) with its maps");
+                        evicted.push(victim);
+                    }
+                    None => {
+                        // Only scenarios live jobs need are left to evict.
+                        let (pinned_count, pinned_bytes) = by_id
+                            .values()
+                            .filter(|s| pinned.contains(&s.id))
+                            .fold((0, 0), |(n, b), s| (n + 1, b + s.bytes));
+                        let over_share = shares.over_share(&holder, self.api_limit(&by_id));
+                        let overshoot_left = by_id.len() < self.limit.saturating_add(pinned_count)
+                            && held + bytes <= self.budget_bytes.saturating_add(pinned_bytes);
+                        if !over_share && overshoot_left {
+                            break;
+                        }
+                        let why = if over_share { "over_share" } else { "full" };
+                        metrics::counter!("irs_scenarios_refused_total", "why" => why).increment(1);
+                        metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
+                        return Err(Error::RegistryFull {
+                            detail: format!(
+                                "the registry holds {} scenarios in {held} bytes (limits: {} scenarios, \
+                             {} bytes); {} and live jobs need every one that could make room: \
+                             retry when a job ends, or delete scenarios you registered",
+                                by_id.len(),
+                                self.limit,
+                                self.budget_bytes,
+                                if over_share {
+                                    "you hold more than your fair share"
+                                } else {
+                                    "the registry is full"
+                                }
+                            ),
+                            retry: true,
+                        });
+                    }
+                }
             }
         }
         let stored = Arc::new(StoredScenario {
@@ -251,7 +373,20 @@ impl ScenarioRegistry {
         metrics::gauge!("irs_scenario_bytes").set((held + bytes) as f64);
         drop(by_id);
         self.persist(&stored);
-        Ok((stored, true))
+        Ok(Registered {
+            stored,
+            created: true,
+            evicted,
+        })
+    }
+
+    /// Room for API scenarios: the count limit less the server's own scenarios.
+    fn api_limit(&self, by_id: &HashMap<ScenarioId, Arc<StoredScenario>>) -> usize {
+        let own = by_id
+            .values()
+            .filter(|s| s.source != ScenarioSource::Api)
+            .count();
+        self.limit.saturating_sub(own)
     }
 
     pub fn get(&self, id: &ScenarioId) -> Option<Arc<StoredScenario>> {
@@ -319,5 +454,89 @@ impl ScenarioRegistry {
 
     pub fn len(&self) -> usize {
         self.by_id.read().expect("registry lock").len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn floor(name: &str) -> Scenario {
+        let mut scenario = Scenario::builtin("small-test").unwrap();
+        scenario.name = Some(name.to_string());
+        scenario
+    }
+
+    fn owner(digest: &str) -> Option<Owner> {
+        Some(Owner::from_digest(digest.into()))
+    }
+
+    /// The registry's API scenarios, by name.
+    fn names(registry: &ScenarioRegistry) -> Vec<String> {
+        let mut names: Vec<String> = registry
+            .list(&Caller::Open)
+            .into_iter()
+            .filter(|s| s.source == ScenarioSource::Api)
+            .filter_map(|s| s.name)
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_flood_evicts_its_own_and_a_full_registry_refuses_only_its_filler() {
+        let registry = ScenarioRegistry::new(4, usize::MAX, None);
+        let none = HashSet::new;
+        let (a, b) = (owner("aaaa"), owner("bbbb"));
+        registry
+            .register(floor("b0"), ScenarioSource::Api, b.clone(), none)
+            .unwrap();
+        for k in 0..10 {
+            let done = registry.register(
+                floor(&format!("a{k}")),
+                ScenarioSource::Api,
+                a.clone(),
+                none,
+            );
+            assert!(done.unwrap().created, "a's flood is admitted: {k}");
+        }
+        assert_eq!(
+            names(&registry),
+            ["a7", "a8", "a9", "b0"],
+            "a evicted its own, oldest first"
+        );
+        // B, under its share, makes room from the heaviest holder.
+        let b1 = registry
+            .register(floor("b1"), ScenarioSource::Api, b.clone(), none)
+            .unwrap();
+        assert_eq!(b1.evicted.len(), 1);
+        assert_eq!(names(&registry), ["a8", "a9", "b0", "b1"]);
+        // Every scenario of a's pinned by live jobs: a, over its share, is refused (and may
+        // not evict b's), b is admitted over the limit by at most the pinned ones.
+        let pinned = || -> HashSet<ScenarioId> {
+            ["a8", "a9"]
+                .iter()
+                .map(|n| ScenarioId::of(&floor(n)))
+                .collect()
+        };
+        let refused = registry.register(floor("a10"), ScenarioSource::Api, a.clone(), pinned);
+        assert!(
+            matches!(refused, Err(Error::RegistryFull { retry: true, .. })),
+            "a is refused"
+        );
+        // b at its share: its own oldest goes first.
+        let b2 = registry
+            .register(floor("b2"), ScenarioSource::Api, b.clone(), pinned)
+            .unwrap();
+        assert_eq!(b2.evicted, [ScenarioId::of(&floor("b0"))]);
+        // The same document is new to another tenant, and not to its registrant.
+        let again = registry
+            .register(floor("b2"), ScenarioSource::Api, a, pinned)
+            .unwrap();
+        assert!(again.created && again.evicted.is_empty());
+        let twice = registry
+            .register(floor("b2"), ScenarioSource::Api, b, pinned)
+            .unwrap();
+        assert!(!twice.created);
     }
 }

@@ -82,17 +82,28 @@ impl App {
         Ok(stored)
     }
 
-    /// The scenario a request names at `prefix`: a registered one by id (here or on another
-    /// replica; an unknown id is "not found", as an unknown map id is, naming the field) or
-    /// an inline document (parsed, not registered yet).
+    /// A scenario by id as `caller` may see it: the server's own scenarios are everybody's, an
+    /// API scenario only its registrants' (anybody else is told it does not exist).
+    pub(crate) async fn visible_scenario(
+        &self,
+        caller: &Caller,
+        id: &ScenarioId,
+    ) -> Result<Option<Arc<StoredScenario>>, Error> {
+        Ok(self.scenario(id).await?.filter(|s| s.visible_to(caller)))
+    }
+
+    /// The scenario a request of `caller` names at `prefix`: a registered one by id that the
+    /// caller may see (here or on another replica; an unknown id is "not found", as an unknown
+    /// map id is, naming the field) or an inline document (parsed, not registered yet).
     pub(crate) async fn named_scenario(
         &self,
+        caller: &Caller,
         reference: ScenarioRef,
         prefix: &str,
     ) -> Result<Named, Error> {
         match (reference.id, reference.document) {
             (Some(id), None) => {
-                let stored = self.scenario(&id).await?.ok_or_else(|| {
+                let stored = self.visible_scenario(caller, &id).await?.ok_or_else(|| {
                     Error::not_found("scenario", &id).with_field(format!("{prefix}scenario_id"))
                 })?;
                 Ok(Named {

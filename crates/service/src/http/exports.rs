@@ -5,6 +5,7 @@ use super::problem::ApiError;
 use super::{heavy, only_query};
 use crate::app::App;
 use crate::app::Error;
+use crate::app::identity::Caller;
 use crate::ids::MapId;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
@@ -30,6 +31,7 @@ pub(super) fn query_point(
 /// The map as a PNG; with `start` and `goal`, the path at `threshold` (default "max") drawn on it.
 pub(super) async fn image(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
@@ -69,7 +71,7 @@ pub(super) async fn image(
                 })
         })
         .transpose()?;
-    let (map, scenario) = state.map_with_scenario(&map_id).await?;
+    let (map, scenario) = state.map_with_scenario(&caller, &map_id).await?;
     // Rendering touches every pixel (up to 4096² of them), so it is always a heavy query.
     let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
         let options = match path_ends {
@@ -108,6 +110,7 @@ pub(super) async fn image(
 /// `best`): its YAML and PGM in one tar archive.
 pub(super) async fn nav2_mask(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
@@ -129,7 +132,7 @@ pub(super) async fn nav2_mask(
         })
         .transpose()?
         .unwrap_or_default();
-    let map = state.map(&map_id).await?;
+    let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
     let archive = heavy(&state, "mask export", cells, move |_| {
         export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
@@ -150,11 +153,12 @@ pub(super) async fn nav2_mask(
 /// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).
 pub(super) async fn values_npy(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     only_query(&query, &[])?;
-    let map = state.map(&map_id).await?;
+    let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
     let bytes = heavy(&state, "values export", cells, move |_| export::npy(&map)).await?;
     let disposition = format!("attachment; filename=\"{map_id}.npy\"");

@@ -44,9 +44,10 @@ pub(super) async fn list_jobs(
 
 pub(super) async fn get_job(
     State(state): State<App>,
+    caller: Caller,
     Path(id): Path<JobId>,
 ) -> Result<Json<JobView>, ApiError> {
-    Ok(Json(state.job(&id).await?))
+    Ok(Json(state.job(&caller, &id).await?))
 }
 
 pub(super) async fn cancel_job(

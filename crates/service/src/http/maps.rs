@@ -106,15 +106,17 @@ pub(super) struct MapList {
     next_cursor: Option<String>,
 }
 
-/// The cached maps, by id, a page at a time.
+/// The cached maps the caller asked for (all of them with authentication off), by id, a page
+/// at a time.
 pub(super) async fn list_maps(
     State(state): State<App>,
+    caller: Caller,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MapList>, ApiError> {
     let page = Page::of(&query)?;
     let mut entries: Vec<(String, _)> = state
-        .cache()
-        .entries()
+        .list_maps(&caller)
+        .await?
         .into_iter()
         .map(|(id, map)| (id.to_string(), map))
         .collect();
@@ -126,22 +128,25 @@ pub(super) async fn list_maps(
     }))
 }
 
-/// Drops a cached map (the next request for it builds it again). A map being built answers
-/// 409 with its job: cancel the job instead.
+/// Withdraws the caller's claim on a map, dropping the map with the last claim (the next
+/// request for it builds it again). A map being built answers 409 with its job: cancel the
+/// job instead.
 pub(super) async fn delete_map(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
 ) -> Result<StatusCode, ApiError> {
-    state.delete_map(&map_id).await?;
+    state.delete_map(&caller, &map_id).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
 pub(super) async fn get_map(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
-    let map = state.map(&map_id).await?;
+    let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
     let bytes = heavy(&state, "map body", cells, move |_| {
         serde_json::to_vec(&Timed::since(started, irs_answers::map::body(&map)))

@@ -40,6 +40,7 @@ pub(super) struct Coverage {
 
 pub(super) async fn coverage(
     State(state): State<App>,
+    caller: Caller,
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
@@ -48,7 +49,7 @@ pub(super) async fn coverage(
         .get("threshold")
         .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
     let threshold = parse_finite(threshold).map_err(|e| Error::invalid("threshold", e))?;
-    let map = state.map(&map_id).await?;
+    let map = state.map(&caller, &map_id).await?;
     let eta = map.coverage(threshold);
     let free = map.free_cells();
     Ok(Json(Coverage {
@@ -96,7 +97,7 @@ pub(super) async fn map_for_query(
     map: Option<MapRequest>,
 ) -> Result<Result<(Arc<RadioMap>, Arc<Scenario>), Response>, Error> {
     match (map_id, map) {
-        (Some(id), None) => Ok(Ok(state.map_with_scenario(&id).await?)),
+        (Some(id), None) => Ok(Ok(state.map_with_scenario(caller, &id).await?)),
         (None, Some(request)) => Ok(
             match state.request_map(caller, request.spec(), "map.").await? {
                 Obtained::Ready { map, scenario } => Ok((map, scenario)),

@@ -97,7 +97,7 @@ pub(super) async fn place(
     };
     let Named {
         scenario, inline, ..
-    } = state.named_scenario(reference, "").await?;
+    } = state.named_scenario(&caller, reference, "").await?;
     let search = Search {
         what: request.what,
         index: request.index,
@@ -130,22 +130,35 @@ pub(super) async fn place(
     }
     let work = candidates.len() * scenario.grid().cells() * scenario.access_points().len();
     let (registrar, owner) = (state.clone(), caller.clone());
+    let (claimant, claimer) = (state.clone(), caller.clone());
     let checked = PlacementSearch {
         scenario,
         search,
         candidates,
         keep,
     };
-    let job = state
-        .jobs()
-        .place(state.cache(), checked, caller.owner(), move |s| {
+    let job = state.jobs().place(
+        state.cache(),
+        checked,
+        caller.owner(),
+        move |s| {
             registrar
                 .register_scenario(s, ScenarioSource::Api, &owner)
                 .inspect_err(
                     |e| tracing::warn!(error = %e, "a placement candidate was not registered"),
                 )
                 .is_ok()
-        })?;
+        },
+        // The best candidates' maps are the caller's, as if it had asked for each.
+        move |map_id| {
+            let (state, caller) = (claimant.clone(), claimer.clone());
+            Box::pin(async move {
+                if let Err(e) = state.claim_map(&caller, &map_id).await {
+                    tracing::warn!(error = %e, "a placement candidate's map was not claimed");
+                }
+            })
+        },
+    )?;
     if work > SYNC_PLACEMENT_MAPS * state.limits().sync_cells || estimated_s > SYNC_PLACEMENT_S {
         return Ok(accepted(job.view()));
     }
@@ -162,12 +175,13 @@ pub(super) async fn place(
 
 pub(super) async fn get_placement(
     State(state): State<App>,
+    caller: Caller,
     Path(placement_id): Path<JobId>,
 ) -> Result<Response, ApiError> {
     let job = state
         .jobs()
         .get(&placement_id)
-        .filter(|j| matches!(j.work, Work::Placement { .. }))
+        .filter(|j| matches!(j.work, Work::Placement { .. }) && j.visible_to(&caller))
         .ok_or_else(|| Error::not_found("placement", &placement_id))?;
     match job.placement() {
         Some(outcome) => Ok(Json(placement_body(&job, &outcome)).into_response()),

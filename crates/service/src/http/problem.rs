@@ -263,12 +263,17 @@ impl From<app::Error> for ApiError {
                 e.retry_after_s = Some(1);
                 e
             }
-            E::RegistryFull(_) => Self::new(
-                StatusCode::INSUFFICIENT_STORAGE,
-                "registry_full",
-                "Scenario registry full",
-                detail,
-            ),
+            E::RegistryFull { retry, .. } => {
+                let mut e = Self::new(
+                    StatusCode::INSUFFICIENT_STORAGE,
+                    "registry_full",
+                    "Scenario registry full",
+                    detail,
+                );
+                // Room comes back as live jobs end (the only scenarios never evicted).
+                e.retry_after_s = retry.then_some(5);
+                e
+            }
             E::ScenarioProtected { .. } => Self::new(
                 StatusCode::CONFLICT,
                 "scenario_protected",

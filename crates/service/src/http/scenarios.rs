@@ -84,10 +84,11 @@ pub(super) async fn register_scenario(
 
 pub(super) async fn get_scenario(
     State(state): State<App>,
+    caller: Caller,
     Path(id): Path<ScenarioId>,
 ) -> Result<Response, ApiError> {
     let stored = state
-        .scenario(&id)
+        .visible_scenario(&caller, &id)
         .await?
         .ok_or_else(|| Error::not_found("scenario", &id))?;
     let body = scenario_answer(&state, stored).await?;

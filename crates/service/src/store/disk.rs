@@ -1,7 +1,9 @@
 //! Persistence on one node (`serve --data-dir DIR`): the scenarios registered through the API,
 //! the built maps and the finished job records, as files that survive a restart.
 //!
-//! Layout: `DIR/scenarios/<scenario id>.rec`, `DIR/maps/<map id>.rec`, `DIR/jobs/<job id>.rec`.
+//! Layout: `DIR/scenarios/<scenario id>.rec`, `DIR/maps/<map id>.rec`, `DIR/jobs/<job id>.rec`,
+//! and `DIR/map-owners/<map id>.rec` (the owner digests of a map, with tokens on); a map's
+//! owners file goes whenever its map file goes, so no claim outlives its map.
 //! Scenario and map files are content-addressed (the id is the hash of the scenario's
 //! canonical form, or of the map key), so a file can only ever hold one content; a job record
 //! is rewritten only when the job ends.
@@ -56,6 +58,8 @@ pub(crate) enum Kind {
     Scenario,
     Map,
     Job,
+    /// Who asked for a map (`app::map_owners`).
+    MapOwners,
 }
 
 impl Kind {
@@ -64,6 +68,7 @@ impl Kind {
             Kind::Scenario => "scenarios",
             Kind::Map => "maps",
             Kind::Job => "jobs",
+            Kind::MapOwners => "map-owners",
         }
     }
 }
@@ -125,7 +130,7 @@ impl DataDir {
     /// with a warning, and reported by [`DataDir::unwritable`].
     pub fn open(root: &Path, maps_budget_bytes: u64, cache_bytes: u64) -> Result<DataDir, String> {
         fs::create_dir_all(root).map_err(|e| format!("--data-dir {}: {e}", root.display()))?;
-        for kind in [Kind::Scenario, Kind::Map, Kind::Job] {
+        for kind in [Kind::Scenario, Kind::Map, Kind::Job, Kind::MapOwners] {
             let dir = root.join(kind.dir());
             if let Err(e) = fs::create_dir_all(&dir) {
                 // The probe below reports it; what can be read is still served.
@@ -306,7 +311,7 @@ impl DataDir {
         let path = self.path(kind, id);
         let max_bytes = match kind {
             Kind::Map => self.max_map_file_bytes,
-            Kind::Scenario | Kind::Job => MAX_JSON_RECORD_BYTES,
+            Kind::Scenario | Kind::Job | Kind::MapOwners => MAX_JSON_RECORD_BYTES,
         };
         let bytes = match irs_answers::files::read_regular(&path, max_bytes) {
             Ok(bytes) => bytes,
@@ -345,6 +350,17 @@ impl DataDir {
 
     pub fn remove_json(&self, kind: Kind, id: &str) {
         self.remove(kind, id);
+    }
+
+    /// One JSON record, if it is there and readable (a damaged one is skipped with a warning).
+    pub fn load_one_json<T: serde::de::DeserializeOwned>(&self, kind: Kind, id: &str) -> Option<T> {
+        if !valid_id(id) {
+            return None;
+        }
+        let payload = self.read(kind, id)?;
+        serde_json::from_slice(&payload)
+            .inspect_err(|e| tracing::warn!(id, kind = kind.dir(), error = %e, "record ignored"))
+            .ok()
     }
 
     /// Every readable JSON record of `kind`, with its id; unreadable ones are skipped.
@@ -404,6 +420,7 @@ impl DataDir {
                     break;
                 }
                 self.remove(Kind::Map, &id);
+                self.remove(Kind::MapOwners, &id);
                 maps.remove(&id);
                 held -= bytes;
                 tracing::info!(map_id = %id, "map dropped from the data directory (budget)");
@@ -455,6 +472,7 @@ impl DataDir {
             .remove(map_id)
             .is_some();
         self.remove(Kind::Map, map_id);
+        self.remove(Kind::MapOwners, map_id);
         known
     }
 

@@ -10,6 +10,11 @@
 //!   its SHA-256 like a data-directory file; each replica keeps its moka cache in front;
 //! * `irs:job:<id>`: a map job's record (state, progress, times, error), rewritten by the
 //!   replica building it once per heartbeat; `irs:cancel:<id>` asks that replica to cancel;
+//! * `irs:map-owners:<map id>`: with tokens on, the set of owner digests that asked for the map
+//!   (a tenant without a claim is told the map does not exist); a claim is withdrawn with a
+//!   script that deletes the map with the last claim;
+//! * `irs:job-owners:<job id>`: the set of owner digests that share a build; a cancel withdraws
+//!   one with a script that asks the builder to stop only when the last one withdraws;
 //! * `irs:building:<map id>`: the single-flight lock, the id of the job building the map, set
 //!   with NX and an expiry that the builder renews every heartbeat;
 //! * the stream `irs:builds` with the consumer group `builders`: one entry per build. Every
@@ -84,7 +89,30 @@ fn cancel_key(id: &JobId) -> String {
 fn lock_key(map_id: &MapId) -> String {
     format!("irs:building:{map_id}")
 }
+fn map_owners_key(id: &MapId) -> String {
+    format!("irs:map-owners:{id}")
+}
+fn job_owners_key(id: &JobId) -> String {
+    format!("irs:job-owners:{id}")
+}
 
+/// Withdraws one owner (ARGV[1]) from the set KEYS[1], atomically with what follows when it
+/// is the last: with ARGV[2] = "del" KEYS[2] is deleted with the set (a map nobody claims any
+/// more); otherwise KEYS[2] is set for ARGV[3] seconds and the last owner stays in the set (a
+/// build nobody wants is asked to stop, and stays its last owner's to read). Returns the
+/// owners left, or -1 if ARGV[1] was not one (then nothing changes).
+const WITHDRAW: &str = r"
+if redis.call('SISMEMBER', KEYS[1], ARGV[1]) == 0 then return -1 end
+local left = redis.call('SCARD', KEYS[1]) - 1
+if left > 0 then
+  redis.call('SREM', KEYS[1], ARGV[1])
+elseif ARGV[2] == 'del' then
+  redis.call('DEL', KEYS[1], KEYS[2])
+else
+  redis.call('SET', KEYS[2], '1', 'EX', tonumber(ARGV[3]))
+end
+return left
+";
 /// One build, as the stream carries it.
 #[derive(Debug, Clone)]
 pub(crate) struct BuildEntry {
@@ -380,8 +408,83 @@ impl Cluster {
 
     pub async fn delete_map(&self, id: &MapId) -> Result<bool, Error> {
         let mut conn = self.conn()?;
-        let removed: usize = conn.del(map_key(id)).await.map_err(|e| self.error(&e))?;
+        let removed: usize = conn
+            .del(&[map_key(id), map_owners_key(id)])
+            .await
+            .map_err(|e| self.error(&e))?;
         Ok(removed > 0)
+    }
+
+    /// Records that `owner` (a digest) asked for the map.
+    pub async fn claim_map(&self, id: &MapId, owner: &str) -> Result<(), Error> {
+        let mut conn = self.conn()?;
+        conn.sadd::<_, _, ()>(map_owners_key(id), owner)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// Whether `owner` asked for the map.
+    pub async fn map_claimed(&self, id: &MapId, owner: &str) -> Result<bool, Error> {
+        let mut conn = self.conn()?;
+        conn.sismember(map_owners_key(id), owner)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// Withdraws `owner`'s claim on a map, deleting the map with the last claim (atomically,
+    /// so a claim made meanwhile on another replica is never left on a deleted map). The
+    /// owners left, or `None` if `owner` had no claim.
+    pub async fn withdraw_map(&self, id: &MapId, owner: &str) -> Result<Option<usize>, Error> {
+        let mut conn = self.conn()?;
+        let left: i64 = redis::Script::new(WITHDRAW)
+            .key(map_owners_key(id))
+            .key(map_key(id))
+            .arg(owner)
+            .arg("del")
+            .arg(0)
+            .invoke_async(&mut conn)
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(usize::try_from(left).ok())
+    }
+
+    /// Records that `owner` shares the build `id` (kept as long as job records are).
+    pub async fn join_job(&self, id: &JobId, owner: &str) -> Result<(), Error> {
+        let mut conn = self.conn()?;
+        let key = job_owners_key(id);
+        redis::pipe()
+            .atomic()
+            .sadd(&key, owner)
+            .ignore()
+            .expire(&key, RECORD_TTL_S as i64)
+            .ignore()
+            .query_async::<()>(&mut conn)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// Whether `owner` shares the build `id`.
+    pub async fn job_owned_by(&self, id: &JobId, owner: &str) -> Result<bool, Error> {
+        let mut conn = self.conn()?;
+        conn.sismember(job_owners_key(id), owner)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// Withdraws `owner` from the build `id`; with the last owner the builder is asked to stop
+    /// (atomically). The owners left, or `None` if `owner` was not one.
+    pub async fn withdraw_job(&self, id: &JobId, owner: &str) -> Result<Option<usize>, Error> {
+        let mut conn = self.conn()?;
+        let left: i64 = redis::Script::new(WITHDRAW)
+            .key(job_owners_key(id))
+            .key(cancel_key(id))
+            .arg(owner)
+            .arg("set")
+            .arg(RECORD_TTL_S)
+            .invoke_async(&mut conn)
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(usize::try_from(left).ok())
     }
 
     pub async fn put_job(&self, id: &JobId, record: &impl Serialize) -> Result<(), Error> {

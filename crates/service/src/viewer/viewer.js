@@ -53,6 +53,33 @@ async function api(method, path, body) {
   return { status: response.status, data };
 }
 
+// A download link is a plain GET, which carries no header: with tokens on, a map is its
+// tenants' only (anybody else gets 404), so with a token set the file is fetched with it and
+// handed to the browser as a blob.
+async function downloadWithToken(event) {
+  const token = $("token").value.trim();
+  const link = event.currentTarget;
+  if (!token || !link.href || link.href.startsWith("blob:")) return;
+  event.preventDefault();
+  try {
+    const response = await fetch(link.href, { headers: { authorization: `Bearer ${token}` } });
+    if (!response.ok) {
+      const problem = await response.json().catch(() => ({}));
+      throw new Error(`${problem.title || response.status}: ${problem.detail || ""}`);
+    }
+    const url = URL.createObjectURL(await response.blob());
+    const save = document.createElement("a");
+    save.href = url;
+    save.download = link.download;
+    document.body.appendChild(save);
+    save.click();
+    save.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 10_000);
+  } catch (error) {
+    say(`Download failed: ${error.message}`, true);
+  }
+}
+
 function say(message, isError = false) {
   const status = $("status");
   status.textContent = message;
@@ -641,6 +668,7 @@ function wire() {
   const guard = (f) => (...args) => Promise.resolve(f(...args)).catch(report);
   $("scenario").addEventListener("change", guard((e) => chooseScenario(e.target.value)));
   $("token").value = sessionStorage.getItem("irs-planner-token") || "";
+  for (const id of ["download-map", "download-png"]) $(id).addEventListener("click", downloadWithToken);
   $("token").addEventListener("change", () => sessionStorage.setItem("irs-planner-token", $("token").value.trim()));
   $("register").addEventListener("click", guard(registerScenario));
   for (const id of ["kind", "phases", "access"]) $(id).addEventListener("change", guard(buildMap));

@@ -2,7 +2,7 @@
 //! delivers its map to the requests waiting for it, and waiting for it to end.
 
 use super::placements::PlacementOutcome;
-use crate::app::identity::Owner;
+use crate::app::identity::{Caller, Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::radiomap::{MapKey, Progress, RadioMap};
 use serde::{Deserialize, Serialize};
@@ -139,8 +139,10 @@ pub struct Job {
     pub id: JobId,
     /// Order of creation, for listings (newest first) and their cursors.
     pub seq: u64,
-    /// The token that started it (`None` with authentication off); only it may cancel.
-    pub owner: Option<Owner>,
+    /// The tokens that asked for it (none with authentication off): a map build shared by
+    /// several tenants serves each of them, each cancel withdraws one, and the build stops only
+    /// when none is left.
+    pub(super) owners: Mutex<Owners>,
     /// The scenario the job works on (a live job keeps it registered).
     pub scenario_id: ScenarioId,
     pub work: Work,
@@ -169,7 +171,50 @@ pub(super) fn unix(t: Option<SystemTime>) -> Option<f64> {
     })
 }
 
+/// What a cancel did to a job.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Withdrawn {
+    /// The caller was the last owner (or authentication is off): the job is asked to stop.
+    Stopping,
+    /// Other owners still want it: it goes on for them.
+    SharedOn,
+}
+
 impl Job {
+    /// Its owners now.
+    pub fn owners(&self) -> Owners {
+        self.owners.lock().expect("job lock").clone()
+    }
+
+    /// May `caller` see or cancel it? (A tenant that is not an owner is told it does not exist.)
+    pub fn visible_to(&self, caller: &Caller) -> bool {
+        caller.may_touch_any(&self.owners.lock().expect("job lock"))
+    }
+
+    /// Adds an owner that asked for the same work (a shared build).
+    pub(super) fn join(&self, owner: Option<Owner>) {
+        if let Some(owner) = owner {
+            self.owners.lock().expect("job lock").insert(owner);
+        }
+    }
+
+    /// Withdraws `caller`'s interest: the job stops with the last owner's. `None` when the
+    /// caller is not an owner.
+    pub(super) fn withdraw(&self, caller: &Caller) -> Option<Withdrawn> {
+        let mut owners = self.owners.lock().expect("job lock");
+        match caller {
+            Caller::Open => Some(Withdrawn::Stopping),
+            Caller::Anonymous => None,
+            Caller::Owner(me) if !owners.contains(me) => None,
+            // The last owner stays on the record: the job it stopped is still its to read.
+            Caller::Owner(_) if owners.len() == 1 => Some(Withdrawn::Stopping),
+            Caller::Owner(me) => {
+                owners.remove(me);
+                Some(Withdrawn::SharedOn)
+            }
+        }
+    }
+
     pub fn state(&self) -> JobState {
         *self.state.borrow()
     }

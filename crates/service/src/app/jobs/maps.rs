@@ -10,7 +10,7 @@ use super::Jobs;
 use super::job::{Job, MapDelivery, Work};
 use crate::app::Error;
 use crate::app::cache::MapCache;
-use crate::app::identity::Owner;
+use crate::app::identity::{Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::radiomap::{MapKey, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
@@ -29,7 +29,8 @@ impl Jobs {
         self.in_flight.lock().await.get(map_id).cloned()
     }
 
-    /// The map if cached, else the job building it (started now unless one is in flight).
+    /// The map if cached, else the job building it (started now unless one is in flight; a
+    /// job in flight adds `owner` to its owners).
     pub async fn request(
         self: &Arc<Self>,
         cache: &MapCache,
@@ -43,10 +44,12 @@ impl Jobs {
             return Ok(MapRequestOutcome::Ready(map));
         }
         if let Some(job) = in_flight.get(&map_id) {
+            // A shared build: it now serves this owner too, until each has let go.
+            job.join(owner);
             return Ok(MapRequestOutcome::Building(job.clone()));
         }
         self.check_room()?;
-        let job = self.admit_map(JobId::random(), &key, owner);
+        let job = self.admit_map(JobId::random(), &key, Owners::of(owner));
         in_flight.insert(map_id.clone(), job.clone());
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
@@ -71,7 +74,7 @@ impl Jobs {
         job_id: JobId,
         scenario: Arc<Scenario>,
         key: MapKey,
-        owner: Option<Owner>,
+        owners: Owners,
         cache: &MapCache,
         publish: P,
     ) -> Arc<Job>
@@ -80,7 +83,7 @@ impl Jobs {
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
         let map_id = MapId::of(&key);
-        let job = self.admit_map(job_id, &key, owner);
+        let job = self.admit_map(job_id, &key, owners);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
@@ -108,12 +111,12 @@ impl Jobs {
     }
 
     /// A map build admitted as job `id`, counted in `irs_map_builds_total`.
-    fn admit_map(&self, id: JobId, key: &MapKey, owner: Option<Owner>) -> Arc<Job> {
+    fn admit_map(&self, id: JobId, key: &MapKey, owners: Owners) -> Arc<Job> {
         metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
         self.admit_as(
             id,
             ScenarioId::of_key(key),
-            owner,
+            owners,
             Work::Map {
                 map_id: MapId::of(key),
                 key: key.clone(),

@@ -10,13 +10,14 @@ mod placements;
 mod record;
 
 use job::JobTimes;
-pub use job::{Job, JobState, Work};
+pub use job::{Job, JobState, Withdrawn, Work};
 pub use maps::MapRequestOutcome;
 pub use placements::{PlacementOutcome, PlacementSearch};
 pub(crate) use record::{JobRecord, JobView};
 
 use crate::app::Error;
-use crate::app::identity::{Caller, Owner};
+use crate::app::identity::{Caller, Owner, Owners};
+use crate::app::map_owners::MapOwners;
 use crate::ids::{JobId, MapId, ScenarioId};
 use crate::store::{DataDir, Kind};
 use irs_model::radiomap::{Cancelled, Progress, WorkError};
@@ -36,6 +37,8 @@ pub struct Jobs {
     in_flight: tokio::sync::Mutex<HashMap<MapId, Arc<Job>>>,
     /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
     disk: Option<Arc<DataDir>>,
+    /// The claims on maps: a build that ends without its map leaves no claim behind.
+    map_owners: Arc<MapOwners>,
 }
 
 impl Jobs {
@@ -47,6 +50,7 @@ impl Jobs {
         history_limit: usize,
         history_bytes: u64,
         disk: Option<Arc<DataDir>>,
+        map_owners: Arc<MapOwners>,
     ) -> Self {
         Jobs {
             next_seq: AtomicU64::new(0),
@@ -62,6 +66,7 @@ impl Jobs {
             by_id: Mutex::new(HashMap::new()),
             in_flight: tokio::sync::Mutex::new(HashMap::new()),
             disk,
+            map_owners,
         }
     }
 
@@ -129,7 +134,7 @@ impl Jobs {
             .lock()
             .expect("jobs lock")
             .values()
-            .filter(|j| caller.may_touch(j.owner.as_ref()))
+            .filter(|j| j.visible_to(caller))
             .map(|j| (j.seq, j.view()))
             .collect();
         all.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
@@ -160,22 +165,16 @@ impl Jobs {
 
     /// Creates a queued job and records it.
     fn admit(&self, scenario_id: ScenarioId, owner: Option<Owner>, work: Work) -> Arc<Job> {
-        self.admit_as(JobId::random(), scenario_id, owner, work)
+        self.admit_as(JobId::random(), scenario_id, Owners::of(owner), work)
     }
 
     /// [`Jobs::admit`] under a given id (a cluster job keeps the id its record has).
-    fn admit_as(
-        &self,
-        id: JobId,
-        scenario_id: ScenarioId,
-        owner: Option<Owner>,
-        work: Work,
-    ) -> Arc<Job> {
+    fn admit_as(&self, id: JobId, scenario_id: ScenarioId, owners: Owners, work: Work) -> Arc<Job> {
         let (state, _) = watch::channel(JobState::Queued);
         let job = Arc::new(Job {
             id,
             seq: self.next_seq.fetch_add(1, Ordering::Relaxed),
-            owner,
+            owners: Mutex::new(owners),
             scenario_id,
             work,
             progress: Arc::new(Progress::default()),
@@ -266,6 +265,10 @@ impl Jobs {
     async fn retire(&self, job: &Arc<Job>) {
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
+            if job.state() != JobState::Done {
+                // No map came of it: the claims made on it while it ran claim nothing.
+                self.map_owners.forget(map_id);
+            }
         }
         if let Some(disk) = self.disk.clone() {
             let (id, record) = (job.id.clone(), job.record());
@@ -288,11 +291,13 @@ impl Jobs {
         }
     }
 
-    /// Cancels a queued or running job; a job of another token is not found (404).
-    pub fn cancel(&self, id: &JobId, caller: &Caller) -> Result<Arc<Job>, Error> {
+    /// Withdraws `caller`'s interest in a queued or running job, which stops when no owner
+    /// wants it any more (at once with authentication off); a job the caller does not own is
+    /// not found (404).
+    pub fn cancel(&self, id: &JobId, caller: &Caller) -> Result<(Arc<Job>, Withdrawn), Error> {
         let job = self
             .get(id)
-            .filter(|job| caller.may_touch(job.owner.as_ref()))
+            .filter(|job| job.visible_to(caller))
             .ok_or_else(|| Error::not_found("job", id))?;
         let state = job.state();
         if state.is_terminal() {
@@ -301,9 +306,14 @@ impl Jobs {
                 state,
             });
         }
-        job.progress.cancel();
-        job.cancel.notify_one();
-        Ok(job)
+        let withdrawn = job
+            .withdraw(caller)
+            .ok_or_else(|| Error::not_found("job", id))?;
+        if withdrawn == Withdrawn::Stopping {
+            job.progress.cancel();
+            job.cancel.notify_one();
+        }
+        Ok((job, withdrawn))
     }
 }
 

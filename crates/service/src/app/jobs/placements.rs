@@ -13,6 +13,9 @@ use irs_model::scenario::Scenario;
 use std::sync::{Arc, OnceLock};
 use tracing::Instrument;
 
+/// Claiming a candidate's map for the search's owner (which may ask the shared store).
+pub type Claiming = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
+
 /// A checked placement search, ready to run.
 pub struct PlacementSearch {
     pub scenario: Arc<Scenario>,
@@ -48,7 +51,8 @@ impl PlacementOutcome {
 
 impl Jobs {
     /// Starts a placement search as a job (503 when the queue is full). When it is done, the
-    /// best `keep` candidates' scenarios go to `register` and their maps into `cache`, so the
+    /// best `keep` candidates' scenarios go to `register`, their maps to `claim` (for the
+    /// owner) and into `cache`, so the
     /// answer's map ids answer path queries at once; then the answer is kept in the job.
     pub fn place(
         self: &Arc<Self>,
@@ -56,6 +60,7 @@ impl Jobs {
         search: PlacementSearch,
         owner: Option<Owner>,
         register: impl Fn(Scenario) -> bool + Send + 'static,
+        claim: impl Fn(MapId) -> Claiming + Send + 'static,
     ) -> Result<Arc<Job>, Error> {
         let PlacementSearch {
             scenario,
@@ -104,7 +109,9 @@ impl Jobs {
             let mut registered = 0;
             for (scenario, map) in placement.scenarios.into_iter().zip(maps) {
                 if register(scenario) {
-                    cache.insert(MapId::of_map(&map), Arc::new(map)).await;
+                    let map_id = MapId::of_map(&map);
+                    claim(map_id.clone()).await;
+                    cache.insert(map_id, Arc::new(map)).await;
                     registered += 1;
                 }
             }

@@ -4,7 +4,7 @@
 
 use super::job::{Job, JobKind, JobState, JobTimes, MapDelivery, Work, from_unix, unix};
 use super::placements::PlacementOutcome;
-use crate::app::identity::Owner;
+use crate::app::identity::{Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::radiomap::{MapKey, Progress};
 use serde::{Deserialize, Serialize};
@@ -87,8 +87,13 @@ pub(crate) struct JobRecord {
     #[serde(flatten)]
     pub view: JobView,
     pub seq: u64,
-    /// The owner's digest (never the token).
+    /// The first owner's digest (never the token): what records had before `owners`, kept so
+    /// an older release reads the record.
     pub owner: Option<String>,
+    /// Every owner's digest (a shared build serves several tenants). Absent from older
+    /// records: `owner` alone then.
+    #[serde(default)]
+    pub owners: Vec<String>,
     /// Placement jobs that finished: the answer and how many candidates were registered.
     pub placement: Option<(serde_json::Value, usize)>,
 }
@@ -111,13 +116,18 @@ impl JobRecord {
             },
             seq: 0,
             owner: owner.map(|o| o.to_string()),
+            owners: owner.map(|o| o.to_string()).into_iter().collect(),
             placement: None,
         }
     }
 
-    /// The owner, as [`Caller::may_touch`] takes it.
-    pub(crate) fn owner(&self) -> Option<Owner> {
-        self.owner.clone().map(Owner::from_digest)
+    /// The owners, from `owners`, or `owner` in a record written before it.
+    pub(crate) fn owners(&self) -> Owners {
+        if self.owners.is_empty() {
+            Owners::from_digests(self.owner.clone())
+        } else {
+            Owners::from_digests(self.owners.clone())
+        }
     }
 }
 
@@ -143,10 +153,12 @@ impl Job {
 
     /// The record a data directory keeps of a finished job (and Redis of a cluster's build).
     pub(crate) fn record(&self) -> JobRecord {
+        let owners = self.owners();
         JobRecord {
             view: self.view(),
             seq: self.seq,
-            owner: self.owner.as_ref().map(|o| o.to_string()),
+            owner: owners.first().map(|o| o.to_string()),
+            owners: owners.digests(),
             placement: self
                 .placement()
                 .map(|outcome| (outcome.answer.clone(), outcome.registered)),
@@ -156,11 +168,12 @@ impl Job {
     /// A finished job again, from its record; `None` for a record that is not of a finished
     /// job (the store only writes finished ones) or whose map key does not match its kind.
     pub(super) fn restore(record: JobRecord) -> Option<Job> {
+        let owners = record.owners();
         let JobRecord {
             view,
             seq,
-            owner,
             placement,
+            ..
         } = record;
         if !view.state.is_terminal() {
             return None;
@@ -187,7 +200,7 @@ impl Job {
         Some(Job {
             id: view.job_id,
             seq,
-            owner: owner.map(Owner::from_digest),
+            owners: Mutex::new(owners),
             scenario_id: view.scenario_id,
             work,
             progress: Arc::new(progress),
@@ -208,10 +221,10 @@ mod tests {
     use super::*;
 
     /// A finished map job's record as the data directory and Redis hold it.
-    const MAP_RECORD: &str = r#"{"job_id":"0123456789abcdef0123456789abcdef","seq":7,"owner":"d1gest","scenario_id":"5c3na410","key":{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null},"state":"done","cells_done":40,"cells_total":40,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"placement":null}"#;
+    const MAP_RECORD: &str = r#"{"job_id":"0123456789abcdef0123456789abcdef","seq":7,"owner":"d1gest","owners":["d1gest"],"scenario_id":"5c3na410","key":{"scenario_id":"5c3na410","kind":"gain","phases":"continuous","access":null,"solver":null},"state":"done","cells_done":40,"cells_total":40,"created_at":1700000000.25,"started_at":1700000001.5,"finished_at":1700000002.75,"error":null,"placement":null}"#;
 
     /// A finished placement job's record.
-    const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
+    const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"owners":[],"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
 
     /// A record reads back as the record it was, and carries every field of today's format
     /// (so the release before this one reads it too).
@@ -223,6 +236,16 @@ mod tests {
         for (field, value) in today.as_object().unwrap() {
             assert_eq!(&written[field], value, "{field}");
         }
+    }
+
+    /// A record of the release before `owners` reads with its one owner.
+    #[test]
+    fn a_record_with_only_owner_reads_as_one_owner() {
+        let older = MAP_RECORD.replace(r#""owners":["d1gest"],"#, "");
+        let record: JobRecord = serde_json::from_str(&older).unwrap();
+        assert_eq!(record.owners().digests(), ["d1gest"]);
+        let job = Job::restore(record).unwrap();
+        assert_eq!(job.record().owners, ["d1gest"]);
     }
 
     #[test]
