@@ -154,3 +154,59 @@ fn a_diagonal_wall_shadows_the_cells_behind_it() {
     assert!(map.values[behind] < open.values[behind] - 2.0);
     assert_eq!(map.values[past], open.values[past]);
 }
+
+/// Nav2's depot map (tests/data/nav2-depot, a scan the project did not draw) at a 0.25 m grid:
+/// its thin walls cross many cells away from their centres. No move of the planner's graph
+/// between free cells crosses an occupied pixel (the exact segment test), where the rule of
+/// occupied centres let many through; and a path across the depot keeps off every pixel.
+#[test]
+fn no_move_crosses_a_wall_of_a_public_ros_map() {
+    let file =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nav2-depot/depot.json");
+    let depot = Scenario::from_file(&file).expect("the depot scenario");
+    let map = gain_map(&depot, PhaseMode::None);
+    let grid = depot.grid();
+    let obstructions = depot.obstructions();
+    let at = |i: usize, j: usize, z: f64| {
+        let [x, y] = grid.centre(i, j);
+        [x, y, z]
+    };
+    let (mut moves, mut crossing_before) = (0, 0);
+    for i in 0..grid.nx {
+        for j in 0..grid.ny {
+            for (di, dj) in [(1i64, 0i64), (0, 1), (1, 1), (1, -1)] {
+                let (k, l) = (i as i64 + di, j as i64 + dj);
+                if k >= grid.nx as i64 || l < 0 || l >= grid.ny as i64 {
+                    continue;
+                }
+                let (k, l) = (k as usize, l as usize);
+                let (a, b) = (at(i, j, 0.5), at(k, l, 0.5));
+                let centre_free = |p: [f64; 3]| !obstructions.covers(p[0], p[1]);
+                if centre_free(a) && centre_free(b) && obstructions.blocks(a, b) {
+                    crossing_before += 1;
+                }
+                if map.occupied[grid.index(i, j)] || map.occupied[grid.index(k, l)] {
+                    continue;
+                }
+                moves += 1;
+                assert!(!obstructions.blocks(a, b), "{a:?} → {b:?} crosses a wall");
+            }
+        }
+    }
+    assert!(moves > 10_000, "{moves} free moves");
+    // The map does exercise the rule: with only centres tested, moves went through walls.
+    assert!(
+        crossing_before > 10,
+        "{crossing_before} moves crossed walls before"
+    );
+    let path = planner::plan(&map, [1.0, 1.0], [29.0, 14.0], Threshold::Max, 1.0);
+    if let Ok(path) = path {
+        for pair in path.waypoints.windows(2) {
+            let ([ax, ay], [bx, by]) = ([pair[0].x, pair[0].y], [pair[1].x, pair[1].y]);
+            assert!(
+                !obstructions.blocks([ax, ay, 0.5], [bx, by, 0.5]),
+                "the path crosses a wall"
+            );
+        }
+    }
+}

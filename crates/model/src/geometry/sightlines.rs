@@ -219,16 +219,7 @@ fn box_is_near(b: &Aabb, source: &P3) -> bool {
 }
 
 fn wall_corners(w: &Wall) -> [[f64; 2]; 4] {
-    let [ax, ay] = w.axis;
-    // The wall's across-direction (−a_y, a_x): local w = dy·a_x − dx·a_y.
-    let corner = |s: f64, t: f64| [w.from[0] + s * ax - t * ay, w.from[1] + s * ay + t * ax];
-    let (s1, t0, t1) = (w.local.hi[0], w.local.lo[1], w.local.hi[1]);
-    [
-        corner(0.0, t0),
-        corner(s1, t0),
-        corner(s1, t1),
-        corner(0.0, t1),
-    ]
+    w.corners()
 }
 
 fn wall_is_near(w: &Wall, source: &P3) -> bool {

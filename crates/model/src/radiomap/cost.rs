@@ -85,7 +85,7 @@ pub fn sample_links(scenario: &Scenario) -> LinkSample {
             );
             (
                 nalgebra::Vector3::new(x, y, height),
-                !obstructions.covers(x, y),
+                !obstructions.overlaps_square(x, y, grid.resolution_m / 2.0),
             )
         })
         .collect();

@@ -39,7 +39,8 @@ impl fmt::Display for MapKind {
 /// The version of the model's physics. Bumped by every change that alters a value of any
 /// existing key's map, so that a map built before (kept in a data directory or Redis) is never
 /// served for it: the map id hashes the key, and the key carries this version.
-pub const MODEL_VERSION: u32 = 1;
+/// 2: a cell is occupied when an obstacle overlaps its square, not only its centre.
+pub const MODEL_VERSION: u32 = 2;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -228,20 +228,24 @@ impl RadioMap {
     }
 }
 
-/// Per cell of `grid`: true when something on the floor covers its centre (docs/model.md §1).
-/// Rows in parallel: on a 1001² grid this pass was a tenth of a gain map's time on one core.
+/// Per cell of `grid`: true when something on the floor overlaps the cell's square, not only
+/// its centre (docs/model.md §1), so no move between free cells crosses an obstacle.
 pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
     let obstructions = scenario.obstructions();
     let mut occupied = vec![false; grid.cells()];
-    occupied
-        .par_chunks_mut(grid.ny)
-        .enumerate()
-        .for_each(|(i, row)| {
-            for (j, cell) in row.iter_mut().enumerate() {
-                let [x, y] = grid.centre(i, j);
-                *cell = obstructions.covers(x, y);
-            }
-        });
+    obstructions.mark_boxes_and_walls(grid, &mut occupied);
+    if let Some(raster) = &obstructions.raster {
+        let h = grid.resolution_m / 2.0;
+        occupied
+            .par_chunks_mut(grid.ny)
+            .enumerate()
+            .for_each(|(i, row)| {
+                for (j, cell) in row.iter_mut().enumerate() {
+                    let [x, y] = grid.centre(i, j);
+                    *cell = *cell || raster.overlaps_square(x, y, h);
+                }
+            });
+    }
     occupied
 }
 
