@@ -274,7 +274,29 @@ pub struct PlanArgs {
 /// A CLI failure: the message and whether it was the user's input (exit 2) or not (exit 1).
 pub struct Failure {
     pub message: String,
-    pub bad_input: bool,
+    pub kind: FailureKind,
+}
+
+/// Why a command failed, which its exit status tells a script.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailureKind {
+    /// Something other than the input failed: exit 1.
+    Runtime,
+    /// The user's input was wrong: exit 2.
+    Input,
+    /// `plan` answered, but no path meets the threshold: exit 3 (the answer, with its
+    /// `reason`, is printed as for a feasible path).
+    NoPath,
+}
+
+impl FailureKind {
+    fn exit_code(self) -> u8 {
+        match self {
+            FailureKind::Runtime => 1,
+            FailureKind::Input => 2,
+            FailureKind::NoPath => 3,
+        }
+    }
 }
 
 impl Failure {
@@ -282,14 +304,14 @@ impl Failure {
     pub fn input(message: impl Into<String>) -> Self {
         Failure {
             message: message.into(),
-            bad_input: true,
+            kind: FailureKind::Input,
         }
     }
     /// Something other than the input failed (exit 1).
     pub fn runtime(message: impl Into<String>) -> Self {
         Failure {
             message: message.into(),
-            bad_input: false,
+            kind: FailureKind::Runtime,
         }
     }
 }
@@ -303,7 +325,7 @@ fn flag(e: &FieldError) -> String {
 impl From<Failure> for ExitCode {
     fn from(f: Failure) -> ExitCode {
         eprintln!("error: {}", f.message);
-        ExitCode::from(if f.bad_input { 2 } else { 1 })
+        ExitCode::from(f.kind.exit_code())
     }
 }
 
@@ -487,7 +509,20 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         }
         _ => None,
     };
-    print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))
+    let reason = (!path.feasible).then(|| {
+        path.reason
+            .and_then(|r| serde_json::to_value(r).ok())
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_else(|| "infeasible".into())
+    });
+    print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?;
+    match reason {
+        None => Ok(()),
+        Some(reason) => Err(Failure {
+            message: format!("no path meets the threshold ({reason}); the answer above says why"),
+            kind: FailureKind::NoPath,
+        }),
+    }
 }
 
 /// `irs-planner export …`: the masks at `--threshold` and the values, written into `--out`;

@@ -140,6 +140,33 @@ fn map_prints_the_map_body() {
     );
 }
 
+/// A script tells "no path meets the threshold" (exit 3, the answer still printed with its
+/// reason) from bad input (exit 2) and from a path (exit 0).
+#[test]
+fn no_path_exits_3_with_the_answer_printed() {
+    let (code, out, err) = run(&[
+        "plan",
+        "--scenario",
+        SMALL,
+        "--kind",
+        "gain",
+        "--start",
+        "0.5,0.5",
+        "--goal",
+        "5.5,3.5",
+        "--threshold",
+        "10",
+        "--quiet",
+    ]);
+    assert_eq!(code, 3, "{err}");
+    let body: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(body["feasible"], false);
+    assert_eq!(body["reason"], "start_below_threshold");
+    assert!(err.contains("start_below_threshold"), "{err}");
+    let (code, _, _) = run(&SMALL_GAIN_PLAN);
+    assert_eq!(code, 0);
+}
+
 #[test]
 fn bad_input_exits_2_and_names_the_field() {
     let dir = std::env::temp_dir().join(format!("irs-cli-{}", std::process::id()));
