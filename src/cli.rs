@@ -7,7 +7,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use irs_answers::export::{self, MaskKind};
-use irs_answers::path::{self, CheckedPath};
+use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
 use irs_answers::scenario::ScenarioDocument;
@@ -266,6 +266,9 @@ pub struct PlanArgs {
     /// in base64, irs_phase_codes; θ = 2π·c/65536).
     #[arg(long, value_name = "FORMAT", default_value = "radians")]
     pub phase_format: PhaseFormat,
+    /// The frame the answer names for its positions (a ROS tf2 frame id).
+    #[arg(long, value_name = "FRAME", default_value = "map", value_parser = FrameId::parse)]
+    pub frame_id: FrameId,
     /// Seed of the Monte Carlo check.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -487,7 +490,8 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(flag(&e)))?;
-    let path = path::write_phases(path, format, precision);
+    let mut path = path::write_phases(path, format, precision);
+    path.frame_id = args.frame_id.as_str().to_string();
     write_png(
         &args.map,
         &map,

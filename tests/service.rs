@@ -301,8 +301,9 @@ fn openapi_query_patterns_are_the_servers_number_grammar() {
         .lines()
         .filter_map(|line| line.split("pattern: ").nth(1))
         .map(|rest| rest.split(" }").next().unwrap())
-        // A listing's cursor is an opaque key, not a number.
+        // A listing's cursor is an opaque key and a frame id a name, not numbers.
         .filter(|pattern| *pattern != "'^[A-Za-z0-9]{1,128}$'")
+        .filter(|pattern| *pattern != "\"^[A-Za-z0-9_][A-Za-z0-9_/]*$\"")
         .collect();
     assert_eq!(patterns.len(), 6, "threshold ×3, start, goal, best");
     for pattern in patterns {
@@ -442,6 +443,28 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
     );
     full_request["phase_precision"] = "1e-5".into();
     refused_naming(&server, full_request, "phase_precision").await;
+
+    // Poses in the frame the request names (`map` by default), a ROS tf2 frame id or a 422.
+    assert_eq!(path["frame_id"], "map");
+    let goal = path["waypoints"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .clone();
+    let along = goal["distance_m"].as_f64().unwrap();
+    assert!((along - path["distance_m"].as_f64().unwrap()).abs() < 1e-9);
+    assert!(goal["yaw_rad"].is_number() && goal["time_s"].is_number());
+    let mut framed = request.clone();
+    framed["frame_id"] = "site_a/map".into();
+    let (status, in_frame) = server.post("/v1/paths", framed.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{in_frame}");
+    assert_eq!(in_frame["frame_id"], "site_a/map");
+    assert_eq!(in_frame["waypoints"], path["waypoints"]);
+    for bad in ["/map", "", "map frame"] {
+        framed["frame_id"] = bad.into();
+        refused_naming(&server, framed.clone(), "frame_id").await;
+    }
 
     // As 16-bit codes: the same phases to π/2¹⁶, in at most a third of the full answer's bytes,
     // and no radians beside them; a precision applies to radians only.

@@ -40,6 +40,57 @@ pub fn phase_options(
     Ok((format, precision.unwrap_or_default()))
 }
 
+/// The frame a path's positions are given in, as a ROS message names it (`header.frame_id`):
+/// a tf2 frame id of letters, digits, `_` and `/`, not starting with `/` (tf2 refuses a leading
+/// slash), at most [`FrameId::MAX_CHARS`] characters. `map` by default (REP 105).
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct FrameId(String);
+
+impl FrameId {
+    /// Longest frame id accepted.
+    pub const MAX_CHARS: usize = 128;
+
+    /// A frame id as a request or a flag gives it; the reason when it is not one.
+    pub fn parse(text: &str) -> Result<FrameId, String> {
+        if text.is_empty() || text.len() > Self::MAX_CHARS {
+            return Err(format!(
+                "a frame id has 1 to {} characters",
+                Self::MAX_CHARS
+            ));
+        }
+        if text.starts_with('/') {
+            return Err("a frame id does not start with / (tf2 refuses it)".into());
+        }
+        if let Some(bad) = text
+            .chars()
+            .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '/'))
+        {
+            return Err(format!(
+                "{bad:?} is not allowed in a frame id (letters, digits, _ and / only)"
+            ));
+        }
+        Ok(FrameId(text.to_string()))
+    }
+
+    /// The frame id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl Default for FrameId {
+    fn default() -> Self {
+        FrameId(irs_model::planner::DEFAULT_FRAME.to_string())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for FrameId {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        FrameId::parse(&text).map_err(serde::de::Error::custom)
+    }
+}
+
 /// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
 pub fn write_phases(
     path: PathAnswer,

@@ -315,12 +315,16 @@ mod tests {
                 max_feasible_threshold: None,
                 start: end.clone(),
                 goal: end,
+                frame_id: "map".into(),
                 waypoints: vec![Waypoint {
                     x: 0.0,
                     y: 0.0,
                     i: 0,
                     j: 0,
                     value: 0.0,
+                    yaw_rad: 0.0,
+                    distance_m: 0.0,
+                    time_s: 0.0,
                     config: CellConfig {
                         ap: 0,
                         phases: vec![vec![theta, 0.5]],

@@ -94,6 +94,13 @@ pub struct Waypoint<P = SurfaceRadians> {
     pub j: usize,
     /// The map's value at this cell.
     pub value: f64,
+    /// The robot's heading here (rad, counter-clockwise from +x, in (−π, π]): that of the move
+    /// to the next waypoint; at the goal, that of the last move (0 on a one-cell path).
+    pub yaw_rad: f64,
+    /// The path's length from the start to here (m).
+    pub distance_m: f64,
+    /// When the robot reaches this waypoint driving at V_max from the start (s).
+    pub time_s: f64,
     /// What to configure here (serving AP, IRS phases; on rate maps the power split and decoding
     /// order), flattened into the waypoint's JSON.
     #[serde(flatten)]
@@ -140,6 +147,9 @@ pub struct PathAnswer<P = SurfaceRadians> {
     pub start: Endpoint,
     /// Where the goal landed on the grid.
     pub goal: Endpoint,
+    /// The frame the positions are in, as a ROS message names it (`map` unless the request
+    /// names another).
+    pub frame_id: String,
     /// The path's cells, start first and goal last (empty when infeasible).
     pub waypoints: Vec<Waypoint<P>>,
     /// The handovers along the path, in order (empty with one AP).
@@ -240,6 +250,31 @@ pub fn plan_indexed(
     })
 }
 
+/// The frame a path's positions are in unless a request names another: the map frame of a
+/// ROS robot (REP 105).
+pub const DEFAULT_FRAME: &str = "map";
+
+/// Fills each waypoint's heading (towards the next; the goal keeps the last move's), its
+/// distance from the start along the path and the time to reach it at `v_max_mps`.
+fn set_poses<P>(waypoints: &mut [Waypoint<P>], v_max_mps: f64) {
+    let mut travelled = 0.0;
+    let mut heading = 0.0;
+    for k in 0..waypoints.len() {
+        if k > 0 {
+            let (dx, dy) = (
+                waypoints[k].x - waypoints[k - 1].x,
+                waypoints[k].y - waypoints[k - 1].y,
+            );
+            travelled += dx.hypot(dy);
+        }
+        if let Some(next) = waypoints.get(k + 1) {
+            heading = (next.y - waypoints[k].y).atan2(next.x - waypoints[k].x);
+        }
+        let w = &mut waypoints[k];
+        (w.yaw_rad, w.distance_m, w.time_s) = (heading, travelled, travelled / v_max_mps);
+    }
+}
+
 fn plan_with(
     map: &RadioMap,
     start: [f64; 2],
@@ -277,6 +312,7 @@ fn plan_with(
         max_feasible_threshold: widest,
         start,
         goal,
+        frame_id: DEFAULT_FRAME.to_string(),
         waypoints: Vec::new(),
         handovers: Vec::new(),
     };
@@ -295,10 +331,14 @@ fn plan_with(
                     i,
                     j,
                     value: map.values[c],
+                    yaw_rad: 0.0,
+                    distance_m: 0.0,
+                    time_s: 0.0,
                     config: map.cell_config(c),
                 }
             })
             .collect();
+        set_poses(&mut answer.waypoints, v_max_mps);
         answer.handovers = answer
             .waypoints
             .windows(2)
@@ -329,6 +369,9 @@ impl<P> PathAnswer<P> {
                     i: w.i,
                     j: w.j,
                     value: w.value,
+                    yaw_rad: w.yaw_rad,
+                    distance_m: w.distance_m,
+                    time_s: w.time_s,
                     config: w.config.map_phases(&mut f),
                 })
                 .collect(),
@@ -342,6 +385,7 @@ impl<P> PathAnswer<P> {
             max_feasible_threshold: self.max_feasible_threshold,
             start: self.start,
             goal: self.goal,
+            frame_id: self.frame_id,
             handovers: self.handovers,
         }
     }
@@ -394,6 +438,45 @@ pub fn sweep(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each waypoint's pose follows from the path: its heading is that of the move to the next
+    /// waypoint (the goal keeps the last), its distance adds up the moves to the answer's
+    /// length, and its time is the distance over V_max.
+    #[test]
+    fn waypoints_carry_their_heading_distance_and_time() {
+        let scenario = crate::scenario::Scenario::builtin("paper-single-user").unwrap();
+        let key =
+            crate::radiomap::MapKey::gain("x", &scenario, crate::phases::PhaseMode::Continuous)
+                .unwrap();
+        let map = crate::radiomap::build(&scenario, &key, "x".into(), &Default::default()).unwrap();
+        let v = 0.8;
+        let path = plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, v).unwrap();
+        let w = &path.waypoints;
+        assert!(w.len() > 10 && path.feasible);
+        assert_eq!((w[0].distance_m, w[0].time_s), (0.0, 0.0));
+        let last = w.last().unwrap();
+        assert!((last.distance_m - path.distance_m.unwrap()).abs() < 1e-9);
+        assert!((last.time_s - path.travel_time_s.unwrap()).abs() < 1e-9);
+        for k in 0..w.len() - 1 {
+            let (dx, dy) = (w[k + 1].x - w[k].x, w[k + 1].y - w[k].y);
+            assert_eq!(w[k].yaw_rad, dy.atan2(dx), "waypoint {k}");
+            // 8-connected moves: headings are multiples of π/4.
+            let eighths = w[k].yaw_rad / std::f64::consts::FRAC_PI_4;
+            assert!((eighths - eighths.round()).abs() < 1e-12, "{eighths}");
+            let step = w[k + 1].distance_m - w[k].distance_m;
+            assert!((step - dx.hypot(dy)).abs() < 1e-12);
+            assert!((w[k + 1].time_s - w[k + 1].distance_m / v).abs() < 1e-12);
+        }
+        assert_eq!(
+            last.yaw_rad,
+            w[w.len() - 2].yaw_rad,
+            "the goal keeps the last heading"
+        );
+        assert_eq!(path.frame_id, DEFAULT_FRAME);
+        let alone = plan(&map, [-10.0, 0.0], [-10.0, 0.0], Threshold::Max, v).unwrap();
+        assert_eq!(alone.waypoints.len(), 1);
+        assert_eq!(alone.waypoints[0].yaw_rad, 0.0);
+    }
 
     #[test]
     fn thresholds_parse_as_in_json() {

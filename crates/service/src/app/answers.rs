@@ -15,6 +15,7 @@
 use crate::app::Error;
 use crate::ids::MapId;
 use bytes::Bytes;
+use irs_answers::path::FrameId;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_model::planner::Threshold;
 
@@ -29,6 +30,7 @@ pub(crate) struct PathQuery {
     threshold: Option<u64>,
     format: PhaseFormat,
     precision: PhasePrecision,
+    frame: FrameId,
 }
 
 impl PathQuery {
@@ -37,8 +39,8 @@ impl PathQuery {
         start: [f64; 2],
         goal: [f64; 2],
         threshold: Threshold,
-        format: PhaseFormat,
-        precision: PhasePrecision,
+        (format, precision): (PhaseFormat, PhasePrecision),
+        frame: FrameId,
     ) -> Self {
         PathQuery {
             map_id,
@@ -50,12 +52,13 @@ impl PathQuery {
             },
             format,
             precision,
+            frame,
         }
     }
 
     /// Bytes the key holds, for the weigher.
     fn bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.map_id.as_str().len()
+        std::mem::size_of::<Self>() + self.map_id.as_str().len() + self.frame.as_str().len()
     }
 }
 

@@ -14,7 +14,7 @@ use crate::ids::MapId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::response::{IntoResponse, Response};
-use irs_answers::path::{self, CheckedPath};
+use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::timing::Timed;
 use irs_model::input::{parse_finite, present};
@@ -87,6 +87,9 @@ pub(super) struct PathRequest {
     /// Radians (default) or 16-bit codes in base64.
     #[serde(default, deserialize_with = "present")]
     phase_format: Option<PhaseFormat>,
+    /// The frame the answer names for its positions (default `map`).
+    #[serde(default, deserialize_with = "present")]
+    frame_id: Option<FrameId>,
 }
 
 /// The map a path or sweep query names, or the 202 answer while it is built.
@@ -157,14 +160,15 @@ pub(super) async fn plan_path(
     };
     let map_id = MapId::of_map(&map);
     // A plain query asked before is answered from the answer cache (`app::answers`).
+    let frame = request.frame_id.unwrap_or_default();
     let query = request.monte_carlo_draws.is_none().then(|| {
         PathQuery::new(
             map_id.clone(),
             start,
             goal,
             request.threshold,
-            format,
-            precision,
+            (format, precision),
+            frame.clone(),
         )
     });
     if let Some(kept) = query.as_ref().and_then(|q| state.answers().get(q)) {
@@ -179,7 +183,8 @@ pub(super) async fn plan_path(
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
-    let path = path::write_phases(path, format, precision);
+    let mut path = path::write_phases(path, format, precision);
+    path.frame_id = frame.as_str().to_string();
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
@@ -203,13 +208,13 @@ pub(super) async fn plan_path(
         }
         _ => None,
     };
-    // Sized up front: the phases' text and ~150 bytes per waypoint's other fields, so the
+    // Sized up front: the phases' text and ~220 bytes per waypoint's other fields, so the
     // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
     let capacity = 512
         + path
             .waypoints
             .iter()
-            .map(|w| 150 + w.config.phases.json_len_hint())
+            .map(|w| 220 + w.config.phases.json_len_hint())
             .sum::<usize>();
     let answer = OpenAnswer::new(serialize_sized(
         &CheckedPath { path, monte_carlo },
