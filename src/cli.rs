@@ -10,6 +10,7 @@ use irs_answers::export::{self, MaskKind};
 use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
+use irs_answers::route::{self, RouteFormat};
 use irs_answers::scenario::ScenarioDocument;
 use irs_answers::timing::Timed;
 use irs_model::input::{FieldError, parse_finite, parse_point};
@@ -269,6 +270,11 @@ pub struct PlanArgs {
     /// The frame the answer names for its positions (a ROS tf2 frame id).
     #[arg(long, value_name = "FRAME", default_value = "map", value_parser = FrameId::parse)]
     pub frame_id: FrameId,
+    /// What to print: json (the path answer), nav-msgs-path (a ROS 2 nav_msgs/Path message as
+    /// JSON, which is also the YAML `ros2 topic pub` takes) or csv (x,y,yaw_rad,time_s,
+    /// distance_m,value per waypoint).
+    #[arg(long, value_name = "FORMAT", default_value = "json")]
+    pub output: RouteFormat,
     /// Seed of the Monte Carlo check.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -476,6 +482,11 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             "--monte-carlo: must lie in 1..={MAX_DRAWS}"
         )));
     }
+    if args.monte_carlo.is_some() && args.output != RouteFormat::Json {
+        return Err(Failure::input(
+            "--monte-carlo: its report is part of the json output only",
+        ));
+    }
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
@@ -519,7 +530,11 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             .and_then(|v| v.as_str().map(str::to_string))
             .unwrap_or_else(|| "infeasible".into())
     });
-    print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?;
+    match args.output {
+        RouteFormat::Json => print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?,
+        RouteFormat::NavMsgsPath => print_json(&route::nav_msgs_path(&path))?,
+        RouteFormat::Csv => print!("{}", route::csv(&path)),
+    }
     match reason {
         None => Ok(()),
         Some(reason) => Err(Failure {

@@ -710,3 +710,119 @@ fn place_prints_the_ranking_and_draws_the_best() {
         assert!(err.contains(needle), "{all:?}: {err}");
     }
 }
+
+/// The fields of a ROS 2 message type as its vendored `.msg` definition lists them
+/// (tests/data/ros2-msgs): (type, name), defaults and comments dropped.
+fn msg_fields(package: &str, name: &str) -> Vec<(String, String)> {
+    let file = format!(
+        "{}/tests/data/ros2-msgs/{package}__{name}.msg",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    std::fs::read_to_string(&file)
+        .unwrap_or_else(|e| panic!("{file}: {e}"))
+        .lines()
+        .map(|l| l.split('#').next().unwrap().trim())
+        .filter(|l| !l.is_empty())
+        .map(|l| {
+            let mut words = l.split_whitespace();
+            (
+                words.next().unwrap().to_string(),
+                words.next().unwrap().to_string(),
+            )
+        })
+        .collect()
+}
+
+/// Checks `value` against message type `ty` (seen from `package`) as a ROS 2 JSON bridge would
+/// read it: every field of the definition present with its type, no field beyond them.
+fn check_msg(value: &serde_json::Value, ty: &str, package: &str, at: &str) {
+    if let Some(element) = ty.strip_suffix("[]") {
+        for (k, item) in value
+            .as_array()
+            .unwrap_or_else(|| panic!("{at}: not an array"))
+            .iter()
+            .enumerate()
+        {
+            check_msg(item, element, package, &format!("{at}[{k}]"));
+        }
+        return;
+    }
+    match ty {
+        "float64" | "float32" => assert!(value.is_number(), "{at}: {value} is not a number"),
+        "string" => assert!(value.is_string(), "{at}: {value} is not a string"),
+        "int32" => {
+            let v = value
+                .as_i64()
+                .unwrap_or_else(|| panic!("{at}: {value} is not an integer"));
+            assert!(i32::try_from(v).is_ok(), "{at}: {v} overflows int32");
+        }
+        "uint32" => {
+            let v = value
+                .as_u64()
+                .unwrap_or_else(|| panic!("{at}: {value} is not unsigned"));
+            assert!(u32::try_from(v).is_ok(), "{at}: {v} overflows uint32");
+        }
+        _ => {
+            let (pkg, name) = ty.split_once('/').unwrap_or((package, ty));
+            let fields = msg_fields(pkg, name);
+            let object = value
+                .as_object()
+                .unwrap_or_else(|| panic!("{at}: not an object"));
+            let names: Vec<&str> = fields.iter().map(|(_, n)| n.as_str()).collect();
+            for key in object.keys() {
+                assert!(
+                    names.contains(&key.as_str()),
+                    "{at}: {key} is not a field of {ty}"
+                );
+            }
+            for (field_ty, field) in &fields {
+                let inner = object
+                    .get(field)
+                    .unwrap_or_else(|| panic!("{at}: {ty} lacks {field}"));
+                check_msg(inner, field_ty, pkg, &format!("{at}.{field}"));
+            }
+        }
+    }
+}
+
+/// `plan --output nav-msgs-path` writes a nav_msgs/Path as ROS 2 defines it (the vendored
+/// definitions of common_interfaces and rcl_interfaces), in the frame asked for; `--output csv`
+/// one line per waypoint; a Monte Carlo report belongs to the JSON answer only.
+#[test]
+fn a_path_exports_as_nav_msgs_and_csv() {
+    let mut args = SMALL_GAIN_PLAN.to_vec();
+    let (code, out, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let answer: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let waypoints = answer["waypoints"].as_array().unwrap();
+    args.extend(["--output", "nav-msgs-path", "--frame-id", "site/map"]);
+    let (code, out, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let message: serde_json::Value = serde_json::from_str(&out).unwrap();
+    check_msg(&message, "nav_msgs/Path", "nav_msgs", "$");
+    assert_eq!(message["header"]["frame_id"], "site/map");
+    let poses = message["poses"].as_array().unwrap();
+    assert_eq!(poses.len(), waypoints.len());
+    assert_eq!(poses[1]["pose"]["position"]["x"], waypoints[1]["x"]);
+    let mut csv_args = SMALL_GAIN_PLAN.to_vec();
+    csv_args.extend(["--output", "csv"]);
+    let (code, out, err) = run(&csv_args);
+    assert_eq!(code, 0, "{err}");
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines[0], "x,y,yaw_rad,time_s,distance_m,value");
+    assert_eq!(lines.len(), waypoints.len() + 1);
+    let last: Vec<f64> = lines
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(
+        last[4],
+        waypoints.last().unwrap()["distance_m"].as_f64().unwrap()
+    );
+    csv_args.extend(["--monte-carlo", "10"]);
+    let (code, _, err) = run(&csv_args);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--monte-carlo"), "{err}");
+}

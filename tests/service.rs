@@ -465,6 +465,40 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         framed["frame_id"] = bad.into();
         refused_naming(&server, framed.clone(), "frame_id").await;
     }
+    // The same path as a ROS nav_msgs/Path or as CSV, by Accept (no Monte Carlo report there).
+    let as_media = |accept: &'static str, body: Value| {
+        let request = server
+            .client
+            .post(format!("{}/v1/paths", server.base))
+            .header("accept", accept)
+            .json(&body);
+        async move {
+            let resp = request.send().await.unwrap();
+            let media = resp.headers()["content-type"].to_str().unwrap().to_string();
+            (resp.status(), media, resp.text().await.unwrap())
+        }
+    };
+    let waypoints = path["waypoints"].as_array().unwrap();
+    let (status, media, text) =
+        as_media("application/vnd.ros.nav-msgs.path+json", request.clone()).await;
+    assert_eq!(
+        (status, media.as_str()),
+        (StatusCode::OK, "application/vnd.ros.nav-msgs.path+json")
+    );
+    let message: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(message["header"]["frame_id"], "map");
+    assert_eq!(message["poses"].as_array().unwrap().len(), waypoints.len());
+    let (status, media, text) = as_media("text/csv, application/json;q=0.5", request.clone()).await;
+    assert_eq!(
+        (status, media.as_str()),
+        (StatusCode::OK, "text/csv; charset=utf-8")
+    );
+    assert_eq!(text.lines().count(), waypoints.len() + 1);
+    let mut checked = request.clone();
+    checked["monte_carlo_draws"] = 10.into();
+    let (status, _, text) = as_media("text/csv", checked).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{text}");
+    assert!(text.contains("monte_carlo_draws"), "{text}");
 
     // As 16-bit codes: the same phases to π/2¹⁶, in at most a third of the full answer's bytes,
     // and no radians beside them; a precision applies to radians only.

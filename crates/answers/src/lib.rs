@@ -31,5 +31,6 @@ pub mod mapfile;
 pub mod path;
 pub mod phase_text;
 pub mod render;
+pub mod route;
 pub mod scenario;
 pub mod timing;

@@ -37,9 +37,9 @@ const SDR_SCA_S_PER_CUBE_ORDER: f64 = 150e-6;
 /// links a cell, five boxes): 15 ms, 47 ns a link.
 const ROW_LINK_S: f64 = 60e-9;
 /// Seconds per (link · box) and (link · wall) of a row: every link of a row is tested against
-/// every box and wall (`Obstructions::blocks_row`). 1000 boxes at 401²: 0.14 s more, 0.44 ns;
-/// 1000 walls: 1.24 s more, 3.9 ns.
-const ROW_BOX_S: f64 = 0.6e-9;
+/// every box and wall (`Obstructions::blocks_row`). 1000 boxes at 401²: 0.07 s for the free
+/// cells' links, 0.3 ns; 1000 walls: 0.97 s, 3.9 ns.
+const ROW_BOX_S: f64 = 0.45e-9;
 const ROW_WALL_S: f64 = 5e-9;
 /// Seconds per floor-plan column a blockage test walks (`Raster::columns_walked`): a free
 /// 4096² plan over the paper's floor at 401², 2 300 columns a link on average: 9.7 s, 13 ns.
@@ -117,9 +117,9 @@ pub fn sample_links(scenario: &Scenario) -> LinkSample {
 
 /// What a surface's point costs for an AP that does not see the surface's centre, against
 /// one it sees: its reflected field is not summed, its scattered power still is. An `elements`
-/// surface of 1 200 points behind 1 000 walls: 0.30 s against 3.95 s in sight at 401², 0.08;
-/// rounded up.
-const UNLIT_SHARE: f64 = 0.1;
+/// surface of 1 200 points behind 1 000 walls: 0.06 s against 3.8 s in sight at 401² (with
+/// most of the cells behind the walls occupied), 0.02 a free cell; rounded up.
+const UNLIT_SHARE: f64 = 0.03;
 
 /// Scattering points a cell sums over all APs (the direct link counts one), a surface's
 /// weighed by [`UNLIT_SHARE`] for an AP that does not see it.
@@ -202,7 +202,7 @@ pub fn gain_seconds(
     let raster = sample.columns * PIXEL_S;
     let per_cell = if evaluation == Evaluation::Rows && by_rows(scenario, mode) {
         let (boxes, walls) = (scenario.obstacles.len() as f64, scenario.walls.len() as f64);
-        links * (ROW_LINK_S + sample.free * (boxes * ROW_BOX_S + walls * ROW_WALL_S + raster))
+        sample.free * links * (ROW_LINK_S + boxes * ROW_BOX_S + walls * ROW_WALL_S + raster)
     } else {
         // Phases in bits evaluate each cell twice: at the optimum, then quantised.
         let factor = if matches!(mode, PhaseMode::Bits(_)) {

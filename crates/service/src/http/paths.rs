@@ -13,9 +13,11 @@ use crate::app::maps::{Obtained, check_budget};
 use crate::ids::MapId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
+use irs_answers::route::{self, RouteFormat};
 use irs_answers::timing::Timed;
 use irs_model::input::{parse_finite, present};
 use irs_model::montecarlo;
@@ -92,6 +94,35 @@ pub(super) struct PathRequest {
     frame_id: Option<FrameId>,
 }
 
+/// The media type of a path written as a ROS 2 `nav_msgs/Path` message (JSON).
+pub(super) const NAV_MSGS_PATH_JSON: &str = "application/vnd.ros.nav-msgs.path+json";
+
+/// The format an `Accept` header asks a path in: CSV (`text/csv`), a `nav_msgs/Path`
+/// ([`NAV_MSGS_PATH_JSON`]), or else the path answer (JSON). The first of the two named wins.
+fn route_format(headers: &HeaderMap) -> RouteFormat {
+    let accept = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .map(|range| {
+            range
+                .split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        });
+    for media in accept {
+        match media.as_str() {
+            "text/csv" => return RouteFormat::Csv,
+            NAV_MSGS_PATH_JSON => return RouteFormat::NavMsgsPath,
+            _ => {}
+        }
+    }
+    RouteFormat::Json
+}
+
 /// The map a path or sweep query names, or the 202 answer while it is built.
 pub(super) async fn map_for_query(
     state: &App,
@@ -125,6 +156,7 @@ pub(super) fn check_point(field: &'static str, p: [f64; 2]) -> Result<[f64; 2], 
 pub(super) async fn plan_path(
     State(state): State<App>,
     caller: Caller,
+    headers: HeaderMap,
     Body(request): Body<PathRequest>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
@@ -152,6 +184,14 @@ pub(super) async fn plan_path(
         )
         .into());
     }
+    let route_format = route_format(&headers);
+    if route_format != RouteFormat::Json && request.monte_carlo_draws.is_some() {
+        return Err(Error::invalid(
+            "monte_carlo_draws",
+            "a Monte Carlo report is part of the JSON path answer only (Accept: application/json)",
+        )
+        .into());
+    }
     let (format, precision) = path::phase_options(request.phase_format, request.phase_precision)?;
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
     let (map, scenario) = match found {
@@ -161,16 +201,17 @@ pub(super) async fn plan_path(
     let map_id = MapId::of_map(&map);
     // A plain query asked before is answered from the answer cache (`app::answers`).
     let frame = request.frame_id.unwrap_or_default();
-    let query = request.monte_carlo_draws.is_none().then(|| {
-        PathQuery::new(
-            map_id.clone(),
-            start,
-            goal,
-            request.threshold,
-            (format, precision),
-            frame.clone(),
-        )
-    });
+    let query =
+        (request.monte_carlo_draws.is_none() && route_format == RouteFormat::Json).then(|| {
+            PathQuery::new(
+                map_id.clone(),
+                start,
+                goal,
+                request.threshold,
+                (format, precision),
+                frame.clone(),
+            )
+        });
     if let Some(kept) = query.as_ref().and_then(|q| state.answers().get(q)) {
         return Ok(json::with_took_ms(kept.open_text(), started));
     }
@@ -185,6 +226,17 @@ pub(super) async fn plan_path(
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
     let mut path = path::write_phases(path, format, precision);
     path.frame_id = frame.as_str().to_string();
+    match route_format {
+        RouteFormat::Json => {}
+        RouteFormat::NavMsgsPath => {
+            let media = [(header::CONTENT_TYPE, NAV_MSGS_PATH_JSON)];
+            return Ok((media, Json(route::nav_msgs_path(&path))).into_response());
+        }
+        RouteFormat::Csv => {
+            let csv = [(header::CONTENT_TYPE, "text/csv; charset=utf-8")];
+            return Ok((csv, route::csv(&path)).into_response());
+        }
+    }
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
