@@ -210,3 +210,50 @@ fn no_move_crosses_a_wall_of_a_public_ros_map() {
         }
     }
 }
+
+/// A robot's radius widens the occupied region (Nav2's inflation): on the depot, a 0.3 m robot
+/// keeps off more cells, and none of its moves passes within 0.3 m of a wall in x and y; a
+/// radius of 0 written out is the scenario without it (the same id).
+#[test]
+fn a_robots_radius_keeps_it_off_the_walls() {
+    let file =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nav2-depot/depot.json");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let base = file.parent().unwrap();
+    let with = |doc: &serde_json::Value| {
+        Scenario::from_value_with_files(doc.clone(), base).expect("a valid depot variant")
+    };
+    let plain = with(&doc);
+    doc["mru"]["radius_m"] = 0.0.into();
+    assert_eq!(
+        with(&doc).content_hash(),
+        plain.content_hash(),
+        "radius 0 is the default"
+    );
+    doc["mru"]["radius_m"] = 0.3.into();
+    let wide = with(&doc);
+    assert_ne!(wide.content_hash(), plain.content_hash());
+    let (narrow_map, wide_map) = (
+        gain_map(&plain, PhaseMode::None),
+        gain_map(&wide, PhaseMode::None),
+    );
+    let count = |m: &RadioMap| m.occupied.iter().filter(|o| **o).count();
+    assert!(
+        count(&wide_map) > count(&narrow_map) + 100,
+        "{} vs {}",
+        count(&wide_map),
+        count(&narrow_map)
+    );
+    for (k, (&w, &n)) in wide_map
+        .occupied
+        .iter()
+        .zip(&narrow_map.occupied)
+        .enumerate()
+    {
+        assert!(w || !n, "cell {k} is free only with the radius");
+    }
+    doc["mru"]["radius_m"] = (-0.1).into();
+    let refused = Scenario::from_value_with_files(doc.clone(), base).unwrap_err();
+    assert_eq!(refused.field, "mru.radius_m");
+}

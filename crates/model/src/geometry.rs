@@ -572,11 +572,16 @@ impl Obstructions {
                 .is_some_and(|r| r.overlaps_square(x, y, h))
     }
 
-    /// Marks `occupied[i·ny + j]` for each cell of `grid` whose square a box or a wall
-    /// overlaps ([`Obstructions::overlaps_square`]), visiting for each only the cells under its
+    /// Marks `occupied[i·ny + j]` for each cell of `grid` whose square of half-side `h` (the
+    /// cell's, or wider for a robot's radius) a box or a wall overlaps
+    /// ([`Obstructions::overlaps_square`]), visiting for each only the cells under its
     /// footprint's bounding box: O(cells covered), not O(cells × obstacles).
-    pub fn mark_boxes_and_walls(&self, grid: &crate::scenario::Grid, occupied: &mut [bool]) {
-        let h = grid.resolution_m / 2.0;
+    pub fn mark_boxes_and_walls(
+        &self,
+        grid: &crate::scenario::Grid,
+        h: f64,
+        occupied: &mut [bool],
+    ) {
         let mut mark = |bounds: [[f64; 2]; 2], overlaps: &dyn Fn(f64, f64) -> bool| {
             // Cells whose squares can reach the bounds, one more each side for rounding.
             let range = |lo: f64, hi: f64, min: f64, n: usize| {
@@ -917,8 +922,8 @@ pub(crate) mod tests {
     /// a scenario.
     fn occupancy(obstructions: &Obstructions, grid: &crate::scenario::Grid) -> Vec<bool> {
         let mut occupied = vec![false; grid.cells()];
-        obstructions.mark_boxes_and_walls(grid, &mut occupied);
         let h = grid.resolution_m / 2.0;
+        obstructions.mark_boxes_and_walls(grid, h, &mut occupied);
         if let Some(raster) = &obstructions.raster {
             for (k, cell) in occupied.iter_mut().enumerate() {
                 let [x, y] = grid.centre(k / grid.ny, k % grid.ny);
@@ -972,6 +977,33 @@ pub(crate) mod tests {
             }
             for (a, b) in free_moves(&grid, &occupied, 0.25) {
                 prop_assert!(!scene.blocks_segment(&a, &b), "{:?} → {:?} crosses an obstacle", a, b);
+            }
+        }
+
+        /// With a robot's radius r widening each cell's square, a move between free cells keeps
+        /// at least r from every box in both axes: it crosses no box grown by r (the exact
+        /// segment test).
+        #[test]
+        fn a_robots_radius_keeps_its_moves_that_far_from_boxes(
+            scene in scene(),
+            resolution in prop::sample::select(vec![0.25, 0.5, 1.0]),
+            radius in prop::sample::select(vec![0.1, 0.3, 0.45]),
+        ) {
+            let boxes = Obstructions { walls: vec![], ..scene };
+            let n = (20.0 / resolution) as usize + 1;
+            let grid = crate::scenario::Grid { nx: n, ny: n, x_min: -10.0, y_min: -10.0, resolution_m: resolution };
+            let mut occupied = vec![false; grid.cells()];
+            boxes.mark_boxes_and_walls(&grid, resolution / 2.0 + radius, &mut occupied);
+            let grown = Obstructions {
+                boxes: boxes.boxes.iter().map(|b| Aabb {
+                    lo: [b.lo[0] - radius, b.lo[1] - radius, b.lo[2]],
+                    hi: [b.hi[0] + radius, b.hi[1] + radius, b.hi[2]],
+                }).collect(),
+                walls: vec![],
+                raster: None,
+            };
+            for (a, b) in free_moves(&grid, &occupied, 0.25) {
+                prop_assert!(!grown.blocks_segment(&a, &b), "{:?} → {:?} comes within {} of a box", a, b, radius);
             }
         }
 

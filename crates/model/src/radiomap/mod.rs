@@ -229,13 +229,17 @@ impl RadioMap {
 }
 
 /// Per cell of `grid`: true when something on the floor overlaps the cell's square, not only
-/// its centre (docs/model.md §1), so no move between free cells crosses an obstacle.
+/// its centre, the square widened by the robot's radius (docs/model.md §1), so no move between
+/// free cells crosses an obstacle or comes closer to one than the radius.
 pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
     let obstructions = scenario.obstructions();
     let mut occupied = vec![false; grid.cells()];
-    obstructions.mark_boxes_and_walls(grid, &mut occupied);
+    // The robot's radius inflates each cell's square: an obstacle within r of the square in
+    // any direction (at most r·√2 at its corners) occupies the cell, so every move between
+    // free cells keeps at least r from every obstacle.
+    let h = grid.resolution_m / 2.0 + scenario.mru.radius_m;
+    obstructions.mark_boxes_and_walls(grid, h, &mut occupied);
     if let Some(raster) = &obstructions.raster {
-        let h = grid.resolution_m / 2.0;
         occupied
             .par_chunks_mut(grid.ny)
             .enumerate()

@@ -138,6 +138,15 @@ pub struct Mru {
     pub antenna_height_m: f64,
     /// V_max (m/s).
     pub v_max_mps: f64,
+    /// The robot's radius (m), by which obstacles are inflated before cells are marked
+    /// occupied (docs/model.md §1), as Nav2 inflates its costmap. Left out of the canonical
+    /// form at 0, so scenarios written before it keep their ids.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub radius_m: f64,
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
 }
 
 /// A static robot (SRU) sharing the AP with the MRU; rate maps guarantee it its rate.

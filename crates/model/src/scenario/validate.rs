@@ -310,6 +310,14 @@ impl Scenario {
         if self.mru.v_max_mps <= 0.0 {
             return err("mru.v_max_mps", "must be positive");
         }
+        finite("mru.radius_m", self.mru.radius_m)?;
+        let room_side = (r.x_max - r.x_min).min(r.y_max - r.y_min);
+        if !(self.mru.radius_m >= 0.0 && self.mru.radius_m < room_side / 2.0) {
+            return err(
+                "mru.radius_m",
+                "must be at least 0 and less than half the room's shorter side",
+            );
+        }
 
         if self.srus.len() > MAX_SRUS {
             return Err(FieldError::new(
