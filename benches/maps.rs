@@ -83,9 +83,9 @@ fn large_grid(c: &mut Criterion) {
     });
     // The widest-path index the service keeps per map: its build, and a query on it.
     group.bench_function("bottleneck_index_build_1001x1001", |b| {
-        b.iter(|| planner::bottlenecks(black_box(&map)))
+        b.iter(|| planner::Bottlenecks::new(black_box(&graph)))
     });
-    let index = planner::bottlenecks(&map);
+    let index = planner::Bottlenecks::new(&graph);
     assert_eq!(
         index.widest_path_threshold(&map.values, start, goal),
         Some(widest)
@@ -103,7 +103,16 @@ fn large_grid(c: &mut Criterion) {
         ("one_step_query_backward", next, here),
     ] {
         group.bench_function(name, |b| {
-            b.iter(|| planner::plan(&map, centre(from), centre(to), Threshold::Max, 1.0))
+            b.iter(|| {
+                planner::plan(
+                    &map,
+                    map.native_unit(),
+                    centre(from),
+                    centre(to),
+                    Threshold::Max,
+                    1.0,
+                )
+            })
         });
     }
     group.finish();
@@ -190,12 +199,22 @@ fn floors(c: &mut Criterion) {
         ("path_at_max_threshold", Threshold::Max),
     ] {
         assert!(
-            planner::plan(&map, start, goal, threshold, 1.0)
+            planner::plan(&map, map.native_unit(), start, goal, threshold, 1.0)
                 .unwrap()
                 .feasible
         );
         group.bench_function(name, |b| {
-            b.iter(|| planner::plan(black_box(&map), start, goal, threshold, 1.0).unwrap())
+            b.iter(|| {
+                planner::plan(
+                    black_box(&map),
+                    map.native_unit(),
+                    start,
+                    goal,
+                    threshold,
+                    1.0,
+                )
+                .unwrap()
+            })
         });
     }
     group.finish();
@@ -294,7 +313,7 @@ fn path_answer(c: &mut Criterion) {
     let s = paper("paper-single-user", |_| {});
     let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
     let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
-    let index = planner::bottlenecks(&map);
+    let index = planner::UnitIndex::new(&map, map.native_unit()).unwrap();
     let plan = || {
         let threshold = Threshold::Value(-62.0);
         planner::plan_indexed(&map, &index, [-10.0, 0.0], [10.0, 0.0], threshold, 1.0).unwrap()

@@ -18,7 +18,7 @@ use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, WorkError, cost};
+use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, Unit, WorkError, cost};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
 use irs_model::solver::SolverKind;
@@ -197,12 +197,16 @@ pub struct ScenarioArgs {
 pub struct ExportArgs {
     #[command(flatten)]
     pub map: MapArgs,
-    /// QoS threshold γ of the masks, in the map's unit (dB or bit/s/Hz).
+    /// QoS threshold γ of the masks, in --unit (by default the map's: dB or bit/s/Hz).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
     pub threshold: f64,
-    /// The value that costs 0 in the cost mask (default: the map's maximum).
+    /// The value that costs 0 in the cost mask, in --unit (default: the map's maximum).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_finite)]
     pub best: Option<f64>,
+    /// The unit of the threshold, of `best` and of map.npy's values: gain_db, dbm, snr_db,
+    /// bps_hz or mbps (docs/model.md §3.1); default: the map's own.
+    #[arg(long, value_name = "UNIT")]
+    pub unit: Option<Unit>,
     /// Folder to write keepout.{yaml,pgm}, cost.{yaml,pgm} and map.npy into (created if needed).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -245,7 +249,7 @@ pub struct PlanArgs {
     /// Goal point "X,Y" (m); snapped to the nearest cell centre.
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub goal: [f64; 2],
-    /// QoS threshold in the map's unit (dB or bit/s/Hz), or "max".
+    /// QoS threshold in --unit (by default the map's: dB or bit/s/Hz), or "max".
     #[arg(
         long,
         allow_hyphen_values = true,
@@ -253,6 +257,10 @@ pub struct PlanArgs {
         required_unless_present = "max_threshold"
     )]
     pub threshold: Option<Threshold>,
+    /// The unit of the threshold and of the values printed: gain_db, dbm, snr_db, bps_hz or
+    /// mbps (docs/model.md §3.1); default: the map's own (gain_db or bps_hz).
+    #[arg(long, value_name = "UNIT")]
+    pub unit: Option<Unit>,
     /// Use the largest threshold for which a path exists (the same as --threshold max).
     #[arg(long)]
     pub max_threshold: bool,
@@ -443,12 +451,14 @@ fn write_png(
         cell_px: args.cell_px.map(usize::from),
         ..options
     };
-    let bytes = render::png(map, scenario, &options).ok_or_else(|| {
-        Failure::input(format!(
-            "--cell-px: the picture would exceed {} pixels a side",
-            render::MAX_SIDE_PX
-        ))
-    })?;
+    let bytes = render::png(map, scenario, &options)
+        .map_err(|e| Failure::input(flag(&e)))?
+        .ok_or_else(|| {
+            Failure::input(format!(
+                "--cell-px: the picture would exceed {} pixels a side",
+                render::MAX_SIDE_PX
+            ))
+        })?;
     std::fs::write(file, bytes)
         .map_err(|e| Failure::input(format!("--png {}: {e}", file.display())))
 }
@@ -493,8 +503,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let started = Instant::now();
     let (format, precision) = path::phase_options(Some(args.phase_format), args.phase_precision)
         .map_err(|e| Failure::input(flag(&e)))?;
+    let unit = args.unit.unwrap_or(map.native_unit());
     let path = planner::plan(
         &map,
+        unit,
         args.start,
         args.goal,
         threshold,
@@ -549,10 +561,12 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
 pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
-    let keepout = export::nav2_mask(&map, MaskKind::Keepout, args.threshold, None)
+    let unit = args.unit.unwrap_or(map.native_unit());
+    let keepout = export::nav2_mask(&map, unit, MaskKind::Keepout, args.threshold, None)
         .map_err(|e| Failure::input(flag(&e)))?;
-    let cost = export::nav2_mask(&map, MaskKind::Cost, args.threshold, args.best)
+    let cost = export::nav2_mask(&map, unit, MaskKind::Cost, args.threshold, args.best)
         .map_err(|e| Failure::input(flag(&e)))?;
+    let values = export::npy(&map, unit).map_err(|e| Failure::input(flag(&e)))?;
     let out = &args.out;
     std::fs::create_dir_all(out)
         .map_err(|e| Failure::runtime(format!("--out {}: {e}", out.display())))?;
@@ -562,7 +576,7 @@ pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
         (keepout.pgm_name(), keepout.files.pgm.as_slice()),
         (cost.yaml_name(), cost.files.yaml.as_bytes()),
         (cost.pgm_name(), cost.files.pgm.as_slice()),
-        ("map.npy".to_string(), &export::npy(&map)),
+        ("map.npy".to_string(), &values),
     ];
     for (name, bytes) in files {
         let path = out.join(&name);
@@ -643,8 +657,15 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
                     Objective::Distance { threshold, .. } => Threshold::Value(threshold),
                     _ => Threshold::Max,
                 };
-                let path = planner::plan(&map, start, goal, threshold, best.mru.v_max_mps)
-                    .map_err(|e| Failure::input(flag(&e)))?;
+                let path = planner::plan(
+                    &map,
+                    map.native_unit(),
+                    start,
+                    goal,
+                    threshold,
+                    best.mru.v_max_mps,
+                )
+                .map_err(|e| Failure::input(flag(&e)))?;
                 RenderOptions::for_path(&map, &path)
             }
             Objective::Coverage { threshold } => RenderOptions {
@@ -653,6 +674,7 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
             },
         };
         let bytes = render::png(&map, best, &options)
+            .map_err(|e| Failure::runtime(e.to_string()))?
             .ok_or_else(|| Failure::runtime("the picture would be too large"))?;
         std::fs::write(file, bytes)
             .map_err(|e| Failure::input(format!("--png {}: {e}", file.display())))?;

@@ -75,7 +75,15 @@ fn the_paper_floor_as_pixels_gives_the_box_map() {
         assert_same_map(&a, &b, &format!("{phases:?}"));
     }
     let map = gain_map(&raster, PhaseMode::Continuous);
-    let path = planner::plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 1.0).unwrap();
+    let path = planner::plan(
+        &map,
+        map.native_unit(),
+        [-10.0, 0.0],
+        [10.0, 0.0],
+        Threshold::Max,
+        1.0,
+    )
+    .unwrap();
     let max = path.max_feasible_threshold.unwrap();
     assert!((max - -59.60).abs() < 0.005, "{max}");
 }
@@ -199,7 +207,14 @@ fn no_move_crosses_a_wall_of_a_public_ros_map() {
         crossing_before > 10,
         "{crossing_before} moves crossed walls before"
     );
-    let path = planner::plan(&map, [1.0, 1.0], [29.0, 14.0], Threshold::Max, 1.0);
+    let path = planner::plan(
+        &map,
+        map.native_unit(),
+        [1.0, 1.0],
+        [29.0, 14.0],
+        Threshold::Max,
+        1.0,
+    );
     if let Ok(path) = path {
         for pair in path.waypoints.windows(2) {
             let ([ax, ay], [bx, by]) = ([pair[0].x, pair[0].y], [pair[1].x, pair[1].y]);

@@ -34,7 +34,7 @@ fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> O
     match *objective {
         Objective::Coverage { threshold } => Some(map.coverage(threshold)),
         Objective::MaxThreshold { start, goal } => {
-            planner::plan(&map, start, goal, Threshold::Max, 1.0)
+            planner::plan(&map, map.native_unit(), start, goal, Threshold::Max, 1.0)
                 .unwrap()
                 .max_feasible_threshold
         }
@@ -43,9 +43,16 @@ fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> O
             start,
             goal,
         } => {
-            planner::plan(&map, start, goal, Threshold::Value(threshold), 1.0)
-                .unwrap()
-                .distance_m
+            planner::plan(
+                &map,
+                map.native_unit(),
+                start,
+                goal,
+                Threshold::Value(threshold),
+                1.0,
+            )
+            .unwrap()
+            .distance_m
         }
     }
 }

@@ -26,7 +26,7 @@ fn multi_user() -> &'static Scenario {
 }
 
 fn max_threshold(map: &RadioMap) -> f64 {
-    planner::plan(map, Q_I, Q_F, Threshold::Max, 1.0)
+    planner::plan(map, map.native_unit(), Q_I, Q_F, Threshold::Max, 1.0)
         .unwrap()
         .max_feasible_threshold
         .unwrap()
@@ -82,10 +82,17 @@ fn without_irs_the_path_at_minus_63_db_is_longer() {
     let s = single_user();
     let plan = |phases| {
         let map = build(s, MapKind::Gain, phases, None);
-        planner::plan(&map, Q_I, Q_F, Threshold::Value(-63.0), s.mru.v_max_mps)
-            .unwrap()
-            .distance_m
-            .unwrap()
+        planner::plan(
+            &map,
+            map.native_unit(),
+            Q_I,
+            Q_F,
+            Threshold::Value(-63.0),
+            s.mru.v_max_mps,
+        )
+        .unwrap()
+        .distance_m
+        .unwrap()
     };
     let (none, irs) = (plan(PhaseMode::None), plan(PhaseMode::Continuous));
     assert!(none > irs * 1.05, "no IRS {none} m vs IRS {irs} m");

@@ -465,6 +465,66 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         framed["frame_id"] = bad.into();
         refused_naming(&server, framed.clone(), "frame_id").await;
     }
+    // Thresholds in the operator's units (docs/model.md §3.1): 20 dBm of transmit power and no
+    // antenna gains, so a received-power threshold is the gain threshold + 20 and selects the
+    // same path; the answer labels its unit, and the answer cache keeps the two apart.
+    let widest_db = path["max_feasible_threshold"].as_f64().unwrap();
+    let mut in_dbm = request.clone();
+    in_dbm["unit"] = "dbm".into();
+    in_dbm["threshold"] = (widest_db + 20.0 - 0.5).into();
+    let (status, dbm) = server.post("/v1/paths", in_dbm.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{dbm}");
+    assert_eq!(
+        (dbm["unit"].as_str(), path["unit"].as_str()),
+        (Some("dBm"), Some("dB"))
+    );
+    let widest_dbm = dbm["max_feasible_threshold"].as_f64().unwrap();
+    assert!(
+        (widest_dbm - (widest_db + 20.0)).abs() < 1e-9,
+        "{widest_dbm}"
+    );
+    let mut in_db = request.clone();
+    in_db["threshold"] = (widest_db - 0.5).into();
+    let (_, db) = server.post("/v1/paths", in_db).await;
+    let cells = |answer: &Value| -> Vec<(Value, Value, f64)> {
+        answer["waypoints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| (w["i"].clone(), w["j"].clone(), w["value"].as_f64().unwrap()))
+            .collect()
+    };
+    let (a, b) = (cells(&db), cells(&dbm));
+    assert_eq!(a.len(), b.len());
+    for ((ia, ja, va), (ib, jb, vb)) in a.iter().zip(&b) {
+        assert_eq!((ia, ja), (ib, jb));
+        assert!((vb - (va + 20.0)).abs() < 1e-9);
+    }
+    let (status, cov_snr) = server
+        .get(&format!(
+            "/v1/maps/{map_id}/coverage?threshold=50&unit=snr_db"
+        ))
+        .await;
+    assert_eq!(status, StatusCode::OK, "{cov_snr}");
+    assert_eq!(cov_snr["unit"], "dB SNR");
+    // −60 dB of gain is 50 dB of SNR here (20 dBm, σ² = −90 dBm).
+    assert_eq!(cov_snr["covered_cells"], cov["covered_cells"]);
+    // Throughput needs a bandwidth the scenario does not state; unknown units are refused.
+    in_dbm["unit"] = "mbps".into();
+    refused_naming(&server, in_dbm.clone(), "unit").await;
+    in_dbm["unit"] = "dBm".into();
+    let (status, body) = server.post("/v1/paths", in_dbm).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    let (status, body) = server
+        .get(&format!("/v1/maps/{map_id}/values.npy?unit=mbps"))
+        .await;
+    problem(
+        status,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+    );
+    assert_eq!(body["field"], "unit");
     // The same path as a ROS nav_msgs/Path or as CSV, by Accept (no Monte Carlo report there).
     let as_media = |accept: &'static str, body: Value| {
         let request = server
@@ -606,6 +666,10 @@ async fn rate_map_job_reports_progress_and_serves_paths_with_powers() {
         .map(|t| t.as_f64().unwrap())
         .collect();
     assert_eq!(decode_codes(&codes), full_phases);
+    // A rate map holds rates: received power or SNR is refused, naming `unit`.
+    let mut in_dbm = query("radians", None);
+    in_dbm["unit"] = "dbm".into();
+    refused_naming(&server, in_dbm, "unit").await;
     let (_, body) = server
         .get(&format!("/v1/maps/{}", job["map_id"].as_str().unwrap()))
         .await;

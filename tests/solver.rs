@@ -146,7 +146,15 @@ fn monte_carlo_means_respect_the_jensen_bound() {
     ] {
         let key = MapKey::new("t", &s, kind, None, access, None).unwrap();
         let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
-        let path = planner::plan(&map, [0.5, 0.5], [5.5, 3.0], Threshold::Max, 1.0).unwrap();
+        let path = planner::plan(
+            &map,
+            map.native_unit(),
+            [0.5, 0.5],
+            [5.5, 3.0],
+            Threshold::Max,
+            1.0,
+        )
+        .unwrap();
         assert!(path.feasible);
         let report =
             montecarlo::check_path(&s, &map, &path, 20_000, 7, &Progress::default()).unwrap();

@@ -3,7 +3,7 @@
 //!
 //! Stored: the map key (as JSON), the build time, and per cell the value (f64), the occupancy
 //! (one byte) and the per-cell solution (gain maps: the serving AP, one byte, only with several
-//! APs; rate maps: the upper bound, N phase codes (`u16`, as the map holds them), the power split
+//! APs, and its gain where another AP has the best one; rate maps: the upper bound, N phase codes (`u16`, as the map holds them), the power split
 //! and the decoding order). Not stored: the grid, the channel models and the rate model, which
 //! [`decode`] rebuilds from the scenario (they are deterministic functions of it). The bytes are postcard (serde's compact
 //! format); f64 values keep their bits, so a decoded map is bit-identical to the one encoded,
@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 
 /// Bumped whenever the layout below changes; a stored map of another version is not decoded
 /// (it is rebuilt on request).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 #[derive(Serialize, Deserialize)]
 struct Stored {

@@ -16,7 +16,7 @@
 use crate::mapfile::{self, EncodedMap};
 use irs_model::floorplan::MapMode;
 use irs_model::input::FieldError;
-use irs_model::radiomap::RadioMap;
+use irs_model::radiomap::{RadioMap, Unit};
 
 /// Which Nav2 mask.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
@@ -88,24 +88,25 @@ impl Nav2Mask {
 }
 
 /// Nav2 cell values of a mask, row-major from the bottom row (pixel (c, r) = cell (i = c, j = r)).
-fn mask_values(map: &RadioMap, mut value_of: impl FnMut(f64) -> i8) -> Vec<i8> {
+fn mask_values(map: &RadioMap, values: &[f64], mut value_of: impl FnMut(f64) -> i8) -> Vec<i8> {
     let (nx, ny) = (map.grid.nx, map.grid.ny);
     let mut out = vec![100i8; nx * ny];
     for j in 0..ny {
         for i in 0..nx {
             let k = map.grid.index(i, j);
             if !map.occupied[k] {
-                out[j * nx + i] = value_of(map.values[k]);
+                out[j * nx + i] = value_of(values[k]);
             }
         }
     }
     out
 }
 
-/// The mask of `kind` at `threshold` (the map's unit). `best` (cost masks only) is the value
-/// that costs 0; default the map's maximum. Errors name the query field.
+/// The mask of `kind` at `threshold` in `unit`. `best` (cost masks only, in `unit`) is the
+/// value that costs 0; default the map's maximum. Errors name the query field.
 pub fn nav2_mask(
     map: &RadioMap,
+    unit: Unit,
     kind: MaskKind,
     threshold: f64,
     best: Option<f64>,
@@ -113,19 +114,19 @@ pub fn nav2_mask(
     if !threshold.is_finite() {
         return Err(FieldError::new("threshold", "must be a finite number"));
     }
+    let in_unit = map.values_in(unit)?;
     let values = match kind {
         MaskKind::Keepout => {
             if best.is_some() {
                 return Err(FieldError::new("best", "applies only to cost masks"));
             }
             // NaN (infeasible) compares false, so it stays occupied.
-            mask_values(map, |v| if v >= threshold { 0 } else { 100 })
+            mask_values(map, &in_unit, |v| if v >= threshold { 0 } else { 100 })
         }
         MaskKind::Cost => {
             let best = match best {
                 Some(b) => b,
-                None => map
-                    .values
+                None => in_unit
                     .iter()
                     .copied()
                     .filter(|v| v.is_finite())
@@ -140,7 +141,7 @@ pub fn nav2_mask(
                     ),
                 ));
             }
-            mask_values(map, |v| {
+            mask_values(map, &in_unit, |v| {
                 if v >= threshold {
                     (99.0 * ((best - v) / (best - threshold)).clamp(0.0, 1.0)).round() as i8
                 } else {
@@ -166,11 +167,13 @@ pub fn nav2_mask(
     Ok(Nav2Mask { kind, files })
 }
 
-/// The map's values as a NumPy `.npy` file: float32, shape (nx, ny), `a[i, j]` the cell at
-/// (x_min + iΔ, y_min + jΔ) (the flat layout of [`RadioMap::values`]), NaN where occupied.
-pub fn npy(map: &RadioMap) -> Vec<u8> {
+/// The map's values in `unit` as a NumPy `.npy` file: float32, shape (nx, ny), `a[i, j]` the
+/// cell at (x_min + iΔ, y_min + jΔ) (the flat layout of [`RadioMap::values`]), NaN where
+/// occupied. An error names `unit` when the map cannot be read in it.
+pub fn npy(map: &RadioMap, unit: Unit) -> Result<Vec<u8>, FieldError> {
     use npyz::WriterBuilder;
-    let mut out = Vec::with_capacity(map.values.len() * 4 + 128);
+    let values = map.values_in(unit)?;
+    let mut out = Vec::with_capacity(values.len() * 4 + 128);
     let mut writer = npyz::WriteOptions::new()
         .default_dtype()
         .shape(&[map.grid.nx as u64, map.grid.ny as u64])
@@ -178,10 +181,10 @@ pub fn npy(map: &RadioMap) -> Vec<u8> {
         .begin_nd()
         .expect("writing into memory cannot fail");
     writer
-        .extend(map.values.iter().map(|&v| v as f32))
+        .extend(values.iter().map(|&v| v as f32))
         .expect("writing into memory cannot fail");
     writer.finish().expect("writing into memory cannot fail");
-    out
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -213,7 +216,7 @@ mod tests {
             .filter(|v| v.is_finite())
             .collect();
         let threshold = finite.iter().sum::<f64>() / finite.len() as f64;
-        let mask = nav2_mask(&map, MaskKind::Keepout, threshold, None).unwrap();
+        let mask = nav2_mask(&map, Unit::GainDb, MaskKind::Keepout, threshold, None).unwrap();
         let yaml: serde_json::Value = serde_saphyr::from_str(&mask.files.yaml).unwrap();
         let mut document = serde_json::to_value(&s).unwrap();
         document["obstacles"] = serde_json::json!([]);
@@ -239,7 +242,7 @@ mod tests {
     fn cost_masks_are_monotone_and_span_the_range() {
         let (_, map) = small_map();
         let threshold = -70.0;
-        let mask = nav2_mask(&map, MaskKind::Cost, threshold, None).unwrap();
+        let mask = nav2_mask(&map, Unit::GainDb, MaskKind::Cost, threshold, None).unwrap();
         let plan = irs_model::floorplan::FloorPlan {
             image: "".into(),
             resolution: map.grid.resolution_m,
@@ -280,14 +283,21 @@ mod tests {
                 .all(|(_, c)| *c == 100)
         );
         assert!(free.iter().all(|(v, c)| (*v < threshold) == (*c == 100)));
-        let e = nav2_mask(&map, MaskKind::Cost, threshold, Some(threshold - 1.0)).unwrap_err();
+        let e = nav2_mask(
+            &map,
+            Unit::GainDb,
+            MaskKind::Cost,
+            threshold,
+            Some(threshold - 1.0),
+        )
+        .unwrap_err();
         assert_eq!(e.field, "best");
     }
 
     #[test]
     fn the_archive_holds_both_files() {
         let (_, map) = small_map();
-        let mask = nav2_mask(&map, MaskKind::Keepout, -70.0, None).unwrap();
+        let mask = nav2_mask(&map, Unit::GainDb, MaskKind::Keepout, -70.0, None).unwrap();
         let bytes = mask.tar();
         let mut archive = tar::Archive::new(bytes.as_slice());
         let names: Vec<String> = archive
@@ -302,7 +312,7 @@ mod tests {
     #[test]
     fn npy_holds_the_values_in_c_order() {
         let (_, map) = small_map();
-        let bytes = npy(&map);
+        let bytes = npy(&map, Unit::GainDb).unwrap();
         let file = npyz::NpyFile::new(bytes.as_slice()).unwrap();
         assert_eq!(file.shape(), [map.grid.nx as u64, map.grid.ny as u64]);
         let read: Vec<f32> = file.into_vec().unwrap();

@@ -306,7 +306,7 @@ mod tests {
             };
             let path = PathAnswer {
                 map_id: String::new(),
-                unit: "dB",
+                unit: irs_model::radiomap::Unit::GainDb,
                 threshold: None,
                 feasible: true,
                 reason: None,

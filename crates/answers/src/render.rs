@@ -14,8 +14,9 @@
 //! North (+y) is up. Text uses the public-domain 8×8 bitmap font of `font8x8`.
 
 use font8x8::UnicodeFonts;
+use irs_model::input::FieldError;
 use irs_model::planner::PathAnswer;
-use irs_model::radiomap::{MapKind, RadioMap};
+use irs_model::radiomap::{MapKind, RadioMap, Unit};
 use irs_model::scenario::Scenario;
 
 /// Largest plot side in pixels (the map itself, without margins).
@@ -26,6 +27,8 @@ pub const MAX_CELL_PX: usize = 32;
 /// What a picture shows on top of the map (a threshold, a path and its ends) and at what scale.
 #[derive(Debug, Clone, Default)]
 pub struct RenderOptions {
+    /// The unit the cells are coloured in and the threshold is given in (default: the map's).
+    pub unit: Option<Unit>,
     /// Dim the cells below this value.
     pub threshold: Option<f64>,
     /// Cells (flat indices) of a path, start first.
@@ -42,6 +45,7 @@ impl RenderOptions {
     /// its two ends are drawn.
     pub fn for_path<P>(map: &RadioMap, answer: &PathAnswer<P>) -> Self {
         RenderOptions {
+            unit: Some(answer.unit),
             threshold: answer.threshold,
             path: answer
                 .waypoints
@@ -269,17 +273,38 @@ fn label(v: f64) -> String {
     text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// Encodes the picture of `map` (with the devices of its `scenario`) as PNG; `None` when the
-/// plot would exceed [`MAX_SIDE_PX`] at the requested cell size.
-pub fn png(map: &RadioMap, scenario: &Scenario, options: &RenderOptions) -> Option<Vec<u8>> {
-    let layout = Layout::new(map, options.cell_px)?;
+/// Encodes the picture of `map` (with the devices of its `scenario`) as PNG, coloured in the
+/// options' unit; `Ok(None)` when the plot would exceed [`MAX_SIDE_PX`] at the requested cell
+/// size, an error naming `unit` when the map cannot be read in it.
+pub fn png(
+    map: &RadioMap,
+    scenario: &Scenario,
+    options: &RenderOptions,
+) -> Result<Option<Vec<u8>>, FieldError> {
+    let unit = options.unit.unwrap_or(map.native_unit());
+    let values = map.values_in(unit)?;
+    let Some(layout) = Layout::new(map, options.cell_px) else {
+        return Ok(None);
+    };
     let mut canvas = Canvas::new(layout.width, layout.height);
-    let stats = map.stats();
-    let (low, high) = (stats.min.unwrap_or(0.0), stats.max.unwrap_or(1.0));
+    let finite = values.iter().copied().filter(|v| v.is_finite());
+    let (low, high) = finite.fold((None, None), |(lo, hi): (Option<f64>, Option<f64>), v| {
+        (
+            Some(lo.map_or(v, |l| l.min(v))),
+            Some(hi.map_or(v, |h| h.max(v))),
+        )
+    });
+    let (low, high) = (low.unwrap_or(0.0), high.unwrap_or(1.0));
     let span = if high > low { high - low } else { 1.0 };
-    draw_cells(&mut canvas, map, &layout, options, low, span);
+    draw_cells(&mut canvas, map, &values, &layout, options, low, span);
     draw_axes(&mut canvas, map, &layout);
-    draw_colour_bar(&mut canvas, map, &layout, options.threshold, low, high);
+    let bar = ColourBar {
+        threshold: options.threshold,
+        low,
+        high,
+        unit,
+    };
+    draw_colour_bar(&mut canvas, &layout, &bar);
     draw_devices(&mut canvas, map, scenario, &layout);
     if let Some((start, goal)) = options.ends {
         for (cell, rgb) in [(start, START), (goal, GOAL)] {
@@ -300,12 +325,21 @@ pub fn png(map: &RadioMap, scenario: &Scenario, options: &RenderOptions) -> Opti
             .write_image_data(&canvas.pixels)
             .expect("PNG data to memory");
     }
-    Some(out)
+    Ok(Some(out))
+}
+
+/// The colour bar's range, threshold mark and unit.
+struct ColourBar {
+    threshold: Option<f64>,
+    low: f64,
+    high: f64,
+    unit: Unit,
 }
 
 fn draw_cells(
     canvas: &mut Canvas,
     map: &RadioMap,
+    values: &[f64],
     layout: &Layout,
     options: &RenderOptions,
     low: f64,
@@ -314,7 +348,7 @@ fn draw_cells(
     let (nx, ny) = (map.grid.nx, map.grid.ny);
     let mut cell_rgb = vec![[0u8; 3]; nx * ny];
     for (k, rgb) in cell_rgb.iter_mut().enumerate() {
-        let v = map.values[k];
+        let v = values[k];
         *rgb = if map.occupied[k] {
             OBSTACLE
         } else if !v.is_finite() {
@@ -386,14 +420,13 @@ fn title(map: &RadioMap) -> String {
     }
 }
 
-fn draw_colour_bar(
-    canvas: &mut Canvas,
-    map: &RadioMap,
-    layout: &Layout,
-    threshold: Option<f64>,
-    low: f64,
-    high: f64,
-) {
+fn draw_colour_bar(canvas: &mut Canvas, layout: &Layout, bar: &ColourBar) {
+    let &ColourBar {
+        threshold,
+        low,
+        high,
+        unit,
+    } = bar;
     let s = layout.text_scale;
     let glyph = 8 * s as i64;
     let x0 = (layout.left + layout.plot_width) as i64 + glyph * 2;
@@ -428,8 +461,7 @@ fn draw_colour_bar(
         canvas.fill(x0 - glyph / 2, y - 1, bar_width + glyph, 3, INK);
         canvas.fill(x0 - glyph / 2, y, bar_width + glyph, 1, BACKGROUND);
     }
-    let unit = map.key.unit();
-    canvas.text(x0, top - glyph * 2, unit, s, INK);
+    canvas.text(x0, top - glyph * 2, unit.symbol(), s, INK);
 }
 
 fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout: &Layout) {
@@ -516,10 +548,18 @@ mod tests {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
         let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
-        let answer = planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Max, 1.0).unwrap();
+        let answer = planner::plan(
+            &map,
+            map.native_unit(),
+            [0.5, 0.5],
+            [5.5, 3.5],
+            Threshold::Max,
+            1.0,
+        )
+        .unwrap();
         let options = RenderOptions::for_path(&map, &answer);
         let layout = Layout::new(&map, None).unwrap();
-        let (width, height, buf) = decode(png(&map, &s, &options).unwrap());
+        let (width, height, buf) = decode(png(&map, &s, &options).unwrap().unwrap());
         assert_eq!((width, height), (layout.width, layout.height));
         assert!(width > layout.plot_width && height > layout.plot_height);
         let pixel = |(x, y): (usize, usize)| {
@@ -564,12 +604,19 @@ mod tests {
         let s = Scenario::builtin("small-test").unwrap();
         let key = MapKey::gain("t", &s, PhaseMode::Continuous).unwrap();
         let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
-        let answer =
-            planner::plan(&map, [0.5, 0.5], [5.5, 3.5], Threshold::Value(1e9), 1.0).unwrap();
+        let answer = planner::plan(
+            &map,
+            map.native_unit(),
+            [0.5, 0.5],
+            [5.5, 3.5],
+            Threshold::Value(1e9),
+            1.0,
+        )
+        .unwrap();
         assert!(!answer.feasible);
         let options = RenderOptions::for_path(&map, &answer);
         let layout = Layout::new(&map, None).unwrap();
-        let (width, _, buf) = decode(png(&map, &s, &options).unwrap());
+        let (width, _, buf) = decode(png(&map, &s, &options).unwrap().unwrap());
         let (x, y) = layout.cell_centre(&map, answer.start.i, answer.start.j);
         let at = (y * width + x) * 3;
         assert_eq!([buf[at], buf[at + 1], buf[at + 2]], START);
@@ -577,7 +624,7 @@ mod tests {
             cell_px: Some(MAX_SIDE_PX),
             ..RenderOptions::default()
         };
-        assert!(png(&map, &s, &too_big).is_none());
+        assert!(png(&map, &s, &too_big).unwrap().is_none());
     }
 
     #[test]

@@ -98,7 +98,15 @@ mod tests {
         let floor = Scenario::builtin("paper-single-user").unwrap();
         let key = MapKey::gain(&floor.content_hash(), &floor, PhaseMode::Continuous).unwrap();
         let map = crate::map::build(&floor, &key, &Progress::default()).unwrap();
-        planner::plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 0.5).unwrap()
+        planner::plan(
+            &map,
+            map.native_unit(),
+            [-10.0, 0.0],
+            [10.0, 0.0],
+            Threshold::Max,
+            0.5,
+        )
+        .unwrap()
     }
 
     /// The message's poses are the waypoints: positions, unit quaternions whose angle about z

@@ -9,15 +9,16 @@ pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
 
 use crate::input::{FieldError, Scalar, parse_finite};
-use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, SurfaceRadians, WorkError};
+use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, SurfaceRadians, Unit, WorkError};
 use crate::scenario::Grid;
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::str::FromStr;
 
-/// The QoS threshold of a path query: a value in the map's unit, or the largest feasible one.
+/// The QoS threshold of a path query: a value in the query's unit, or the largest feasible one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Threshold {
-    /// γ in the map's unit: dB on gain maps, bit/s/Hz on rate maps.
+    /// γ in the query's [`Unit`] (by default the map's: dB on gain maps, bit/s/Hz on rate maps).
     Value(f64),
     /// The largest γ for which any path joins start and goal (the widest-path value, §6).
     Max,
@@ -92,7 +93,7 @@ pub struct Waypoint<P = SurfaceRadians> {
     pub i: usize,
     /// The cell's index along y.
     pub j: usize,
-    /// The map's value at this cell.
+    /// The map's value at this cell, in the query's unit.
     pub value: f64,
     /// The robot's heading here (rad, counter-clockwise from +x, in (−π, π]): that of the move
     /// to the next waypoint; at the goal, that of the last move (0 on a one-cell path).
@@ -129,8 +130,10 @@ pub struct Handover {
 pub struct PathAnswer<P = SurfaceRadians> {
     /// The id of the map the path was planned on.
     pub map_id: String,
-    /// The unit of values and thresholds: `dB` (gain maps) or `bit/s/Hz` (rate maps).
-    pub unit: &'static str,
+    /// The unit of values and thresholds, written as its symbol ([`Unit::symbol`]): the
+    /// query's unit, by default the map's (`dB` on gain maps, `bit/s/Hz` on rate maps).
+    #[serde(serialize_with = "unit_symbol")]
+    pub unit: Unit,
     /// The threshold applied (for `"max"`, the largest feasible one).
     pub threshold: Option<f64>,
     /// Whether a path was found.
@@ -177,8 +180,9 @@ pub struct SweepPoint {
 pub struct SweepAnswer {
     /// The id of the map swept.
     pub map_id: String,
-    /// The unit of the thresholds: `dB` (gain maps) or `bit/s/Hz` (rate maps).
-    pub unit: &'static str,
+    /// The thresholds' unit, written as its symbol ([`Unit::symbol`]).
+    #[serde(serialize_with = "unit_symbol")]
+    pub unit: Unit,
     /// The largest threshold for which any path joins start and goal (`None`: none does).
     pub max_feasible_threshold: Option<f64>,
     /// Where the start landed on the grid.
@@ -187,6 +191,10 @@ pub struct SweepAnswer {
     pub goal: Endpoint,
     /// One point per requested threshold, in the order given.
     pub points: Vec<SweepPoint>,
+}
+
+fn unit_symbol<S: serde::Serializer>(unit: &Unit, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(unit.symbol())
 }
 
 fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), FieldError> {
@@ -208,46 +216,104 @@ fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), 
     ))
 }
 
-fn graph(map: &RadioMap) -> CellGraph<'_> {
+fn graph<'m>(map: &'m RadioMap, values: &'m [f64]) -> CellGraph<'m> {
     CellGraph {
         grid: &map.grid,
-        values: &map.values,
+        values,
         occupied: &map.occupied,
     }
 }
 
-/// Builds a map's [`Bottlenecks`] index, for [`plan_indexed`] and [`sweep`].
-pub fn bottlenecks(map: &RadioMap) -> Bottlenecks {
-    Bottlenecks::new(&graph(map))
+/// A map's values in one [`Unit`] and their widest-path index: what path and sweep queries on
+/// a map search, built once per map and unit (the service keeps it with the map).
+#[derive(Debug, Clone)]
+pub struct UnitIndex {
+    unit: Unit,
+    /// The values in `unit`; `None` when they are the map's own.
+    converted: Option<Vec<f64>>,
+    bottlenecks: Bottlenecks,
+}
+
+impl UnitIndex {
+    /// The index of `map`'s values in `unit`; an error names `unit` when the map cannot give
+    /// its values in it ([`RadioMap::values_in`]).
+    pub fn new(map: &RadioMap, unit: Unit) -> Result<UnitIndex, FieldError> {
+        let converted = match map.values_in(unit)? {
+            Cow::Borrowed(_) => None,
+            Cow::Owned(values) => Some(values),
+        };
+        let values = converted.as_deref().unwrap_or(&map.values);
+        let bottlenecks = Bottlenecks::new(&graph(map, values));
+        Ok(UnitIndex {
+            unit,
+            converted,
+            bottlenecks,
+        })
+    }
+
+    /// The unit of the values.
+    pub fn unit(&self) -> Unit {
+        self.unit
+    }
+
+    /// The values in the index's unit; `map` must be the map the index was built from.
+    pub fn values<'m>(&'m self, map: &'m RadioMap) -> &'m [f64] {
+        self.converted.as_deref().unwrap_or(&map.values)
+    }
+
+    /// Heap bytes held, for a cache's weigher.
+    pub fn bytes(&self) -> usize {
+        self.bottlenecks.bytes()
+            + self
+                .converted
+                .as_ref()
+                .map_or(0, |v| v.capacity() * std::mem::size_of::<f64>())
+    }
 }
 
 /// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre),
-/// finding the widest-path threshold by a search: the cheaper way for one query on a map.
+/// with the threshold and the values in `unit`, finding the widest-path threshold by a search:
+/// the cheaper way for one query on a map.
 pub fn plan(
     map: &RadioMap,
+    unit: Unit,
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
     v_max_mps: f64,
 ) -> Result<PathAnswer, FieldError> {
-    plan_with(map, start, goal, threshold, v_max_mps, |graph, s, g| {
-        graph.widest_path_threshold(s, g)
-    })
+    let values = map.values_in(unit)?;
+    plan_with(
+        map,
+        (unit, &values),
+        start,
+        goal,
+        threshold,
+        v_max_mps,
+        |graph, s, g| graph.widest_path_threshold(s, g),
+    )
 }
 
-/// [`plan`] with the widest-path threshold read from the map's [`Bottlenecks`] index: the
-/// cheaper way for a map that answers many queries (the service keeps the index with the map).
+/// [`plan`] in the index's unit, the widest-path threshold read from the [`UnitIndex`]: the
+/// cheaper way for a map that answers many queries.
 pub fn plan_indexed(
     map: &RadioMap,
-    index: &Bottlenecks,
+    index: &UnitIndex,
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
     v_max_mps: f64,
 ) -> Result<PathAnswer, FieldError> {
-    plan_with(map, start, goal, threshold, v_max_mps, |_, s, g| {
-        index.widest_path_threshold(&map.values, s, g)
-    })
+    let values = index.values(map);
+    plan_with(
+        map,
+        (index.unit, values),
+        start,
+        goal,
+        threshold,
+        v_max_mps,
+        |_, s, g| index.bottlenecks.widest_path_threshold(values, s, g),
+    )
 }
 
 /// The frame a path's positions are in unless a request names another: the map frame of a
@@ -277,6 +343,7 @@ fn set_poses<P>(waypoints: &mut [Waypoint<P>], v_max_mps: f64) {
 
 fn plan_with(
     map: &RadioMap,
+    (unit, values): (Unit, &[f64]),
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
@@ -285,7 +352,7 @@ fn plan_with(
 ) -> Result<PathAnswer, FieldError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
-    let graph = graph(map);
+    let graph = graph(map, values);
     let widest = widest_path_threshold(&graph, s, g);
     let applied = match threshold {
         Threshold::Value(v) => Some(v),
@@ -303,7 +370,7 @@ fn plan_with(
     };
     let mut answer = PathAnswer {
         map_id: map.id.clone(),
-        unit: map.key.unit(),
+        unit,
         threshold: applied,
         feasible: result.is_ok(),
         reason: result.as_ref().err().copied(),
@@ -330,7 +397,7 @@ fn plan_with(
                     y,
                     i,
                     j,
-                    value: map.values[c],
+                    value: values[c],
                     yaw_rad: 0.0,
                     distance_m: 0.0,
                     time_s: 0.0,
@@ -391,13 +458,13 @@ impl<P> PathAnswer<P> {
     }
 }
 
-/// Distance versus threshold for a list of thresholds, in one request, on a map whose
-/// [`Bottlenecks`] index is at hand (a sweep is a query of the service, which keeps it).
+/// Distance versus threshold for a list of thresholds in the index's unit, in one request, on a
+/// map whose [`UnitIndex`] is at hand (a sweep is a query of the service, which keeps it).
 /// `progress` counts the thresholds done; cancelling it stops the sweep before the next
 /// threshold.
 pub fn sweep(
     map: &RadioMap,
-    index: &Bottlenecks,
+    index: &UnitIndex,
     start: [f64; 2],
     goal: [f64; 2],
     thresholds: &[f64],
@@ -406,7 +473,8 @@ pub fn sweep(
 ) -> Result<SweepAnswer, WorkError> {
     let (s, start) = endpoint(&map.grid, "start", start)?;
     let (g, goal) = endpoint(&map.grid, "goal", goal)?;
-    let graph = graph(map);
+    let values = index.values(map);
+    let graph = graph(map, values);
     progress.start(thresholds.len());
     let points = thresholds
         .iter()
@@ -427,8 +495,8 @@ pub fn sweep(
         .collect::<Result<_, Cancelled>>()?;
     Ok(SweepAnswer {
         map_id: map.id.clone(),
-        unit: map.key.unit(),
-        max_feasible_threshold: index.widest_path_threshold(&map.values, s, g),
+        unit: index.unit,
+        max_feasible_threshold: index.bottlenecks.widest_path_threshold(values, s, g),
         start,
         goal,
         points,
@@ -450,7 +518,15 @@ mod tests {
                 .unwrap();
         let map = crate::radiomap::build(&scenario, &key, "x".into(), &Default::default()).unwrap();
         let v = 0.8;
-        let path = plan(&map, [-10.0, 0.0], [10.0, 0.0], Threshold::Max, v).unwrap();
+        let path = plan(
+            &map,
+            Unit::GainDb,
+            [-10.0, 0.0],
+            [10.0, 0.0],
+            Threshold::Max,
+            v,
+        )
+        .unwrap();
         let w = &path.waypoints;
         assert!(w.len() > 10 && path.feasible);
         assert_eq!((w[0].distance_m, w[0].time_s), (0.0, 0.0));
@@ -473,7 +549,15 @@ mod tests {
             "the goal keeps the last heading"
         );
         assert_eq!(path.frame_id, DEFAULT_FRAME);
-        let alone = plan(&map, [-10.0, 0.0], [-10.0, 0.0], Threshold::Max, v).unwrap();
+        let alone = plan(
+            &map,
+            Unit::GainDb,
+            [-10.0, 0.0],
+            [-10.0, 0.0],
+            Threshold::Max,
+            v,
+        )
+        .unwrap();
         assert_eq!(alone.waypoints.len(), 1);
         assert_eq!(alone.waypoints[0].yaw_rad, 0.0);
     }

@@ -42,35 +42,58 @@ pub fn best_gain(
     }
 }
 
+/// What [`gain_values`] computes per cell.
+pub(super) struct GainValues {
+    /// The best AP's gain (dB), NaN where occupied: the map's values.
+    pub values: Vec<f64>,
+    /// The serving AP of each cell (empty with one AP).
+    pub serving: Vec<u8>,
+    /// The serving AP's gain (dB) where it differs from the best; empty when the AP of best
+    /// gain serves every cell.
+    pub serving_gain_db: Vec<f64>,
+}
+
 /// The map values in dB (NaN where occupied) and, with several APs, the AP serving each cell:
-/// the one whose optimised gain is highest there, all IRSs configured for it (docs/model.md §3).
-/// Rows of the grid are spread over rayon's pool; progress advances once per row, and
-/// cancellation is checked once per row (a row at a time) or per cell (cell by cell). The continuous closed form over `coherent` surfaces is evaluated a row at a
-/// time ([`ChannelModel::closed_form_row`]); other modes cell by cell.
+/// the one received strongest there (its optimised gain plus its link budget `offsets_db`, all
+/// IRSs configured for it), which need not be the one of best gain when transmit powers differ
+/// (docs/model.md §3). Rows of the grid are spread over rayon's pool; progress advances once per
+/// row, and cancellation is checked once per row (a row at a time) or per cell (cell by cell).
+/// The continuous closed form over `coherent` surfaces is evaluated a row at a time
+/// ([`ChannelModel::closed_form_row`]); other modes cell by cell.
 pub(super) fn gain_values(
     models: &[ChannelModel],
+    offsets_db: &[f64],
     grid: &Grid,
     occupied: &[bool],
     height: f64,
     mode: PhaseMode,
     progress: &Progress,
-) -> Result<(Vec<f64>, Vec<u8>), Cancelled> {
+) -> Result<GainValues, Cancelled> {
     let mut values = vec![f64::NAN; grid.cells()];
     let mut serving = vec![0u8; grid.cells()];
+    let mut serving_gain = vec![f64::NAN; grid.cells()];
+    // Each AP's budget relative to the first, linear: the received power compared is λ·weight.
+    let weights: Vec<f64> = offsets_db
+        .iter()
+        .map(|o| 10f64.powf((o - offsets_db[0]) / 10.0))
+        .collect();
     let rows = values
         .par_chunks_mut(grid.ny)
         .zip(occupied.par_chunks(grid.ny))
         .zip(serving.par_chunks_mut(grid.ny))
+        .zip(serving_gain.par_chunks_mut(grid.ny))
         .enumerate();
+    let db_per_neper = 10.0 * std::f64::consts::LOG10_E;
     if mode == PhaseMode::Continuous && models.iter().all(|m| m.closed_form_by_rows()) {
         rows.try_for_each_init(
             ClosedFormRow::default,
-            |row, (i, ((values_row, occupied_row), serving_row))| {
+            |row, (i, (((values_row, occupied_row), serving_row), serving_gain_row))| {
                 if progress.is_cancelled() {
                     return Err(Cancelled);
                 }
                 let x = grid.x_min + i as f64 * grid.resolution_m;
-                // λ of the best AP so far, in place of the dB value until the last AP is seen.
+                // λ of the best AP and of the serving one so far, in place of their dB values
+                // until the last AP is seen.
                 for (k, model) in models.iter().enumerate() {
                     model.closed_form_row(
                         x,
@@ -80,18 +103,27 @@ pub(super) fn gain_values(
                         occupied_row,
                         row,
                     );
-                    let cells = values_row.iter_mut().zip(serving_row.iter_mut());
-                    for ((best, ap), (a, t)) in cells.zip(row.amplitude.iter().zip(&row.tau)) {
+                    let cells = values_row
+                        .iter_mut()
+                        .zip(serving_row.iter_mut())
+                        .zip(serving_gain_row.iter_mut());
+                    for (((best, ap), at_ap), (a, t)) in
+                        cells.zip(row.amplitude.iter().zip(&row.tau))
+                    {
                         let gain = a * a + t;
                         if k == 0 || gain > *best {
-                            (*best, *ap) = (gain, k as u8);
+                            *best = gain;
+                        }
+                        if k == 0 || gain * weights[k] > *at_ap * weights[usize::from(*ap)] {
+                            (*at_ap, *ap) = (gain, k as u8);
                         }
                     }
                 }
-                vecmath::ln_in_place(values_row);
-                let db_per_neper = 10.0 * std::f64::consts::LOG10_E;
-                for (value, &occ) in values_row.iter_mut().zip(occupied_row) {
-                    *value = if occ { f64::NAN } else { *value * db_per_neper };
+                for part in [&mut *values_row, &mut *serving_gain_row] {
+                    vecmath::ln_in_place(part);
+                    for (value, &occ) in part.iter_mut().zip(occupied_row) {
+                        *value = if occ { f64::NAN } else { *value * db_per_neper };
+                    }
                 }
                 progress.advance(values_row.len());
                 Ok(())
@@ -101,7 +133,7 @@ pub(super) fn gain_values(
         let n = models.first().map_or(0, |m| m.subsurfaces());
         rows.try_for_each_init(
             || (vec![C64::new(0.0, 0.0); n], vec![0.0; n]),
-            |(w, theta), (i, ((row, occupied_row), serving_row))| {
+            |(w, theta), (i, (((row, occupied_row), serving_row), serving_gain_row))| {
                 if progress.is_cancelled() {
                     return Err(Cancelled);
                 }
@@ -116,15 +148,18 @@ pub(super) fn gain_values(
                     }
                     let [x, y] = grid.centre(i, j);
                     let user = [x, y, height];
-                    let (mut best, mut best_ap) = (f64::NEG_INFINITY, 0);
+                    let (mut best, mut received, mut at_ap, mut ap) =
+                        (f64::NEG_INFINITY, f64::NEG_INFINITY, 0.0, 0);
                     for (k, model) in models.iter().enumerate() {
                         let gain = best_gain(model, user, mode, w, theta);
-                        if gain > best {
-                            (best, best_ap) = (gain, k);
+                        best = best.max(gain);
+                        if gain * weights[k] > received {
+                            (received, at_ap, ap) = (gain * weights[k], gain, k);
                         }
                     }
                     *value = 10.0 * best.log10();
-                    serving_row[j] = best_ap as u8;
+                    serving_gain_row[j] = 10.0 * at_ap.log10();
+                    serving_row[j] = ap as u8;
                 }
                 progress.advance(row.len());
                 Ok(())
@@ -135,7 +170,18 @@ pub(super) fn gain_values(
         // One AP serves every cell: nothing to keep.
         serving = Vec::new();
     }
-    Ok((values, serving))
+    let differs = values
+        .iter()
+        .zip(&serving_gain)
+        .any(|(v, g)| v.to_bits() != g.to_bits());
+    if !differs {
+        serving_gain = Vec::new();
+    }
+    Ok(GainValues {
+        values,
+        serving,
+        serving_gain_db: serving_gain,
+    })
 }
 
 /// The phases to apply at a waypoint of a gain map: θ* of eq. 11 (quantised for `bits`), none

@@ -40,7 +40,8 @@ impl fmt::Display for MapKind {
 /// existing key's map, so that a map built before (kept in a data directory or Redis) is never
 /// served for it: the map id hashes the key, and the key carries this version.
 /// 2: a cell is occupied when an obstacle overlaps its square, not only its centre.
-pub const MODEL_VERSION: u32 = 2;
+/// 3: with several APs, the one received strongest serves a cell, not the one of best gain.
+pub const MODEL_VERSION: u32 = 3;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -182,10 +183,7 @@ impl MapKey {
 
     /// The unit of the map's values.
     pub fn unit(&self) -> &'static str {
-        match self.kind {
-            MapKind::Gain => "dB",
-            MapKind::Rate => "bit/s/Hz",
-        }
+        super::Unit::native(self.kind).symbol()
     }
 }
 

@@ -15,11 +15,13 @@ pub mod gain;
 pub mod key;
 mod parts;
 pub mod rate_cells;
+pub mod units;
 
 pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
 pub use parts::StoredCells;
 pub use rate_cells::RateCells;
+pub use units::{LinkBudget, Unit};
 
 use crate::channel::ChannelModel;
 use crate::scenario::{Grid, Scenario};
@@ -99,8 +101,12 @@ pub enum CellSolutions {
     Gain {
         /// One model per AP, in scenario order.
         models: Vec<Arc<ChannelModel>>,
-        /// The AP serving each cell (empty with one AP).
+        /// The AP serving each cell, the one received strongest (empty with one AP).
         serving: Vec<u8>,
+        /// The serving AP's gain (dB) per cell, where that AP is not the one of best gain (a
+        /// weaker channel from a stronger transmitter); empty when the AP of best gain serves
+        /// every cell, always so with one AP or APs of one link budget.
+        serving_gain_db: Vec<f64>,
         /// H₀ (m): the height of the MRU antenna, where a waypoint's θ* is recomputed.
         antenna_height_m: f64,
     },
@@ -147,6 +153,9 @@ pub struct RadioMap {
     pub occupied: Vec<bool>,
     /// What answers "how do I configure the IRS here?" at each cell.
     pub cells: CellSolutions,
+    /// Each AP's link budget, which turns gains into received power, SNR and throughput
+    /// ([`RadioMap::values_in`]).
+    pub links: Vec<LinkBudget>,
     /// Wall-clock build time (s).
     pub build_seconds: f64,
 }
@@ -194,6 +203,7 @@ impl RadioMap {
                 models,
                 serving,
                 antenna_height_m,
+                ..
             } => {
                 let (i, j) = self.grid.cell_of(index);
                 let [x, y] = self.grid.centre(i, j);
@@ -221,8 +231,15 @@ impl RadioMap {
             + self.occupied.capacity();
         match &self.cells {
             CellSolutions::Gain {
-                models, serving, ..
-            } => base + serving.capacity() + models.iter().map(|m| m.heap_bytes()).sum::<usize>(),
+                models,
+                serving,
+                serving_gain_db,
+                ..
+            } => {
+                base + serving.capacity()
+                    + serving_gain_db.capacity() * std::mem::size_of::<f64>()
+                    + models.iter().map(|m| m.heap_bytes()).sum::<usize>()
+            }
             CellSolutions::Rate(r) => base + r.size_bytes(),
         }
     }
@@ -264,6 +281,7 @@ pub fn build(
     let started = std::time::Instant::now();
     let grid = scenario.grid();
     let occupied = occupancy(scenario, &grid);
+    let links = LinkBudget::for_scenario(scenario);
     progress.start(grid.cells());
     let (values, cells) = match key.kind {
         MapKind::Gain => {
@@ -271,14 +289,17 @@ pub fn build(
             let models: Vec<ChannelModel> = (0..scenario.access_points().len())
                 .map(|ap| ChannelModel::for_ap(scenario, ap))
                 .collect();
-            let (values, serving) =
-                gain::gain_values(&models, &grid, &occupied, height, key.phases, progress)?;
+            let offsets: Vec<f64> = links.iter().map(|l| l.offset_dbm).collect();
+            let gains = gain::gain_values(
+                &models, &offsets, &grid, &occupied, height, key.phases, progress,
+            )?;
             let cells = CellSolutions::Gain {
                 models: models.into_iter().map(Arc::new).collect(),
-                serving,
+                serving: gains.serving,
+                serving_gain_db: gains.serving_gain_db,
                 antenna_height_m: height,
             };
-            (values, cells)
+            (gains.values, cells)
         }
         MapKind::Rate => {
             // Rate maps take one AP (MapKey::new rejects several).
@@ -295,6 +316,7 @@ pub fn build(
         values,
         occupied,
         cells,
+        links,
         build_seconds: started.elapsed().as_secs_f64(),
     })
 }

@@ -18,6 +18,9 @@ pub enum StoredCells {
     Gain {
         /// The AP serving each cell (flat index i·ny + j); empty with one AP.
         serving: Vec<u8>,
+        /// The serving AP's gain (dB) per cell; empty when the AP of best gain serves every
+        /// cell.
+        serving_gain_db: Vec<f64>,
     },
     /// A rate map: the solver's argmax and the certificate of every cell.
     Rate {
@@ -36,8 +39,13 @@ impl RadioMap {
     /// The per-cell solutions as stored.
     pub fn stored_cells(&self) -> StoredCells {
         match &self.cells {
-            CellSolutions::Gain { serving, .. } => StoredCells::Gain {
+            CellSolutions::Gain {
+                serving,
+                serving_gain_db,
+                ..
+            } => StoredCells::Gain {
                 serving: serving.clone(),
+                serving_gain_db: serving_gain_db.clone(),
             },
             CellSolutions::Rate(rate) => StoredCells::Rate {
                 upper_bound: rate.upper_bound.clone(),
@@ -76,11 +84,20 @@ impl RadioMap {
             return mismatch("occupied", occupied.len(), cells);
         }
         let solutions = match (key.kind, stored) {
-            (MapKind::Gain, StoredCells::Gain { serving }) => {
+            (
+                MapKind::Gain,
+                StoredCells::Gain {
+                    serving,
+                    serving_gain_db,
+                },
+            ) => {
                 let aps = scenario.access_points().len();
                 let expected = if aps > 1 { cells } else { 0 };
                 if serving.len() != expected {
                     return mismatch("serving", serving.len(), expected);
+                }
+                if !serving_gain_db.is_empty() && serving_gain_db.len() != cells {
+                    return mismatch("serving_gain_db", serving_gain_db.len(), cells);
                 }
                 if serving.iter().any(|&ap| usize::from(ap) >= aps) {
                     return Err(format!(
@@ -92,6 +109,7 @@ impl RadioMap {
                         .map(|ap| Arc::new(ChannelModel::for_ap(scenario, ap)))
                         .collect(),
                     serving,
+                    serving_gain_db,
                     antenna_height_m: scenario.mru.antenna_height_m,
                 }
             }
@@ -152,6 +170,7 @@ impl RadioMap {
             values,
             occupied,
             cells: solutions,
+            links: super::LinkBudget::for_scenario(scenario),
             build_seconds,
         })
     }

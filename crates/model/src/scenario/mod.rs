@@ -65,6 +65,12 @@ pub const MAX_GRID_SIDE: usize = 10_001;
 /// Largest |coordinate| (m) of the room, and so of everything inside it: a floor is far smaller,
 /// and beyond ~10⁵ m squared distances lose the millimetre precision blockage tests rely on.
 pub const MAX_COORDINATE_M: f64 = 100_000.0;
+/// Widest channel (MHz) a throughput is computed for: beyond 802.11ad's 2.16 GHz channels.
+pub const MAX_BANDWIDTH_MHZ: f64 = 10_000.0;
+/// Largest antenna gain (dBi) accepted, either sign: a dish's gain, far beyond an indoor AP's.
+pub const MAX_ANTENNA_GAIN_DBI: f64 = 50.0;
+/// Largest fade margin (dB) accepted.
+pub const MAX_FADE_MARGIN_DB: f64 = 60.0;
 /// Relative tolerance for "the room is a whole number of cells wide" and "the normal is unit":
 /// loose enough for spans and normals typed with six significant digits.
 const TOL: f64 = 1e-6;
@@ -178,6 +184,16 @@ impl Scenario {
         match &self.ap {
             Some(one) => std::slice::from_ref(one),
             None => &self.aps,
+        }
+    }
+
+    /// The JSON path of access point `k` in the document (`ap` or `aps[k]`), for errors that
+    /// name one of its fields.
+    pub fn ap_field(&self, k: usize) -> String {
+        if self.ap.is_some() {
+            "ap".to_string()
+        } else {
+            format!("aps[{k}]")
         }
     }
 

@@ -66,6 +66,15 @@ pub struct AccessPoint {
     pub noise_dbm: f64,
     /// f_c (GHz).
     pub carrier_ghz: f64,
+    /// The AP antenna's gain towards the robots (dBi), added to the link budget of received
+    /// power, SNR and rates (docs/model.md §3.1); the channel gain map does not include it. Left
+    /// out of the canonical form at 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub antenna_gain_dbi: f64,
+    /// The channel's bandwidth (MHz), which turns bit/s/Hz into Mbit/s; needed only for
+    /// throughput (`mbps`) thresholds and values.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bandwidth_mhz: Option<f64>,
 }
 
 /// How the N̄ elements of a sub-surface combine (docs/model.md §2).
@@ -143,6 +152,10 @@ pub struct Mru {
     /// form at 0, so scenarios written before it keep their ids.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub radius_m: f64,
+    /// The robot antenna's gain (dBi), added to the link budget like the AP's. Left out of the
+    /// canonical form at 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub antenna_gain_dbi: f64,
 }
 
 fn is_zero(value: &f64) -> bool {
@@ -178,6 +191,11 @@ pub struct ChannelSpec {
     /// The path-loss model (default and only one: `3gpp_inf_sh`).
     #[serde(default)]
     pub path_loss: PathLossModel,
+    /// A fade margin (dB) taken off every link budget (received power, SNR, rates; not the
+    /// channel gain), so that thresholds hold with that much to spare. Left out of the canonical
+    /// form at 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub fade_margin_db: f64,
 }
 
 fn default_rician_k_db() -> f64 {
@@ -189,6 +207,7 @@ impl Default for ChannelSpec {
         ChannelSpec {
             rician_k_db: default_rician_k_db(),
             path_loss: PathLossModel::default(),
+            fade_margin_db: 0.0,
         }
     }
 }

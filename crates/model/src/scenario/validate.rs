@@ -235,6 +235,16 @@ impl Scenario {
                     "must lie in (0, 100] GHz, the 3GPP InF model's range",
                 );
             }
+            antenna_gain(&f("antenna_gain_dbi"), ap.antenna_gain_dbi)?;
+            if let Some(b) = ap.bandwidth_mhz {
+                finite(&f("bandwidth_mhz"), b)?;
+                if !(b > 0.0 && b <= MAX_BANDWIDTH_MHZ) {
+                    return err(
+                        &f("bandwidth_mhz"),
+                        &format!("must lie in (0, {MAX_BANDWIDTH_MHZ}] MHz"),
+                    );
+                }
+            }
             self.inside_room(&f("position"), ap.position)?;
             if obstructions.contains(ap.position) {
                 return err(&f("position"), "lies inside an obstacle");
@@ -318,6 +328,7 @@ impl Scenario {
                 "must be at least 0 and less than half the room's shorter side",
             );
         }
+        antenna_gain("mru.antenna_gain_dbi", self.mru.antenna_gain_dbi)?;
 
         if self.srus.len() > MAX_SRUS {
             return Err(FieldError::new(
@@ -352,6 +363,13 @@ impl Scenario {
         finite("channel.rician_k_db", self.channel.rician_k_db)?;
         if self.channel.rician_k_db.abs() > 60.0 {
             return err("channel.rician_k_db", "must lie in [-60, 60] dB");
+        }
+        finite("channel.fade_margin_db", self.channel.fade_margin_db)?;
+        if !(0.0..=MAX_FADE_MARGIN_DB).contains(&self.channel.fade_margin_db) {
+            return err(
+                "channel.fade_margin_db",
+                &format!("must lie in [0, {MAX_FADE_MARGIN_DB}] dB"),
+            );
         }
         Ok(())
     }
@@ -658,6 +676,17 @@ fn finite(field: &str, v: f64) -> Result<(), FieldError> {
     } else {
         Err(FieldError::new(field, "must be a finite number"))
     }
+}
+
+fn antenna_gain(field: &str, v: f64) -> Result<(), FieldError> {
+    finite(field, v)?;
+    if v.abs() > MAX_ANTENNA_GAIN_DBI {
+        return Err(FieldError::new(
+            field,
+            format!("must lie in [-{MAX_ANTENNA_GAIN_DBI}, {MAX_ANTENNA_GAIN_DBI}] dBi"),
+        ));
+    }
+    Ok(())
 }
 
 fn finite_all(field: &str, v: &[f64]) -> Result<(), FieldError> {

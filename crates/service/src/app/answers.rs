@@ -18,6 +18,7 @@ use bytes::Bytes;
 use irs_answers::path::FrameId;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_model::planner::Threshold;
+use irs_model::radiomap::Unit;
 
 /// What a path answer depends on besides its map's content: the map's id and the query's
 /// fields, the coordinates as their exact bits (an answer repeats the requested points).
@@ -28,6 +29,7 @@ pub(crate) struct PathQuery {
     goal: [u64; 2],
     /// `None` for `"max"`.
     threshold: Option<u64>,
+    unit: Unit,
     format: PhaseFormat,
     precision: PhasePrecision,
     frame: FrameId,
@@ -38,7 +40,7 @@ impl PathQuery {
         map_id: MapId,
         start: [f64; 2],
         goal: [f64; 2],
-        threshold: Threshold,
+        (threshold, unit): (Threshold, Unit),
         (format, precision): (PhaseFormat, PhasePrecision),
         frame: FrameId,
     ) -> Self {
@@ -50,6 +52,7 @@ impl PathQuery {
                 Threshold::Value(v) => Some(v.to_bits()),
                 Threshold::Max => None,
             },
+            unit,
             format,
             precision,
             frame,

@@ -5,8 +5,9 @@ use super::map_owners::MapOwners;
 use super::registry::ScenarioRegistry;
 use crate::ids::{MapId, ScenarioId};
 use crate::store::DataDir;
-use irs_model::planner::{self, Bottlenecks};
-use irs_model::radiomap::RadioMap;
+use irs_model::input::FieldError;
+use irs_model::planner::UnitIndex;
+use irs_model::radiomap::{RadioMap, Unit};
 use std::sync::Arc;
 
 /// Built maps by map id, weighed in KiB so the budget is in bytes, not entries; with
@@ -15,12 +16,12 @@ use std::sync::Arc;
 #[derive(Clone)]
 pub struct MapCache {
     maps: moka::future::Cache<MapId, Arc<RadioMap>>,
-    /// Each queried map's widest-path index ([`Bottlenecks`], 8 bytes a cell), built by its
-    /// first path or sweep query. Its own budget, a quarter of the maps', holds the indexes of
-    /// the maps being queried (an index is at most as big as its map); an evicted one is rebuilt
-    /// on demand (≈ 0.1 s for 1001² cells). Map ids hash the map's inputs, so an index can never
-    /// outlive the map it describes.
-    indexes: moka::sync::Cache<MapId, Arc<Bottlenecks>>,
+    /// Each queried map's values and widest-path index per unit queried ([`UnitIndex`]: 8 bytes
+    /// a cell, 16 for a unit other than the map's own), built by its first path or sweep query
+    /// in that unit. Its own budget, a quarter of the maps', holds the indexes of the maps being
+    /// queried; an evicted one is rebuilt on demand (≈ 0.1 s for 1001² cells). Map ids hash the
+    /// map's inputs, so an index can never outlive the map it describes.
+    indexes: moka::sync::Cache<(MapId, Unit), Arc<UnitIndex>>,
     disk: Option<MapDisk>,
 }
 
@@ -54,7 +55,7 @@ impl MapCache {
         let indexes = moka::sync::Cache::builder()
             .eviction_policy(moka::policy::EvictionPolicy::lru())
             .max_capacity((budget_bytes / 4 / 1024).max(1))
-            .weigher(|_id: &MapId, index: &Arc<Bottlenecks>| {
+            .weigher(|_key: &(MapId, Unit), index: &Arc<UnitIndex>| {
                 (index.bytes() / 1024).clamp(1, u32::MAX as usize) as u32
             })
             .build();
@@ -109,11 +110,20 @@ impl MapCache {
         self.record_size();
     }
 
-    /// The widest-path index of a cached map, built on first use by the calling thread (a query
-    /// worker; concurrent first queries wait for one build).
-    pub fn bottlenecks(&self, map_id: &MapId, map: &RadioMap) -> Arc<Bottlenecks> {
+    /// The values in `unit` and widest-path index of a cached map, built on first use by the
+    /// calling thread (a query worker; concurrent first queries wait for one build); an error
+    /// names `unit` when the map cannot be read in it.
+    pub fn unit_index(
+        &self,
+        map_id: &MapId,
+        map: &RadioMap,
+        unit: Unit,
+    ) -> Result<Arc<UnitIndex>, FieldError> {
         self.indexes
-            .get_with_by_ref(map_id, || Arc::new(planner::bottlenecks(map)))
+            .try_get_with((map_id.clone(), unit), || {
+                UnitIndex::new(map, unit).map(Arc::new)
+            })
+            .map_err(|e| (*e).clone())
     }
 
     /// Fills memory from the disk, most recently written first, up to `budget_bytes`: a
@@ -149,10 +159,17 @@ impl MapCache {
         self.maps.iter().map(|(k, v)| ((*k).clone(), v)).collect()
     }
 
+    /// Drops a map's indexes, in every unit.
+    fn forget_indexes(&self, map_id: &MapId) {
+        for unit in Unit::ALL {
+            self.indexes.invalidate(&(map_id.clone(), unit));
+        }
+    }
+
     /// Drops a map from memory and disk; true if it was held.
     pub async fn remove(&self, map_id: &MapId) -> bool {
         let mut removed = self.maps.remove(map_id).await.is_some();
-        self.indexes.invalidate(map_id);
+        self.forget_indexes(map_id);
         if let Some(disk) = &self.disk {
             removed |= disk.dir.remove_map(map_id.as_str());
         }
@@ -165,7 +182,7 @@ impl MapCache {
         for (map_id, map) in self.entries() {
             if map.key.scenario_id == scenario_id.as_str() {
                 self.maps.remove(&map_id).await;
-                self.indexes.invalidate(&map_id);
+                self.forget_indexes(&map_id);
             }
         }
         if let Some(disk) = &self.disk {

@@ -14,8 +14,16 @@ use irs_answers::export::{self, MaskKind};
 use irs_answers::render::{self, RenderOptions};
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::planner::{self, Threshold};
-use irs_model::radiomap::Progress;
+use irs_model::radiomap::{Progress, Unit};
 use std::collections::HashMap;
+
+/// The optional `unit` query parameter.
+fn query_unit(query: &HashMap<String, String>) -> Result<Option<Unit>, Error> {
+    query
+        .get("unit")
+        .map(|text| text.parse::<Unit>().map_err(|e| Error::invalid("unit", e)))
+        .transpose()
+}
 
 /// An optional "x,y" query parameter.
 pub(super) fn query_point(
@@ -35,7 +43,8 @@ pub(super) async fn image(
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    only_query(&query, &["threshold", "start", "goal", "cell_px"])?;
+    only_query(&query, &["threshold", "unit", "start", "goal", "cell_px"])?;
+    let unit = query_unit(&query)?;
     let threshold = match query.get("threshold") {
         None => Threshold::Max,
         Some(text) => text
@@ -74,11 +83,13 @@ pub(super) async fn image(
     let (map, scenario) = state.map_with_scenario(&caller, &map_id).await?;
     // Rendering touches every pixel (up to 4096² of them), so it is always a heavy query.
     let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
+        let unit = unit.unwrap_or(map.native_unit());
         let options = match path_ends {
             Some((s, g)) => {
-                RenderOptions::for_path(&map, &planner::plan(&map, s, g, threshold, 1.0)?)
+                RenderOptions::for_path(&map, &planner::plan(&map, unit, s, g, threshold, 1.0)?)
             }
             None => RenderOptions {
+                unit: Some(unit),
                 threshold: match threshold {
                     Threshold::Value(t) => Some(t),
                     Threshold::Max => None,
@@ -87,7 +98,7 @@ pub(super) async fn image(
             },
         };
         let options = RenderOptions { cell_px, ..options };
-        Ok(render::png(&map, &scenario, &options))
+        render::png(&map, &scenario, &options)
     };
     let bytes = state
         .queries()
@@ -114,7 +125,8 @@ pub(super) async fn nav2_mask(
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    only_query(&query, &["threshold", "mask", "best"])?;
+    only_query(&query, &["threshold", "unit", "mask", "best"])?;
+    let unit = query_unit(&query)?;
     let number = |name: &'static str| {
         query
             .get(name)
@@ -135,7 +147,8 @@ pub(super) async fn nav2_mask(
     let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
     let archive = heavy(&state, "mask export", cells, move |_| {
-        export::nav2_mask(&map, kind, threshold, best).map(|mask| mask.tar())
+        let unit = unit.unwrap_or(map.native_unit());
+        export::nav2_mask(&map, unit, kind, threshold, best).map(|mask| mask.tar())
     })
     .await?
     .map_err(|e| Error::invalid(e.field, e.reason))?;
@@ -157,10 +170,15 @@ pub(super) async fn values_npy(
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    only_query(&query, &[])?;
+    only_query(&query, &["unit"])?;
+    let unit = query_unit(&query)?;
     let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
-    let bytes = heavy(&state, "values export", cells, move |_| export::npy(&map)).await?;
+    let bytes = heavy(&state, "values export", cells, move |_| {
+        export::npy(&map, unit.unwrap_or(map.native_unit()))
+    })
+    .await?
+    .map_err(|e| Error::invalid(e.field, e.reason))?;
     let disposition = format!("attachment; filename=\"{map_id}.npy\"");
     Ok((
         [

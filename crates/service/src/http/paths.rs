@@ -22,7 +22,7 @@ use irs_answers::timing::Timed;
 use irs_model::input::{parse_finite, present};
 use irs_model::montecarlo;
 use irs_model::planner::{self, SweepAnswer, Threshold};
-use irs_model::radiomap::{MapKind, RadioMap, WorkError};
+use irs_model::radiomap::{MapKind, RadioMap, Unit, WorkError, body};
 use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -46,17 +46,23 @@ pub(super) async fn coverage(
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Coverage>, ApiError> {
-    only_query(&query, &["threshold"])?;
+    only_query(&query, &["threshold", "unit"])?;
     let threshold = query
         .get("threshold")
         .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
     let threshold = parse_finite(threshold).map_err(|e| Error::invalid("threshold", e))?;
+    let unit = query
+        .get("unit")
+        .map(|text| text.parse::<Unit>().map_err(|e| Error::invalid("unit", e)))
+        .transpose()?;
     let map = state.map(&caller, &map_id).await?;
-    let eta = map.coverage(threshold);
+    let unit = unit.unwrap_or(map.native_unit());
+    let values = map.values_in(unit)?;
+    let eta = body::coverage(&values, &map.occupied, threshold);
     let free = map.free_cells();
     Ok(Json(Coverage {
         map_id,
-        unit: map.key.unit(),
+        unit: unit.symbol(),
         threshold,
         coverage: eta,
         free_cells: free,
@@ -78,6 +84,9 @@ pub(super) struct PathRequest {
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
+    /// The unit of the threshold and of the values answered (default: the map's own).
+    #[serde(default, deserialize_with = "present")]
+    unit: Option<Unit>,
     /// Monte Carlo draws per waypoint for the Jensen-gap check (paper Fig. 10).
     #[serde(default, deserialize_with = "present")]
     monte_carlo_draws: Option<usize>,
@@ -199,6 +208,7 @@ pub(super) async fn plan_path(
         Err(accepted) => return Ok(accepted),
     };
     let map_id = MapId::of_map(&map);
+    let unit = request.unit.unwrap_or(map.native_unit());
     // A plain query asked before is answered from the answer cache (`app::answers`).
     let frame = request.frame_id.unwrap_or_default();
     let query =
@@ -207,7 +217,7 @@ pub(super) async fn plan_path(
                 map_id.clone(),
                 start,
                 goal,
-                request.threshold,
+                (request.threshold, unit),
                 (format, precision),
                 frame.clone(),
             )
@@ -219,7 +229,7 @@ pub(super) async fn plan_path(
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let (planned, cache) = (map.clone(), state.cache().clone());
     let path = heavy(&state, "path", cells, move |_| {
-        let index = cache.bottlenecks(&map_id, &planned);
+        let index = cache.unit_index(&map_id, &planned, unit)?;
         planner::plan_indexed(&planned, &index, start, goal, threshold, v_max)
     })
     .await??;
@@ -288,6 +298,9 @@ pub(super) struct SweepRequest {
     start: [f64; 2],
     goal: [f64; 2],
     thresholds: Vec<f64>,
+    /// The unit of the thresholds (default: the map's own).
+    #[serde(default, deserialize_with = "present")]
+    unit: Option<Unit>,
 }
 
 pub(super) async fn sweep(
@@ -316,11 +329,12 @@ pub(super) async fn sweep(
         Err(accepted) => return Ok(accepted),
     };
     let (cells, v_max, thresholds) = (map.grid.cells(), scenario.mru.v_max_mps, request.thresholds);
+    let unit = request.unit.unwrap_or(map.native_unit());
     // A sweep is one search per threshold: heavy once thresholds × cells is, not cells alone.
     let work = cells.saturating_mul(thresholds.len());
     let cache = state.cache().clone();
     let answer: SweepAnswer = heavy(&state, "sweep", work, move |progress| {
-        let index = cache.bottlenecks(&MapId::of_map(&map), &map);
+        let index = cache.unit_index(&MapId::of_map(&map), &map, unit)?;
         planner::sweep(&map, &index, start, goal, &thresholds, v_max, progress)
     })
     .await?
