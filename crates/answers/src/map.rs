@@ -4,7 +4,7 @@
 use crate::scenario::{ScenarioDocument, hash_hex};
 use irs_model::placement::Naming;
 use irs_model::radiomap::{
-    self, Cancelled, CertificateSummary, MapKey, MapStats, Progress, RadioMap,
+    self, Cancelled, CertificateSummary, ClosedPassage, MapKey, MapStats, Progress, RadioMap,
 };
 use irs_model::scenario::{Grid, Scenario};
 use serde::Serialize;
@@ -22,6 +22,10 @@ pub struct MapBody {
     pub grid: Grid,
     /// Cell counts and the values' min, max, mean and median.
     pub stats: MapStats,
+    /// The passages the conservative occupancy closes, largest first (at most
+    /// [`radiomap::passages::MAX_LISTED`]; `stats.closed_passages` counts them all): where to
+    /// refine the grid.
+    pub closed_passages: Vec<ClosedPassage>,
     /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
     /// maps, where no configuration serves every SRU).
     pub values: Vec<Vec<Option<f64>>>,
@@ -41,6 +45,7 @@ pub fn body(map: &RadioMap) -> MapBody {
         unit: map.key.unit(),
         grid: map.grid,
         stats: map.stats(),
+        closed_passages: map.closed_passages.listed.clone(),
         values: rows(map, &map.values),
         certificate: map.certificate_summary(),
         upper_bound: map.upper_bound().map(|bound| rows(map, bound)),

@@ -9,10 +9,13 @@ use serde::Serialize;
 pub struct MapStats {
     /// Cells of the grid, occupied ones included.
     pub cells: usize,
-    /// Cells whose centre no obstruction occupies.
+    /// Cells no obstruction overlaps (docs/model.md §1).
     pub free_cells: usize,
-    /// Cells whose centre an obstruction occupies (never a waypoint).
+    /// Cells an obstruction overlaps (never a waypoint).
     pub occupied_cells: usize,
+    /// Passages a robot could drive through that no chain of free cells crosses at this grid's
+    /// resolution (listed in the map's body; docs/model.md §1).
+    pub closed_passages: usize,
     /// Free cells with a value (on rate maps, those where every SRU can be served).
     pub valued_cells: usize,
     /// Smallest value; `None` when no cell has one.
@@ -59,6 +62,7 @@ impl RadioMap {
             cells: self.values.len(),
             free_cells: free,
             occupied_cells: self.values.len() - free,
+            closed_passages: self.closed_passages.total,
             valued_cells: finite.len(),
             min: finite.first().copied(),
             max: finite.last().copied(),

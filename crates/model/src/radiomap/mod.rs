@@ -14,12 +14,14 @@ pub mod cost;
 pub mod gain;
 pub mod key;
 mod parts;
+pub mod passages;
 pub mod rate_cells;
 pub mod units;
 
 pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
 pub use parts::StoredCells;
+pub use passages::{ClosedPassage, ClosedPassages};
 pub use rate_cells::RateCells;
 pub use units::{LinkBudget, Unit};
 
@@ -149,8 +151,11 @@ pub struct RadioMap {
     /// Per cell (flat index i·ny + j): dB for gain maps, bit/s/Hz for rate maps, NaN if occupied
     /// (and, on rate maps, where no configuration meets every SRU's rate).
     pub values: Vec<f64>,
-    /// Per cell: true if an obstacle, a wall or the floor plan occupies its centre.
+    /// Per cell: true if an obstacle, a wall or the floor plan overlaps its square (widened by
+    /// the robot's radius; docs/model.md §1).
     pub occupied: Vec<bool>,
+    /// The passages that occupancy closes (where the grid is too coarse for a gap).
+    pub closed_passages: ClosedPassages,
     /// What answers "how do I configure the IRS here?" at each cell.
     pub cells: CellSolutions,
     /// Each AP's link budget, which turns gains into received power, SNR and throughput
@@ -281,6 +286,7 @@ pub fn build(
     let started = std::time::Instant::now();
     let grid = scenario.grid();
     let occupied = occupancy(scenario, &grid);
+    let closed_passages = passages::closed_passages(scenario, &grid, &occupied);
     let links = LinkBudget::for_scenario(scenario);
     progress.start(grid.cells());
     let (values, cells) = match key.kind {
@@ -315,6 +321,7 @@ pub fn build(
         grid,
         values,
         occupied,
+        closed_passages,
         cells,
         links,
         build_seconds: started.elapsed().as_secs_f64(),

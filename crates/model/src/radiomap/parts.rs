@@ -168,6 +168,7 @@ impl RadioMap {
             key,
             grid,
             values,
+            closed_passages: super::passages::closed_passages(scenario, &grid, &occupied),
             occupied,
             cells: solutions,
             links: super::LinkBudget::for_scenario(scenario),
