@@ -107,6 +107,7 @@ fn large_grid(c: &mut Criterion) {
                 planner::plan(
                     &map,
                     map.native_unit(),
+                    Default::default(),
                     centre(from),
                     centre(to),
                     Threshold::Max,
@@ -199,15 +200,24 @@ fn floors(c: &mut Criterion) {
         ("path_at_max_threshold", Threshold::Max),
     ] {
         assert!(
-            planner::plan(&map, map.native_unit(), start, goal, threshold, 1.0)
-                .unwrap()
-                .feasible
+            planner::plan(
+                &map,
+                map.native_unit(),
+                Default::default(),
+                start,
+                goal,
+                threshold,
+                1.0
+            )
+            .unwrap()
+            .feasible
         );
         group.bench_function(name, |b| {
             b.iter(|| {
                 planner::plan(
                     black_box(&map),
                     map.native_unit(),
+                    Default::default(),
                     start,
                     goal,
                     threshold,
@@ -216,6 +226,62 @@ fn floors(c: &mut Criterion) {
                 .unwrap()
             })
         });
+    }
+    group.finish();
+}
+
+/// Any-angle against 8-connected searches (issue: at most 3× the grid query's time) on the
+/// paper floor at 2 cm (1001²) and the warehouse at 5 cm (1201 × 801), each at a threshold
+/// where the path is nearly straight and one just below the largest feasible; the lengths are
+/// printed once, for docs/performance.md.
+fn any_angle(c: &mut Criterion) {
+    let paper_floor = paper("paper-single-user", |v| {
+        v["grid"]["resolution_m"] = 0.02.into();
+    });
+    let warehouse = Scenario::from_value(warehouse_document(0.05)).unwrap();
+    let mut group = c.benchmark_group("any_angle");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(10));
+    for (floor, s, start, goal) in [
+        ("paper_1001x1001", &paper_floor, [-10.0, 0.0], [10.0, 0.0]),
+        (
+            "warehouse_1201x801",
+            &warehouse,
+            [-27.0, 16.0],
+            [26.0, -16.0],
+        ),
+    ] {
+        let key = MapKey::gain("bench", s, PhaseMode::Continuous).unwrap();
+        let map = irs_answers::map::build(s, &key, &Progress::default()).unwrap();
+        let graph = CellGraph {
+            grid: &map.grid,
+            values: &map.values,
+            occupied: &map.occupied,
+        };
+        let cell = |p: [f64; 2]| {
+            let (i, j) = map.grid.snap(p[0], p[1]).unwrap();
+            map.grid.index(i, j)
+        };
+        let (from, to) = (cell(start), cell(goal));
+        let widest = graph.widest_path_threshold(from, to).unwrap();
+        for (level, threshold) in [("wide", widest - 3.0), ("narrow", widest - 0.05)] {
+            let grid_path = graph.shortest_path(from, to, threshold).unwrap();
+            let any = graph.any_angle_path(from, to, threshold).unwrap();
+            eprintln!(
+                "{floor} {level} (γ = {threshold:.2} dB): grid {:.3} m, any-angle {:.3} m                  ({:.2} % shorter, {} vertices)",
+                grid_path.distance_m,
+                any.distance_m,
+                100.0 * (1.0 - any.distance_m / grid_path.distance_m),
+                any.vertices.len()
+            );
+            group.bench_function(format!("{floor}_{level}_grid"), |b| {
+                b.iter(|| graph.shortest_path(from, to, black_box(threshold)))
+            });
+            group.bench_function(format!("{floor}_{level}_any_angle"), |b| {
+                b.iter(|| graph.any_angle_path(from, to, black_box(threshold)))
+            });
+        }
     }
     group.finish();
 }
@@ -316,7 +382,16 @@ fn path_answer(c: &mut Criterion) {
     let index = planner::UnitIndex::new(&map, map.native_unit()).unwrap();
     let plan = || {
         let threshold = Threshold::Value(-62.0);
-        planner::plan_indexed(&map, &index, [-10.0, 0.0], [10.0, 0.0], threshold, 1.0).unwrap()
+        planner::plan_indexed(
+            &map,
+            &index,
+            Default::default(),
+            [-10.0, 0.0],
+            [10.0, 0.0],
+            threshold,
+            1.0,
+        )
+        .unwrap()
     };
     let path = plan();
     assert_eq!(path.waypoints.len(), 41);
@@ -362,6 +437,7 @@ criterion_group!(
     large_grid,
     rate_maps,
     floors,
+    any_angle,
     factory,
     placement,
     path_answer

@@ -17,7 +17,7 @@ use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
 use irs_model::placement::{self, Candidates, Objective, Pose, Search, Segment, What};
-use irs_model::planner::{self, Threshold};
+use irs_model::planner::{self, PathShape, Threshold};
 use irs_model::radiomap::{MapKey, MapKind, Progress, RadioMap, Unit, WorkError, cost};
 use irs_model::rate::Access;
 use irs_model::scenario::Scenario;
@@ -261,6 +261,20 @@ pub struct PlanArgs {
     /// mbps (docs/model.md §3.1); default: the map's own (gain_db or bps_hz).
     #[arg(long, value_name = "UNIT")]
     pub unit: Option<Unit>,
+    /// The route's shape: grid (8-connected steps, the paper's) or any_angle (straight segments
+    /// wherever every cell crossed meets the threshold; never longer).
+    #[arg(long, value_name = "SHAPE", default_value = "grid")]
+    pub path_shape: PathShape,
+    /// How far (m) a start or goal in an obstacle or below the threshold may move to the
+    /// nearest feasible cell (the answer says where; default 0: not at all).
+    #[arg(
+        long,
+        value_name = "METRES",
+        default_value = "0",
+        allow_hyphen_values = true,
+        value_parser = parse_finite
+    )]
+    pub tolerance: f64,
     /// Use the largest threshold for which a path exists (the same as --threshold max).
     #[arg(long)]
     pub max_threshold: bool,
@@ -497,6 +511,12 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             "--monte-carlo: its report is part of the json output only",
         ));
     }
+    if !(0.0..=planner::MAX_TOLERANCE_M).contains(&args.tolerance) {
+        return Err(Failure::input(format!(
+            "--tolerance: must lie in [0, {}] m",
+            planner::MAX_TOLERANCE_M
+        )));
+    }
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let threshold = args.threshold.unwrap_or(Threshold::Max);
@@ -507,6 +527,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let path = planner::plan(
         &map,
         unit,
+        planner::PathOptions {
+            shape: args.path_shape,
+            tolerance_m: args.tolerance,
+        },
         args.start,
         args.goal,
         threshold,
@@ -660,6 +684,7 @@ pub fn run_place(args: &PlaceArgs) -> Result<(), Failure> {
                 let path = planner::plan(
                     &map,
                     map.native_unit(),
+                    Default::default(),
                     start,
                     goal,
                     threshold,

@@ -785,6 +785,108 @@ fn check_msg(value: &serde_json::Value, ty: &str, package: &str, at: &str) {
     }
 }
 
+/// `plan --unit` and `--path-shape`: an RSSI threshold selects the path of the gain threshold
+/// 20 dB lower (20 dBm, no antenna gains), labelled dBm; any-angle is never longer.
+#[test]
+fn plan_takes_units_and_path_shapes() {
+    let plan = |extra: &[&str]| -> serde_json::Value {
+        let args = [
+            &[
+                "plan",
+                "--scenario",
+                "scenarios/paper-single-user.json",
+                "--kind",
+                "gain",
+                "--start=-10,0",
+                "--goal",
+                "10,0",
+                "--quiet",
+            ][..],
+            extra,
+        ]
+        .concat();
+        let (code, out, err) = run(&args);
+        assert_eq!(code, 0, "{err}");
+        serde_json::from_str(&out).unwrap()
+    };
+    let db = plan(&["--threshold=-61"]);
+    let dbm = plan(&["--threshold=-41", "--unit", "dbm"]);
+    assert_eq!(
+        (db["unit"].as_str(), dbm["unit"].as_str()),
+        (Some("dB"), Some("dBm"))
+    );
+    assert_eq!(db["distance_m"], dbm["distance_m"]);
+    let any = plan(&["--threshold=-61", "--path-shape", "any_angle"]);
+    assert_eq!(any["path_shape"], "any_angle");
+    assert!(any["distance_m"].as_f64().unwrap() < db["distance_m"].as_f64().unwrap());
+    let (code, _, err) = run(&[
+        "plan",
+        "--scenario",
+        "scenarios/paper-single-user.json",
+        "--kind",
+        "gain",
+        "--start=-10,0",
+        "--goal",
+        "10,0",
+        "--threshold=5",
+        "--unit",
+        "mbps",
+        "--quiet",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--unit") && err.contains("bandwidth_mhz"),
+        "{err}"
+    );
+}
+
+/// `plan --tolerance`: a start inside the small room's box moves to the nearest free cell
+/// within the tolerance, and says so; without it there is no path (exit 3, start_occupied).
+#[test]
+fn plan_moves_an_end_within_its_tolerance() {
+    let args = |tolerance: &str| {
+        vec![
+            "plan",
+            "--scenario",
+            SMALL,
+            "--kind",
+            "gain",
+            "--start",
+            "3,2",
+            "--goal",
+            "0.5,0.5",
+            "--max-threshold",
+            "--quiet",
+            "--tolerance",
+            tolerance,
+        ]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>()
+    };
+    let run_with = |t: &str| {
+        let a = args(t);
+        let refs: Vec<&str> = a.iter().map(String::as_str).collect();
+        run(&refs)
+    };
+    let (code, out, _) = run_with("0");
+    assert_eq!(code, 3);
+    let stuck: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(stuck["reason"], "start_occupied");
+    let (code, out, err) = run_with("1");
+    assert_eq!(code, 0, "{err}");
+    let moved: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(moved["start"]["moved"], true);
+    let (x, y) = (
+        moved["start"]["x"].as_f64().unwrap(),
+        moved["start"]["y"].as_f64().unwrap(),
+    );
+    assert!((x - 3.0).hypot(y - 2.0) <= 1.0);
+    let (code, _, err) = run_with("-1");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--tolerance"), "{err}");
+}
+
 /// `plan --output nav-msgs-path` writes a nav_msgs/Path as ROS 2 defines it (the vendored
 /// definitions of common_interfaces and rcl_interfaces), in the frame asked for; `--output csv`
 /// one line per waypoint; a Monte Carlo report belongs to the JSON answer only.

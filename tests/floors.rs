@@ -78,6 +78,7 @@ fn the_paper_floor_as_pixels_gives_the_box_map() {
     let path = planner::plan(
         &map,
         map.native_unit(),
+        Default::default(),
         [-10.0, 0.0],
         [10.0, 0.0],
         Threshold::Max,
@@ -210,6 +211,7 @@ fn no_move_crosses_a_wall_of_a_public_ros_map() {
     let path = planner::plan(
         &map,
         map.native_unit(),
+        Default::default(),
         [1.0, 1.0],
         [29.0, 14.0],
         Threshold::Max,
@@ -223,6 +225,56 @@ fn no_move_crosses_a_wall_of_a_public_ros_map() {
                 "the path crosses a wall"
             );
         }
+    }
+    // Any-angle segments are long: none crosses a wall either, and the route is shorter.
+    let threshold = Threshold::Value(f64::NEG_INFINITY);
+    let (from, to) = ([1.0, 1.0], [29.0, 14.0]);
+    let any = planner::plan(
+        &map,
+        map.native_unit(),
+        irs_model::planner::PathOptions::any_angle(),
+        from,
+        to,
+        threshold,
+        1.0,
+    )
+    .unwrap();
+    let grid_path = planner::plan(
+        &map,
+        map.native_unit(),
+        Default::default(),
+        from,
+        to,
+        threshold,
+        1.0,
+    )
+    .unwrap();
+    assert_eq!(any.feasible, grid_path.feasible);
+    if any.feasible {
+        let (a, g) = (any.distance_m.unwrap(), grid_path.distance_m.unwrap());
+        eprintln!(
+            "depot: any-angle {a:.2} m vs grid {g:.2} m, {} vertices",
+            any.vertices.len()
+        );
+        assert!(a <= g + 1e-9);
+        for pair in any.vertices.windows(2) {
+            let (p, q) = (&any.waypoints[pair[0]], &any.waypoints[pair[1]]);
+            assert!(
+                !obstructions.blocks([p.x, p.y, 0.5], [q.x, q.y, 0.5]),
+                "an any-angle segment crosses a wall"
+            );
+        }
+    }
+    // Where the 0.25 m grid closes a gap the robot could drive through, the map says so.
+    let passages = &map.closed_passages;
+    eprintln!(
+        "depot at 0.25 m: {} closed passages, largest {:?}",
+        passages.total,
+        passages.listed.first()
+    );
+    assert_eq!(map.stats().closed_passages, passages.total);
+    for p in &passages.listed {
+        assert!(p.joins >= 2 && p.cells >= 1);
     }
 }
 

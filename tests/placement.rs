@@ -34,9 +34,17 @@ fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> O
     match *objective {
         Objective::Coverage { threshold } => Some(map.coverage(threshold)),
         Objective::MaxThreshold { start, goal } => {
-            planner::plan(&map, map.native_unit(), start, goal, Threshold::Max, 1.0)
-                .unwrap()
-                .max_feasible_threshold
+            planner::plan(
+                &map,
+                map.native_unit(),
+                Default::default(),
+                start,
+                goal,
+                Threshold::Max,
+                1.0,
+            )
+            .unwrap()
+            .max_feasible_threshold
         }
         Objective::Distance {
             threshold,
@@ -46,6 +54,7 @@ fn exhaustive_score(s: &Scenario, objective: &Objective, phases: PhaseMode) -> O
             planner::plan(
                 &map,
                 map.native_unit(),
+                Default::default(),
                 start,
                 goal,
                 Threshold::Value(threshold),

@@ -26,10 +26,18 @@ fn multi_user() -> &'static Scenario {
 }
 
 fn max_threshold(map: &RadioMap) -> f64 {
-    planner::plan(map, map.native_unit(), Q_I, Q_F, Threshold::Max, 1.0)
-        .unwrap()
-        .max_feasible_threshold
-        .unwrap()
+    planner::plan(
+        map,
+        map.native_unit(),
+        Default::default(),
+        Q_I,
+        Q_F,
+        Threshold::Max,
+        1.0,
+    )
+    .unwrap()
+    .max_feasible_threshold
+    .unwrap()
 }
 
 fn rate_map(access: Access, phases: PhaseMode) -> &'static RadioMap {
@@ -85,6 +93,7 @@ fn without_irs_the_path_at_minus_63_db_is_longer() {
         planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             Q_I,
             Q_F,
             Threshold::Value(-63.0),

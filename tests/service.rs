@@ -500,6 +500,30 @@ async fn paper_flow_matches_the_cli_byte_for_byte() {
         assert_eq!((ia, ja), (ib, jb));
         assert!((vb - (va + 20.0)).abs() < 1e-9);
     }
+    // The same threshold with straight segments: shorter, its own entry in the answer cache.
+    let mut any_angle = request.clone();
+    any_angle["threshold"] = (widest_db - 0.5).into();
+    any_angle["path_shape"] = "any_angle".into();
+    let (status, any) = server.post("/v1/paths", any_angle.clone()).await;
+    assert_eq!(status, StatusCode::OK, "{any}");
+    assert_eq!(
+        (any["path_shape"].as_str(), db["path_shape"].as_str()),
+        (Some("any_angle"), Some("grid"))
+    );
+    let (a, g) = (
+        any["distance_m"].as_f64().unwrap(),
+        db["distance_m"].as_f64().unwrap(),
+    );
+    assert!(a < g, "any-angle {a} m vs grid {g} m");
+    let vertices = any["vertices"].as_array().unwrap();
+    assert!(vertices.len() >= 2 && vertices.len() < db["vertices"].as_array().unwrap().len());
+    any_angle["path_shape"] = "diagonal".into();
+    refused_naming(&server, any_angle, "path_shape").await;
+    for bad in [-1.0, 51.0] {
+        let mut far = request.clone();
+        far["tolerance_m"] = bad.into();
+        refused_naming(&server, far, "tolerance_m").await;
+    }
     let (status, cov_snr) = server
         .get(&format!(
             "/v1/maps/{map_id}/coverage?threshold=50&unit=snr_db"

@@ -149,6 +149,7 @@ fn monte_carlo_means_respect_the_jensen_bound() {
         let path = planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             [0.5, 0.5],
             [5.5, 3.0],
             Threshold::Max,

@@ -107,6 +107,7 @@ fn two_aps_serve_each_cell_from_the_better_one() {
         let path = irs_model::planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             [-10.0, 0.0],
             [10.0, 0.0],
             irs_model::planner::Threshold::Max,

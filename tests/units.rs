@@ -115,6 +115,7 @@ fn a_dbm_threshold_is_a_shifted_gain_threshold_with_one_ap() {
         let in_db = planner::plan(
             &map,
             Unit::GainDb,
+            Default::default(),
             start,
             goal,
             Threshold::Value(gamma_db),
@@ -125,6 +126,7 @@ fn a_dbm_threshold_is_a_shifted_gain_threshold_with_one_ap() {
         let in_dbm = planner::plan_indexed(
             &map,
             &index,
+            Default::default(),
             start,
             goal,
             Threshold::Value(gamma_db + offset),
@@ -157,10 +159,18 @@ fn a_throughput_path_with_two_aps_meets_its_threshold_everywhere() {
     let index = UnitIndex::new(&map, Unit::Mbps).unwrap();
     let mbps = map.values_in(Unit::Mbps).unwrap();
     let (start, goal) = ([-9.0, 8.0], [8.0, -8.0]);
-    let widest = planner::plan(&map, Unit::Mbps, start, goal, Threshold::Max, 1.0)
-        .unwrap()
-        .max_feasible_threshold
-        .unwrap();
+    let widest = planner::plan(
+        &map,
+        Unit::Mbps,
+        Default::default(),
+        start,
+        goal,
+        Threshold::Max,
+        1.0,
+    )
+    .unwrap()
+    .max_feasible_threshold
+    .unwrap();
     let graph = planner::CellGraph {
         grid: &map.grid,
         values: &mbps,
@@ -178,8 +188,16 @@ fn a_throughput_path_with_two_aps_meets_its_threshold_everywhere() {
     );
     assert_eq!(graph.widest_path_threshold(s_cell, g_cell), Some(widest));
     for gamma in [widest * 0.5, widest * 0.9, widest] {
-        let path =
-            planner::plan_indexed(&map, &index, start, goal, Threshold::Value(gamma), 1.0).unwrap();
+        let path = planner::plan_indexed(
+            &map,
+            &index,
+            Default::default(),
+            start,
+            goal,
+            Threshold::Value(gamma),
+            1.0,
+        )
+        .unwrap();
         assert!(path.feasible, "γ = {gamma}");
         for w in &path.waypoints {
             assert!(w.value >= gamma);
@@ -190,6 +208,7 @@ fn a_throughput_path_with_two_aps_meets_its_threshold_everywhere() {
     let above = planner::plan_indexed(
         &map,
         &index,
+        Default::default(),
         start,
         goal,
         Threshold::Value(widest * 1.001),
@@ -261,6 +280,7 @@ fn units_a_map_cannot_answer_are_refused_with_the_reason() {
     let e = planner::plan(
         &gain,
         Unit::Mbps,
+        Default::default(),
         [0.5, 0.5],
         [5.5, 3.5],
         Threshold::Max,

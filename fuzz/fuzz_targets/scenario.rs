@@ -8,7 +8,7 @@
 
 use irs_answers::scenario::ScenarioDocument;
 use irs_model::phases::PhaseMode;
-use irs_model::planner::{self, Threshold};
+use irs_model::planner::{self, PathOptions, PathShape, Threshold};
 use irs_model::radiomap::{MapKey, MapKind, Progress, cost};
 use irs_model::scenario::Scenario;
 use libfuzzer_sys::fuzz_target;
@@ -43,12 +43,25 @@ fuzz_target!(|data: &[u8]| {
         let grid = &map.grid;
         let first = grid.centre(0, 0);
         let last = grid.centre(grid.nx - 1, grid.ny - 1);
-        if let Ok(path) = planner::plan(&map, first, last, Threshold::Max, scenario.mru.v_max_mps) {
-            if let Some(t) = path.threshold {
-                for waypoint in &path.waypoints {
-                    assert!(waypoint.value >= t, "a waypoint below the path's threshold");
+        let mut lengths = Vec::new();
+        for shape in [PathShape::Grid, PathShape::AnyAngle] {
+            let options = PathOptions {
+                shape,
+                ..PathOptions::default()
+            };
+            let v_max = scenario.mru.v_max_mps;
+            let unit = map.native_unit();
+            if let Ok(path) = planner::plan(&map, unit, options, first, last, Threshold::Max, v_max) {
+                if let Some(t) = path.threshold {
+                    for waypoint in &path.waypoints {
+                        assert!(waypoint.value >= t, "a waypoint below the path's threshold");
+                    }
                 }
+                lengths.push(path.distance_m);
             }
+        }
+        if let [Some(grid), Some(any)] = lengths[..] {
+            assert!(any <= grid + 1e-9, "an any-angle path longer than the grid path");
         }
     }
 });

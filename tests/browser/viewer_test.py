@@ -75,8 +75,8 @@ try:
     shown = driver.find_element(By.ID, "coverage").text
     check(wanted in shown, "coverage shown is the API's", f"{shown} (API: {wanted}…)")
 
-    expected = api("POST", "/v1/paths", {"map_id": map_id, "start": list(Q_I), "goal": list(Q_F),
-                                         "threshold": THRESHOLD})
+    query = {"map_id": map_id, "start": list(Q_I), "goal": list(Q_F), "threshold": THRESHOLD}
+    expected = api("POST", "/v1/paths", query)
     canvas = driver.find_element(By.ID, "map")
     layout = driver.execute_script(
         "const c = arguments[0]; const r = c.getBoundingClientRect();"
@@ -122,6 +122,19 @@ try:
     tip = driver.find_element(By.ID, "tooltip")
     wait.until(lambda d: tip.is_displayed())
     check("IRS phases: 60" in tip.text, "hovering a waypoint shows its value and phases", tip.text.replace("\n", " | "))
+
+    # The any-angle route of the same query: what the API answers, shorter than the grid's.
+    Select(driver.find_element(By.ID, "path-shape")).select_by_value("any_angle")
+    any_angle = api("POST", "/v1/paths", {**query, "path_shape": "any_angle"})
+    wait.until(lambda d: float(d.find_element(By.ID, "distance").get_attribute("data-value") or "nan")
+               == any_angle["distance_m"])
+    shown = float(driver.find_element(By.ID, "distance").get_attribute("data-value"))
+    check(shown == any_angle["distance_m"] < expected["distance_m"],
+          "an any-angle route is shown, shorter than the grid's",
+          f"{shown} m vs {expected['distance_m']} m")
+    Select(driver.find_element(By.ID, "path-shape")).select_by_value("grid")
+    wait.until(lambda d: float(d.find_element(By.ID, "distance").get_attribute("data-value"))
+               == expected["distance_m"])
 
     driver.save_screenshot(SCREENSHOT)
 

@@ -18,7 +18,7 @@
 //! let floor = Scenario::builtin("paper-single-user").unwrap();
 //! let key = MapKey::gain(&floor.content_hash(), &floor, PhaseMode::Continuous).unwrap();
 //! let map = irs_answers::map::build(&floor, &key, &Progress::default()).unwrap();
-//! let path = planner::plan(&map, map.native_unit(), [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 1.0).unwrap();
+//! let path = planner::plan(&map, map.native_unit(), Default::default(), [-10.0, 0.0], [10.0, 0.0], Threshold::Max, 1.0).unwrap();
 //! assert!(path.feasible && path.max_feasible_threshold.unwrap() > -60.0);
 //! ```
 

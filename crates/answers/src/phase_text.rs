@@ -303,6 +303,7 @@ mod tests {
                 i: 0,
                 j: 0,
                 snapped: false,
+                moved: false,
             };
             let path = PathAnswer {
                 map_id: String::new(),
@@ -310,6 +311,7 @@ mod tests {
                 threshold: None,
                 feasible: true,
                 reason: None,
+                path_shape: Default::default(),
                 distance_m: Some(0.0),
                 travel_time_s: Some(0.0),
                 max_feasible_threshold: None,
@@ -332,6 +334,7 @@ mod tests {
                         decoding_order: None,
                     },
                 }],
+                vertices: vec![0],
                 handovers: Vec::new(),
             };
             let path = write_phases(path, format, precision);

@@ -551,6 +551,7 @@ mod tests {
         let answer = planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             [0.5, 0.5],
             [5.5, 3.5],
             Threshold::Max,
@@ -607,6 +608,7 @@ mod tests {
         let answer = planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             [0.5, 0.5],
             [5.5, 3.5],
             Threshold::Value(1e9),

@@ -101,6 +101,7 @@ mod tests {
         planner::plan(
             &map,
             map.native_unit(),
+            Default::default(),
             [-10.0, 0.0],
             [10.0, 0.0],
             Threshold::Max,

@@ -81,7 +81,8 @@ pub struct MonteCarloReport {
 }
 
 /// Runs the check for every waypoint of a feasible path (waypoints in parallel, each with its
-/// own seeded generator, so the report is reproducible). `progress` counts the waypoints done;
+/// own seeded generator, so the report is reproducible): the waypoint's configuration at its
+/// cell's centre, against the map's value there (in the map's own unit, whatever the query's). `progress` counts the waypoints done;
 /// cancelling it stops the check before the next waypoint.
 pub fn check_path(
     scenario: &Scenario,
@@ -110,7 +111,11 @@ pub fn check_path(
                 return Err(Cancelled);
             }
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed.wrapping_add(k as u64));
-            let mru = [wp.x, wp.y, height];
+            // At the cell's centre, against the map's own value there: the waypoint may lie on
+            // the cell's side (any-angle routes) and its value may be in another unit.
+            let [x, y] = map.grid.centre(wp.i, wp.j);
+            let mru = [x, y, height];
+            let bound = map.values[map.grid.index(wp.i, wp.j)];
             let theta = wp.config.concatenated_phases();
             let theta_opt = (!theta.is_empty()).then_some(theta.as_slice());
             let users = match &map.cells {
@@ -129,10 +134,10 @@ pub fn check_path(
                     let mean_db = 10.0 * mean.log10();
                     vec![UserCheck {
                         user: user_label(0),
-                        bound: wp.value,
+                        bound,
                         monte_carlo_mean: mean_db,
                         std_error: 10.0 * (1.0 + se / mean).log10(),
-                        gap: wp.value - mean_db,
+                        gap: bound - mean_db,
                     }]
                 }
                 CellSolutions::Rate(rate) => {

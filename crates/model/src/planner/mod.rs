@@ -1,10 +1,12 @@
 //! Communication-aware paths over a radio map (docs/model.md §6, paper Section II-D): path and
 //! sweep queries and the answers they return. The searches themselves live in [`graph`].
 
+mod any_angle;
 mod bottleneck;
 pub mod graph;
 mod queue;
 
+pub use any_angle::AnyAnglePath;
 pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
 
@@ -64,6 +66,53 @@ impl<'de> Deserialize<'de> for Threshold {
     }
 }
 
+/// The shape of a path's route (docs/model.md §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PathShape {
+    /// 8-connected steps between cell centres (the paper's, and the default).
+    #[default]
+    Grid,
+    /// Straight segments at any angle between cell centres, each driven only where every cell
+    /// it crosses is free and meets the threshold; never longer than the grid path.
+    AnyAngle,
+}
+
+impl FromStr for PathShape {
+    type Err = String;
+    fn from_str(s: &str) -> Result<PathShape, String> {
+        match s {
+            "grid" => Ok(PathShape::Grid),
+            "any_angle" | "any-angle" => Ok(PathShape::AnyAngle),
+            other => Err(format!("expected grid or any_angle, got {other:?}")),
+        }
+    }
+}
+
+/// Largest `tolerance_m` accepted (m): far beyond a planner's usual goal tolerance, small
+/// enough that the search around an end stays a window of the map.
+pub const MAX_TOLERANCE_M: f64 = 50.0;
+
+/// How a path query is answered beyond its ends and threshold.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PathOptions {
+    /// The route's shape.
+    pub shape: PathShape,
+    /// How far (m) a start or goal whose own cell is occupied or below the threshold may move
+    /// to the nearest cell that is not (Nav2's planner tolerance); 0, the default, moves none.
+    pub tolerance_m: f64,
+}
+
+impl PathOptions {
+    /// An any-angle route, no tolerance.
+    pub fn any_angle() -> PathOptions {
+        PathOptions {
+            shape: PathShape::AnyAngle,
+            ..PathOptions::default()
+        }
+    }
+}
+
 /// Where a requested point landed on the grid.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Endpoint {
@@ -79,21 +128,28 @@ pub struct Endpoint {
     pub j: usize,
     /// True when the requested point was not itself a cell centre.
     pub snapped: bool,
+    /// True when the requested point's own cell was occupied or below the threshold and the
+    /// nearest feasible cell within the query's `tolerance_m` was taken instead (x, y, i, j
+    /// are that cell's).
+    pub moved: bool,
 }
 
-/// One waypoint of a path and the configuration to apply there (phases held as `P`, see
-/// [`CellConfig`]).
+/// One waypoint of a path and the configuration to apply from there on (phases held as `P`,
+/// see [`CellConfig`]). A grid path has one per cell, at its centre. An any-angle path has one
+/// where its route enters each cell it crosses (the cell's configuration applies from there),
+/// and one at the centre of each vertex (its start, turns and goal), so the waypoints, joined in
+/// order, are the route itself.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Waypoint<P = SurfaceRadians> {
-    /// x of the cell centre (m).
+    /// x of the point (m): the cell's centre, or where an any-angle route enters the cell.
     pub x: f64,
-    /// y of the cell centre (m).
+    /// y of the point (m).
     pub y: f64,
     /// The cell's index along x.
     pub i: usize,
     /// The cell's index along y.
     pub j: usize,
-    /// The map's value at this cell, in the query's unit.
+    /// The map's value at this cell (at its centre), in the query's unit.
     pub value: f64,
     /// The robot's heading here (rad, counter-clockwise from +x, in (−π, π]): that of the move
     /// to the next waypoint; at the goal, that of the last move (0 on a one-cell path).
@@ -140,7 +196,10 @@ pub struct PathAnswer<P = SurfaceRadians> {
     pub feasible: bool,
     /// Why there is no path; `None` when feasible.
     pub reason: Option<Infeasible>,
-    /// The path's length (m): orthogonal steps of Δ, diagonal ones of √2·Δ; `None` when infeasible.
+    /// The route's shape: `grid` or `any_angle`.
+    pub path_shape: PathShape,
+    /// The path's length (m): on a grid path orthogonal steps of Δ and diagonal ones of √2·Δ,
+    /// on an any-angle path the sum of its segments; `None` when infeasible.
     pub distance_m: Option<f64>,
     /// `distance_m` / V_max (s); `None` when infeasible.
     pub travel_time_s: Option<f64>,
@@ -155,6 +214,9 @@ pub struct PathAnswer<P = SurfaceRadians> {
     pub frame_id: String,
     /// The path's cells, start first and goal last (empty when infeasible).
     pub waypoints: Vec<Waypoint<P>>,
+    /// Indices into `waypoints` of the route's vertices: the start, every point where the
+    /// heading changes, the goal; the sparse polyline of the route.
+    pub vertices: Vec<usize>,
     /// The handovers along the path, in order (empty with one AP).
     pub handovers: Vec<Handover>,
 }
@@ -212,8 +274,63 @@ fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), 
             i,
             j,
             snapped,
+            moved: false,
         },
     ))
+}
+
+/// Moves an end whose cell is not `usable` to the nearest usable cell whose centre lies within
+/// `tolerance_m` of the requested point (ties to the lower flat index); unchanged when its own
+/// cell is usable, the tolerance is 0 or no cell within it is usable.
+fn relocate(
+    grid: &Grid,
+    (cell, end): (usize, Endpoint),
+    tolerance_m: f64,
+    usable: impl Fn(usize) -> bool,
+) -> (usize, Endpoint) {
+    if tolerance_m <= 0.0 || usable(cell) {
+        return (cell, end);
+    }
+    let [px, py] = end.requested;
+    let reach = (tolerance_m / grid.resolution_m).ceil() as usize + 1;
+    let (i_lo, i_hi) = (
+        end.i.saturating_sub(reach),
+        (end.i + reach).min(grid.nx - 1),
+    );
+    let (j_lo, j_hi) = (
+        end.j.saturating_sub(reach),
+        (end.j + reach).min(grid.ny - 1),
+    );
+    let mut best: Option<(f64, usize)> = None;
+    for i in i_lo..=i_hi {
+        for j in j_lo..=j_hi {
+            let [x, y] = grid.centre(i, j);
+            let d = (x - px).hypot(y - py);
+            let c = grid.index(i, j);
+            if d <= tolerance_m && best.is_none_or(|(b, _)| d < b) && usable(c) {
+                best = Some((d, c));
+            }
+        }
+    }
+    match best {
+        Some((_, c)) => {
+            let (i, j) = grid.cell_of(c);
+            let [x, y] = grid.centre(i, j);
+            (
+                c,
+                Endpoint {
+                    x,
+                    y,
+                    i,
+                    j,
+                    snapped: true,
+                    moved: true,
+                    ..end
+                },
+            )
+        }
+        None => (cell, end),
+    }
 }
 
 fn graph<'m>(map: &'m RadioMap, values: &'m [f64]) -> CellGraph<'m> {
@@ -277,6 +394,7 @@ impl UnitIndex {
 pub fn plan(
     map: &RadioMap,
     unit: Unit,
+    options: PathOptions,
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
@@ -285,7 +403,7 @@ pub fn plan(
     let values = map.values_in(unit)?;
     plan_with(
         map,
-        (unit, &values),
+        (unit, &values, options),
         start,
         goal,
         threshold,
@@ -299,6 +417,7 @@ pub fn plan(
 pub fn plan_indexed(
     map: &RadioMap,
     index: &UnitIndex,
+    options: PathOptions,
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
@@ -307,7 +426,7 @@ pub fn plan_indexed(
     let values = index.values(map);
     plan_with(
         map,
-        (index.unit, values),
+        (index.unit, values, options),
         start,
         goal,
         threshold,
@@ -341,25 +460,106 @@ fn set_poses<P>(waypoints: &mut [Waypoint<P>], v_max_mps: f64) {
     }
 }
 
+/// A route's waypoints as (flat cell index, point) and its length (m).
+type Route = (Vec<(usize, [f64; 2])>, f64);
+
+/// The route of a feasible path as its waypoints' cells and points, and its length (m): the
+/// 8-connected path's cell centres, or an any-angle path's entry points and vertex centres.
+fn route(
+    graph: &CellGraph,
+    shape: PathShape,
+    start: usize,
+    goal: usize,
+    threshold: f64,
+) -> Result<Route, Infeasible> {
+    let grid = graph.grid;
+    let centre = |c: usize| {
+        let (i, j) = grid.cell_of(c);
+        grid.centre(i, j)
+    };
+    match shape {
+        PathShape::Grid => {
+            let path = graph.shortest_path(start, goal, threshold)?;
+            let points = path.cells.iter().map(|&c| (c, centre(c))).collect();
+            Ok((points, path.distance_m))
+        }
+        PathShape::AnyAngle => {
+            let path = graph.any_angle_path(start, goal, threshold)?;
+            let mut points = vec![(start, centre(start))];
+            for pair in path.vertices.windows(2) {
+                let (a, b) = (centre(pair[0]), centre(pair[1]));
+                any_angle::segment_cells(
+                    grid.cell_of(pair[0]),
+                    grid.cell_of(pair[1]),
+                    |i, j, interior, t| {
+                        if interior && t > 0.0 {
+                            let point = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                            points.push((grid.index(i, j), point));
+                        }
+                        true
+                    },
+                );
+                // The vertex itself, where the route turns (or ends).
+                points.push((pair[1], b));
+            }
+            Ok((points, path.distance_m))
+        }
+    }
+}
+
+/// Indices of the waypoints where the route's heading changes, with the first and the last.
+fn vertices<P>(waypoints: &[Waypoint<P>]) -> Vec<usize> {
+    let n = waypoints.len();
+    (0..n)
+        .filter(|&k| {
+            k == 0 || k + 1 == n || {
+                let (a, b, c) = (&waypoints[k - 1], &waypoints[k], &waypoints[k + 1]);
+                // Collinear points: the cross product of the two moves vanishes (to rounding;
+                // moves are at least a fraction of a cell long).
+                let cross = (b.x - a.x) * (c.y - b.y) - (b.y - a.y) * (c.x - b.x);
+                let scale = (b.x - a.x).hypot(b.y - a.y) * (c.x - b.x).hypot(c.y - b.y);
+                cross.abs() > 1e-9 * scale
+                    || (b.x - a.x) * (c.x - b.x) + (b.y - a.y) * (c.y - b.y) < 0.0
+            }
+        })
+        .collect()
+}
+
 fn plan_with(
     map: &RadioMap,
-    (unit, values): (Unit, &[f64]),
+    (unit, values, options): (Unit, &[f64], PathOptions),
     start: [f64; 2],
     goal: [f64; 2],
     threshold: Threshold,
     v_max_mps: f64,
     widest_path_threshold: impl FnOnce(&CellGraph, usize, usize) -> Option<f64>,
 ) -> Result<PathAnswer, FieldError> {
-    let (s, start) = endpoint(&map.grid, "start", start)?;
-    let (g, goal) = endpoint(&map.grid, "goal", goal)?;
     let graph = graph(map, values);
+    // With a tolerance, an end in an obstacle or below the threshold moves to the nearest cell
+    // that is neither ("max": the nearest free cell with a value).
+    let usable = |c: usize| match threshold {
+        Threshold::Value(t) => graph.is_feasible(c, t),
+        Threshold::Max => !map.occupied[c] && values[c] > f64::NEG_INFINITY,
+    };
+    let (s, start) = relocate(
+        &map.grid,
+        endpoint(&map.grid, "start", start)?,
+        options.tolerance_m,
+        usable,
+    );
+    let (g, goal) = relocate(
+        &map.grid,
+        endpoint(&map.grid, "goal", goal)?,
+        options.tolerance_m,
+        usable,
+    );
     let widest = widest_path_threshold(&graph, s, g);
     let applied = match threshold {
         Threshold::Value(v) => Some(v),
         Threshold::Max => widest,
     };
     let result = match applied {
-        Some(t) => graph.shortest_path(s, g, t),
+        Some(t) => route(&graph, options.shape, s, g, t),
         None => Err(if map.occupied[s] {
             Infeasible::StartOccupied
         } else if map.occupied[g] {
@@ -374,6 +574,7 @@ fn plan_with(
         threshold: applied,
         feasible: result.is_ok(),
         reason: result.as_ref().err().copied(),
+        path_shape: options.shape,
         distance_m: None,
         travel_time_s: None,
         max_feasible_threshold: widest,
@@ -381,17 +582,24 @@ fn plan_with(
         goal,
         frame_id: DEFAULT_FRAME.to_string(),
         waypoints: Vec::new(),
+        vertices: Vec::new(),
         handovers: Vec::new(),
     };
-    if let Ok(path) = result {
-        answer.distance_m = Some(path.distance_m);
-        answer.travel_time_s = Some(path.distance_m / v_max_mps);
-        answer.waypoints = path
-            .cells
+    if let Ok((points, distance_m)) = result {
+        answer.distance_m = Some(distance_m);
+        answer.travel_time_s = Some(distance_m / v_max_mps);
+        // A vertex cell of an any-angle route has two waypoints (entry and centre): its
+        // configuration is worked out once.
+        let mut last: Option<(usize, CellConfig)> = None;
+        answer.waypoints = points
             .iter()
-            .map(|&c| {
+            .map(|&(c, [x, y])| {
                 let (i, j) = map.grid.cell_of(c);
-                let [x, y] = map.grid.centre(i, j);
+                let config = match &last {
+                    Some((cell, config)) if *cell == c => config.clone(),
+                    _ => map.cell_config(c),
+                };
+                last = Some((c, config.clone()));
                 Waypoint {
                     x,
                     y,
@@ -401,11 +609,12 @@ fn plan_with(
                     yaw_rad: 0.0,
                     distance_m: 0.0,
                     time_s: 0.0,
-                    config: map.cell_config(c),
+                    config,
                 }
             })
             .collect();
         set_poses(&mut answer.waypoints, v_max_mps);
+        answer.vertices = vertices(&answer.waypoints);
         answer.handovers = answer
             .waypoints
             .windows(2)
@@ -447,12 +656,14 @@ impl<P> PathAnswer<P> {
             threshold: self.threshold,
             feasible: self.feasible,
             reason: self.reason,
+            path_shape: self.path_shape,
             distance_m: self.distance_m,
             travel_time_s: self.travel_time_s,
             max_feasible_threshold: self.max_feasible_threshold,
             start: self.start,
             goal: self.goal,
             frame_id: self.frame_id,
+            vertices: self.vertices,
             handovers: self.handovers,
         }
     }
@@ -521,6 +732,7 @@ mod tests {
         let path = plan(
             &map,
             Unit::GainDb,
+            Default::default(),
             [-10.0, 0.0],
             [10.0, 0.0],
             Threshold::Max,
@@ -552,6 +764,7 @@ mod tests {
         let alone = plan(
             &map,
             Unit::GainDb,
+            Default::default(),
             [-10.0, 0.0],
             [-10.0, 0.0],
             Threshold::Max,
@@ -560,6 +773,133 @@ mod tests {
         .unwrap();
         assert_eq!(alone.waypoints.len(), 1);
         assert_eq!(alone.waypoints[0].yaw_rad, 0.0);
+    }
+
+    /// An any-angle answer on the paper floor: shorter than the grid path at the same
+    /// threshold, its waypoints on the segments between its vertices (each cell's entry point,
+    /// then the vertex centres), every waypoint's cell meeting the threshold, and its poses
+    /// adding up to its length.
+    #[test]
+    fn any_angle_answers_follow_their_segments() {
+        let scenario = crate::scenario::Scenario::builtin("paper-single-user").unwrap();
+        let key =
+            crate::radiomap::MapKey::gain("x", &scenario, crate::phases::PhaseMode::Continuous)
+                .unwrap();
+        let map = crate::radiomap::build(&scenario, &key, "x".into(), &Default::default()).unwrap();
+        let (start, goal) = ([-10.0, 0.0], [10.0, 0.0]);
+        let gamma = Threshold::Value(-61.0);
+        let grid = plan(
+            &map,
+            Unit::GainDb,
+            Default::default(),
+            start,
+            goal,
+            gamma,
+            1.0,
+        )
+        .unwrap();
+        let any = plan(
+            &map,
+            Unit::GainDb,
+            PathOptions::any_angle(),
+            start,
+            goal,
+            gamma,
+            1.0,
+        )
+        .unwrap();
+        assert!(grid.feasible && any.feasible);
+        assert_eq!(any.path_shape, PathShape::AnyAngle);
+        let (g, a) = (grid.distance_m.unwrap(), any.distance_m.unwrap());
+        assert!(a < g, "any-angle {a} m vs grid {g} m");
+        let w = &any.waypoints;
+        let last = w.last().unwrap();
+        assert!((last.distance_m - a).abs() < 1e-9);
+        assert_eq!((w[0].i, w[0].j), (any.start.i, any.start.j));
+        assert_eq!(*any.vertices.last().unwrap(), w.len() - 1);
+        for v in any.vertices.windows(2) {
+            let (p, q) = (&w[v[0]], &w[v[1]]);
+            for r in &w[v[0]..=v[1]] {
+                // On the segment p → q: no cross-track offset, between its ends.
+                let cross = (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
+                assert!(cross.abs() < 1e-9, "{cross}");
+                assert!(r.value >= -61.0);
+            }
+        }
+        // Vertices sit at cell centres.
+        for &k in &any.vertices {
+            let [x, y] = map.grid.centre(w[k].i, w[k].j);
+            assert!((w[k].x - x).abs() < 1e-12 && (w[k].y - y).abs() < 1e-12);
+        }
+        assert!(any.vertices.len() < grid.vertices.len());
+    }
+
+    /// An end inside an obstacle moves to the nearest feasible cell within `tolerance_m` (the
+    /// brute force over every cell agrees), and says so; beyond the tolerance nothing moves and
+    /// the answer says why there is no path. A goal below the threshold moves the same way.
+    #[test]
+    fn ends_move_to_the_nearest_feasible_cell_within_the_tolerance() {
+        let scenario = crate::scenario::Scenario::builtin("small-test").unwrap();
+        let key =
+            crate::radiomap::MapKey::gain("x", &scenario, crate::phases::PhaseMode::Continuous)
+                .unwrap();
+        let map = crate::radiomap::build(&scenario, &key, "x".into(), &Default::default()).unwrap();
+        let inside = [3.0, 2.0];
+        let with = |tolerance_m: f64, goal: [f64; 2], threshold: Threshold| {
+            let options = PathOptions {
+                tolerance_m,
+                ..PathOptions::default()
+            };
+            plan(&map, Unit::GainDb, options, inside, goal, threshold, 1.0).unwrap()
+        };
+        let stuck = with(0.9, [0.5, 0.5], Threshold::Max);
+        assert_eq!(stuck.reason, Some(Infeasible::StartOccupied));
+        assert!(!stuck.start.moved);
+        let moved = with(1.0, [0.5, 0.5], Threshold::Max);
+        assert!(moved.feasible && moved.start.moved && moved.start.snapped);
+        let nearest = (0..map.grid.cells())
+            .filter(|&c| !map.occupied[c])
+            .map(|c| {
+                let (i, j) = map.grid.cell_of(c);
+                let [x, y] = map.grid.centre(i, j);
+                (x - inside[0]).hypot(y - inside[1])
+            })
+            .fold(f64::INFINITY, f64::min);
+        let d = (moved.start.x - inside[0]).hypot(moved.start.y - inside[1]);
+        assert!((d - nearest).abs() < 1e-12 && d <= 1.0, "{d} vs {nearest}");
+        assert_eq!(moved.waypoints[0].x, moved.start.x);
+        // A goal below the threshold: the nearest cell meeting it, within the tolerance. The
+        // threshold lies between the goal cell's value and the best value within 1 m of it.
+        let goal = [0.5, 0.5];
+        let centre_of = |c: usize| {
+            let (i, j) = map.grid.cell_of(c);
+            map.grid.centre(i, j)
+        };
+        let near = |c: usize| {
+            let [x, y] = centre_of(c);
+            (x - goal[0]).hypot(y - goal[1])
+        };
+        let g0 = map.grid.index(1, 1);
+        let best_near = (0..map.grid.cells())
+            .filter(|&c| !map.occupied[c] && near(c) <= 1.0)
+            .map(|c| map.values[c])
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            best_near > map.values[g0],
+            "the goal cell is a local maximum"
+        );
+        let gamma = (best_near + map.values[g0]) / 2.0;
+        let expected = (0..map.grid.cells())
+            .filter(|&c| !map.occupied[c] && map.values[c] >= gamma && near(c) <= 1.0)
+            .map(near)
+            .fold(f64::INFINITY, f64::min);
+        let answer = with(1.0, goal, Threshold::Value(gamma));
+        assert!(answer.goal.moved, "{:?}", answer.reason);
+        let g = map.grid.index(answer.goal.i, answer.goal.j);
+        assert!(map.values[g] >= gamma);
+        assert!((near(g) - expected).abs() < 1e-12);
+        let refused = with(0.0, goal, Threshold::Value(gamma));
+        assert_eq!(refused.reason, Some(Infeasible::StartOccupied));
     }
 
     #[test]

@@ -17,7 +17,7 @@ use crate::ids::MapId;
 use bytes::Bytes;
 use irs_answers::path::FrameId;
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
-use irs_model::planner::Threshold;
+use irs_model::planner::{PathOptions, PathShape, Threshold};
 use irs_model::radiomap::Unit;
 
 /// What a path answer depends on besides its map's content: the map's id and the query's
@@ -30,6 +30,8 @@ pub(crate) struct PathQuery {
     /// `None` for `"max"`.
     threshold: Option<u64>,
     unit: Unit,
+    shape: PathShape,
+    tolerance: u64,
     format: PhaseFormat,
     precision: PhasePrecision,
     frame: FrameId,
@@ -40,7 +42,7 @@ impl PathQuery {
         map_id: MapId,
         start: [f64; 2],
         goal: [f64; 2],
-        (threshold, unit): (Threshold, Unit),
+        (threshold, unit, options): (Threshold, Unit, PathOptions),
         (format, precision): (PhaseFormat, PhasePrecision),
         frame: FrameId,
     ) -> Self {
@@ -53,6 +55,8 @@ impl PathQuery {
                 Threshold::Max => None,
             },
             unit,
+            shape: options.shape,
+            tolerance: options.tolerance_m.to_bits(),
             format,
             precision,
             frame,

@@ -13,7 +13,7 @@ use axum::response::{IntoResponse, Response};
 use irs_answers::export::{self, MaskKind};
 use irs_answers::render::{self, RenderOptions};
 use irs_model::input::{FieldError, parse_finite, parse_point};
-use irs_model::planner::{self, Threshold};
+use irs_model::planner::{self, PathOptions, PathShape, Threshold};
 use irs_model::radiomap::{Progress, Unit};
 use std::collections::HashMap;
 
@@ -43,8 +43,26 @@ pub(super) async fn image(
     Path(map_id): Path<MapId>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    only_query(&query, &["threshold", "unit", "start", "goal", "cell_px"])?;
+    only_query(
+        &query,
+        &[
+            "threshold",
+            "unit",
+            "path_shape",
+            "start",
+            "goal",
+            "cell_px",
+        ],
+    )?;
     let unit = query_unit(&query)?;
+    let shape = query
+        .get("path_shape")
+        .map(|text| {
+            text.parse::<PathShape>()
+                .map_err(|e| Error::invalid("path_shape", e))
+        })
+        .transpose()?
+        .unwrap_or_default();
     let threshold = match query.get("threshold") {
         None => Threshold::Max,
         Some(text) => text
@@ -85,9 +103,21 @@ pub(super) async fn image(
     let render = move |_: &Progress| -> Result<Option<Vec<u8>>, FieldError> {
         let unit = unit.unwrap_or(map.native_unit());
         let options = match path_ends {
-            Some((s, g)) => {
-                RenderOptions::for_path(&map, &planner::plan(&map, unit, s, g, threshold, 1.0)?)
-            }
+            Some((s, g)) => RenderOptions::for_path(
+                &map,
+                &planner::plan(
+                    &map,
+                    unit,
+                    PathOptions {
+                        shape,
+                        tolerance_m: 0.0,
+                    },
+                    s,
+                    g,
+                    threshold,
+                    1.0,
+                )?,
+            ),
             None => RenderOptions {
                 unit: Some(unit),
                 threshold: match threshold {

@@ -21,7 +21,7 @@ use irs_answers::route::{self, RouteFormat};
 use irs_answers::timing::Timed;
 use irs_model::input::{parse_finite, present};
 use irs_model::montecarlo;
-use irs_model::planner::{self, SweepAnswer, Threshold};
+use irs_model::planner::{self, PathShape, SweepAnswer, Threshold};
 use irs_model::radiomap::{MapKind, RadioMap, Unit, WorkError, body};
 use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
@@ -87,6 +87,12 @@ pub(super) struct PathRequest {
     /// The unit of the threshold and of the values answered (default: the map's own).
     #[serde(default, deserialize_with = "present")]
     unit: Option<Unit>,
+    /// `grid` (8-connected, the default) or `any_angle`.
+    #[serde(default, deserialize_with = "present")]
+    path_shape: Option<PathShape>,
+    /// How far an end in an obstacle or below the threshold may move to a feasible cell (m).
+    #[serde(default, deserialize_with = "present")]
+    tolerance_m: Option<f64>,
     /// Monte Carlo draws per waypoint for the Jensen-gap check (paper Fig. 10).
     #[serde(default, deserialize_with = "present")]
     monte_carlo_draws: Option<usize>,
@@ -193,6 +199,14 @@ pub(super) async fn plan_path(
         )
         .into());
     }
+    let tolerance_m = request.tolerance_m.unwrap_or(0.0);
+    if !(0.0..=planner::MAX_TOLERANCE_M).contains(&tolerance_m) {
+        return Err(Error::invalid(
+            "tolerance_m",
+            format!("must lie in [0, {}] m", planner::MAX_TOLERANCE_M),
+        )
+        .into());
+    }
     let route_format = route_format(&headers);
     if route_format != RouteFormat::Json && request.monte_carlo_draws.is_some() {
         return Err(Error::invalid(
@@ -209,6 +223,10 @@ pub(super) async fn plan_path(
     };
     let map_id = MapId::of_map(&map);
     let unit = request.unit.unwrap_or(map.native_unit());
+    let options = planner::PathOptions {
+        shape: request.path_shape.unwrap_or_default(),
+        tolerance_m,
+    };
     // A plain query asked before is answered from the answer cache (`app::answers`).
     let frame = request.frame_id.unwrap_or_default();
     let query =
@@ -217,7 +235,7 @@ pub(super) async fn plan_path(
                 map_id.clone(),
                 start,
                 goal,
-                (request.threshold, unit),
+                (request.threshold, unit, options),
                 (format, precision),
                 frame.clone(),
             )
@@ -230,7 +248,7 @@ pub(super) async fn plan_path(
     let (planned, cache) = (map.clone(), state.cache().clone());
     let path = heavy(&state, "path", cells, move |_| {
         let index = cache.unit_index(&map_id, &planned, unit)?;
-        planner::plan_indexed(&planned, &index, start, goal, threshold, v_max)
+        planner::plan_indexed(&planned, &index, options, start, goal, threshold, v_max)
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.

@@ -259,6 +259,7 @@ async function planPath() {
     start: state.start,
     goal: state.goal,
     threshold: state.threshold,
+    path_shape: $("path-shape").value,
   });
   state.path = data;
   const set = (id, text, value) => {
@@ -307,6 +308,7 @@ function updateDownloads() {
   if (state.start && state.goal) {
     query.set("start", formatPoint(state.start));
     query.set("goal", formatPoint(state.goal));
+    query.set("path_shape", $("path-shape").value);
   }
   $("download-png").href = `/v1/maps/${state.map.map_id}/image.png?${query}`;
   $("download-png").download = `map-${state.map.map_id}.png`;
@@ -687,6 +689,7 @@ function wire() {
     return planPath();
   }));
   $("clear").addEventListener("click", clearPath);
+  $("path-shape").addEventListener("change", guard(() => (state.start && state.goal ? planPath() : null)));
   const canvas = $("map");
   canvas.addEventListener("mousemove", onPointerMove);
   canvas.addEventListener("mouseleave", () => ($("tooltip").hidden = true));

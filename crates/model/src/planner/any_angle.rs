@@ -1,0 +1,422 @@
+//! Any-angle paths (docs/model.md §6, "Any-angle paths"): straight segments between cell
+//! centres instead of 8-connected steps, each segment allowed only where the robot may drive it.
+//!
+//! **Line of sight, exactly.** A segment between two cell centres has integer end points in
+//! cell coordinates, so the cells it meets follow from integer comparisons alone
+//! ([`segment_cells`]): it crosses the *interior* of a sequence of cells, and where it passes
+//! exactly through a corner of the grid it also touches the two cells beside that corner. A
+//! segment is allowed when every cell whose interior it crosses is free and meets the threshold,
+//! and every cell it touches at a corner is free. This is the 8-connected graph's rule extended
+//! to any angle: a diagonal step may cut the corner of a cell below the threshold but not of an
+//! occupied one (whose obstacle may reach its corner under the conservative occupancy of §1).
+//!
+//! **The search** is Lazy Theta* (Nash, Koenig and Tovey, AAAI 2010): A* over the feasible
+//! cells in which a reached cell takes its predecessor's parent as its own, assuming line of
+//! sight, and checks that assumption once, when it is expanded; where it fails, the best
+//! expanded neighbour becomes the parent, as in A*. The Euclidean distance to the goal is the
+//! heuristic. Theta*-class searches are not guaranteed to find the shortest any-angle path, nor
+//! one shorter than the 8-connected path, so the planner also pulls the 8-connected path taut
+//! (each vertex joined to the farthest later one in sight) and answers the shorter of the two:
+//! never longer than the grid path, and shorter wherever a straight segment is allowed.
+
+use super::graph::{CellGraph, Infeasible};
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// Visits the cells a segment between the centres of cells `a` and `b` (each (i, j)) meets, in
+/// order from `a`: `visit(i, j, interior)` with `interior` true for a cell whose interior the
+/// segment crosses and false for one it only touches at a corner. The entry point of each
+/// interior cell is passed as the fraction `t` of the segment at which it is entered (0 for `a`).
+/// Stops early, returning false, when `visit` does.
+pub(crate) fn segment_cells(
+    a: (usize, usize),
+    b: (usize, usize),
+    mut visit: impl FnMut(usize, usize, bool, f64) -> bool,
+) -> bool {
+    let (x0, y0) = (a.0 as i64, a.1 as i64);
+    let (x1, y1) = (b.0 as i64, b.1 as i64);
+    let (dx, dy) = (x1 - x0, y1 - y0);
+    let (sx, sy) = (dx.signum(), dy.signum());
+    let (adx, ady) = (dx.abs(), dy.abs());
+    let (mut x, mut y) = (x0, y0);
+    if !visit(x as usize, y as usize, true, 0.0) {
+        return false;
+    }
+    // Steps taken along x and y; the next boundary along x is crossed at
+    // t = (2·nx + 1) / (2·|dx|), along y at (2·ny + 1) / (2·|dy|).
+    let (mut nx, mut ny) = (0i64, 0i64);
+    while (x, y) != (x1, y1) {
+        // Compare the two crossing fractions without dividing: (2nx+1)·|dy| vs (2ny+1)·|dx|.
+        let (along_x, along_y) = ((2 * nx + 1) * ady, (2 * ny + 1) * adx);
+        let step = if ady == 0 || (adx != 0 && along_x < along_y) {
+            (true, false)
+        } else if adx == 0 || along_y < along_x {
+            (false, true)
+        } else {
+            (true, true)
+        };
+        let t = if step.0 {
+            (2 * nx + 1) as f64 / (2 * adx) as f64
+        } else {
+            (2 * ny + 1) as f64 / (2 * ady) as f64
+        };
+        if step.0 && step.1 {
+            // Through a corner: the two cells beside it are touched there, no more.
+            if !visit((x + sx) as usize, y as usize, false, t)
+                || !visit(x as usize, (y + sy) as usize, false, t)
+            {
+                return false;
+            }
+        }
+        if step.0 {
+            x += sx;
+            nx += 1;
+        }
+        if step.1 {
+            y += sy;
+            ny += 1;
+        }
+        if !visit(x as usize, y as usize, true, t) {
+            return false;
+        }
+    }
+    true
+}
+
+impl CellGraph<'_> {
+    /// Whether the segment between the centres of cells `a` and `b` (flat indices) may be driven
+    /// at `threshold`: every cell whose interior it crosses free and at least `threshold`,
+    /// every cell it touches at a corner free.
+    pub fn line_of_sight(&self, a: usize, b: usize, threshold: f64) -> bool {
+        let ny = self.grid.ny;
+        segment_cells(
+            self.grid.cell_of(a),
+            self.grid.cell_of(b),
+            |i, j, interior, _| {
+                let c = i * ny + j;
+                if interior {
+                    self.is_feasible(c, threshold)
+                } else {
+                    !self.occupied[c]
+                }
+            },
+        )
+    }
+
+    /// The shortest any-angle path this planner finds from `start` to `goal` at `threshold`
+    /// (see the module's notes): its vertices (flat indices of cell centres, start first) and
+    /// length in metres, never longer than [`CellGraph::shortest_path`]'s.
+    pub fn any_angle_path(
+        &self,
+        start: usize,
+        goal: usize,
+        threshold: f64,
+    ) -> Result<AnyAnglePath, Infeasible> {
+        let grid_path = self.shortest_path(start, goal, threshold)?;
+        let taut = self.pull_taut(&grid_path.cells, threshold);
+        let searched = self.lazy_theta(start, goal, threshold);
+        let searched = self.pull_taut(&searched, threshold);
+        let (taut_len, searched_len) = (self.length(&taut), self.length(&searched));
+        let vertices = if searched_len < taut_len {
+            searched
+        } else {
+            taut
+        };
+        let distance_m = self.length(&vertices) * self.grid.resolution_m;
+        Ok(AnyAnglePath {
+            vertices,
+            distance_m,
+        })
+    }
+
+    /// The polyline's length in cells.
+    fn length(&self, vertices: &[usize]) -> f64 {
+        vertices
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (self.grid.cell_of(w[0]), self.grid.cell_of(w[1]));
+                (a.0.abs_diff(b.0) as f64).hypot(a.1.abs_diff(b.1) as f64)
+            })
+            .sum()
+    }
+
+    /// A polyline through `cells` pulled taut: from each vertex, the farthest later cell in
+    /// sight becomes the next vertex. Each shortcut replaces a stretch by a straight segment, so
+    /// the result is never longer.
+    fn pull_taut(&self, cells: &[usize], threshold: f64) -> Vec<usize> {
+        let Some(&first) = cells.first() else {
+            return Vec::new();
+        };
+        let mut vertices = vec![first];
+        let mut anchor = 0;
+        let mut k = 1;
+        while k < cells.len() {
+            // Extend while the next cell is in sight of the anchor; the last one in sight
+            // becomes a vertex (two neighbours in the path are always in sight of each other).
+            if k + 1 < cells.len() && self.line_of_sight(cells[anchor], cells[k + 1], threshold) {
+                k += 1;
+                continue;
+            }
+            vertices.push(cells[k]);
+            anchor = k;
+            k += 1;
+        }
+        vertices
+    }
+
+    /// Lazy Theta* from `start` to `goal` over the feasible cells: the vertices found (start
+    /// first), or just the two ends if the goal is not reached (the callers have checked that
+    /// it is, by the 8-connected search).
+    fn lazy_theta(&self, start: usize, goal: usize, threshold: f64) -> Vec<usize> {
+        let cells = self.values.len();
+        let (gi, gj) = self.grid.cell_of(goal);
+        let h = |c: usize| {
+            let (i, j) = self.grid.cell_of(c);
+            (i.abs_diff(gi) as f64).hypot(j.abs_diff(gj) as f64)
+        };
+        let dist = |a: usize, b: usize| {
+            let (p, q) = (self.grid.cell_of(a), self.grid.cell_of(b));
+            (p.0.abs_diff(q.0) as f64).hypot(p.1.abs_diff(q.1) as f64)
+        };
+        let mut g = vec![f64::INFINITY; cells];
+        let mut parent = vec![u32::MAX; cells];
+        let mut closed = vec![false; cells];
+        let mut open = BinaryHeap::new();
+        g[start] = 0.0;
+        parent[start] = start as u32;
+        open.push((Reverse(Key(h(start))), start));
+        while let Some((Reverse(Key(f)), s)) = open.pop() {
+            if closed[s] || f > g[s] + h(s) + 1e-9 {
+                continue;
+            }
+            let p = parent[s] as usize;
+            if p != s && !self.line_of_sight(p, s, threshold) {
+                // The assumed segment is blocked: the best expanded neighbour is the parent.
+                let (mut best, mut best_g) = (p, f64::INFINITY);
+                self.for_each_neighbour(s, |n, _, _| {
+                    if closed[n] && g[n] + dist(n, s) < best_g {
+                        (best, best_g) = (n, g[n] + dist(n, s));
+                    }
+                });
+                parent[s] = best as u32;
+                g[s] = best_g;
+            }
+            closed[s] = true;
+            if s == goal {
+                break;
+            }
+            let origin = parent[s] as usize;
+            self.for_each_neighbour(s, |n, _, _| {
+                if closed[n] || !self.is_feasible(n, threshold) {
+                    return;
+                }
+                let candidate = g[origin] + dist(origin, n);
+                if candidate < g[n] {
+                    g[n] = candidate;
+                    parent[n] = origin as u32;
+                    open.push((Reverse(Key(candidate + h(n))), n));
+                }
+            });
+        }
+        if !closed[goal] {
+            return vec![start, goal];
+        }
+        let mut vertices = vec![goal];
+        let mut c = goal;
+        while c != start {
+            c = parent[c] as usize;
+            vertices.push(c);
+        }
+        vertices.reverse();
+        vertices
+    }
+}
+
+/// An any-angle path: straight segments between the centres of its vertices.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnyAnglePath {
+    /// Flat indices of the vertices' cells, start first and goal last.
+    pub vertices: Vec<usize>,
+    /// Length (m).
+    pub distance_m: f64,
+}
+
+/// An f64 key with a total order (never NaN here).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Key(f64);
+impl Eq for Key {}
+impl PartialOrd for Key {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Key {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Grid;
+    use proptest::prelude::*;
+
+    /// How a segment between the centres of cells `a` and `b` meets cell (i, j), by exact
+    /// rational arithmetic on the parameter t ∈ [0, 1] of the segment, independent of the
+    /// traversal: (crosses its open interior, meets its closed square).
+    fn meets(a: (usize, usize), b: (usize, usize), (i, j): (usize, usize)) -> (bool, bool) {
+        // In doubled coordinates the centres are even and the cell's sides odd: the cell spans
+        // [2i − 1, 2i + 1] along x. A bound is a fraction num/den of t with den > 0.
+        type Fraction = (i64, i64);
+        let axis = |p0: usize, p1: usize, c: usize| -> Option<(Fraction, Fraction)> {
+            let (p0, d, c) = (2 * p0 as i64, 2 * (p1 as i64 - p0 as i64), 2 * c as i64);
+            if d == 0 {
+                // Constant along this axis: inside the open side only if strictly between.
+                return ((p0 - c).abs() < 1).then_some(((-1, 1), (2, 1)));
+            }
+            let (lo, hi) = ((c - 1 - p0, d), (c + 1 - p0, d));
+            let norm = |(n, den): Fraction| if den < 0 { (-n, -den) } else { (n, den) };
+            let (lo, hi) = (norm(lo), norm(hi));
+            Some(if lo.0 * hi.1 <= hi.0 * lo.1 {
+                (lo, hi)
+            } else {
+                (hi, lo)
+            })
+        };
+        let lt = |x: Fraction, y: Fraction| {
+            (x.0 as i128) * (y.1 as i128) < (y.0 as i128) * (x.1 as i128)
+        };
+        let le = |x: Fraction, y: Fraction| {
+            (x.0 as i128) * (y.1 as i128) <= (y.0 as i128) * (x.1 as i128)
+        };
+        let max = |x: Fraction, y: Fraction| if lt(x, y) { y } else { x };
+        let min = |x: Fraction, y: Fraction| if lt(x, y) { x } else { y };
+        // A constant coordinate exactly on a side touches the closed square for every t.
+        let closed_axis = |p0: usize, p1: usize, c: usize| -> Option<(Fraction, Fraction)> {
+            if p0 == p1 {
+                return (p0.abs_diff(c) == 0).then_some(((-1, 1), (2, 1)));
+            }
+            axis(p0, p1, c)
+        };
+        let interior = match (axis(a.0, b.0, i), axis(a.1, b.1, j)) {
+            (Some((xl, xh)), Some((yl, yh))) => {
+                let (lo, hi) = (max(xl, yl), min(xh, yh));
+                lt(lo, hi) && lt(lo, (1, 1)) && lt((0, 1), hi)
+            }
+            _ => false,
+        };
+        let closed = match (closed_axis(a.0, b.0, i), closed_axis(a.1, b.1, j)) {
+            (Some((xl, xh)), Some((yl, yh))) => {
+                let (lo, hi) = (max(xl, yl), min(xh, yh));
+                le(lo, hi) && le(lo, (1, 1)) && le((0, 1), hi)
+            }
+            _ => false,
+        };
+        (interior, closed)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(500))]
+
+        /// The traversal visits exactly the cells whose interior the segment crosses (in
+        /// order of entry, each once) and, flagged, exactly those it meets only at a corner.
+        #[test]
+        fn segment_cells_are_exact(a in (1usize..11, 1usize..11), b in (1usize..11, 1usize..11)) {
+            let mut interior = Vec::new();
+            let mut corner = Vec::new();
+            let mut last_t = -1.0;
+            segment_cells(a, b, |i, j, inside, t| {
+                if inside {
+                    assert!(t >= last_t, "entries in order");
+                    last_t = t;
+                    interior.push((i, j));
+                } else {
+                    corner.push((i, j));
+                }
+                true
+            });
+            for i in 0..12 {
+                for j in 0..12 {
+                    let (crosses, touches) = meets(a, b, (i, j));
+                    let seen_inside = interior.iter().filter(|&&c| c == (i, j)).count();
+                    let seen_corner = corner.iter().filter(|&&c| c == (i, j)).count();
+                    prop_assert_eq!(seen_inside, usize::from(crosses), "{:?}→{:?} cell {:?}", a, b, (i, j));
+                    prop_assert_eq!(seen_corner, usize::from(touches && !crosses), "{:?}→{:?} cell {:?}", a, b, (i, j));
+                }
+            }
+            prop_assert_eq!(interior.first(), Some(&a));
+            prop_assert_eq!(interior.last(), Some(&b));
+        }
+
+        /// On random maps the any-angle path exists exactly when the grid path does, is never
+        /// longer, and every segment crosses only feasible cells and touches only free ones,
+        /// checked cell by cell by exact arithmetic.
+        #[test]
+        fn any_angle_paths_are_valid_and_never_longer(
+            (nx, ny) in (2usize..14, 2usize..14),
+            seed in any::<u64>(),
+            threshold in 0.0f64..8.0,
+            ends in (any::<u32>(), any::<u32>()),
+        ) {
+            use rand::{RngExt, SeedableRng};
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let n = nx * ny;
+            let occupied: Vec<bool> = (0..n).map(|_| rng.random::<f64>() < 0.12).collect();
+            let values: Vec<f64> = (0..n)
+                .map(|c| if occupied[c] { f64::NAN } else { rng.random_range(0.0..10.0) })
+                .collect();
+            let grid = Grid { nx, ny, x_min: 0.0, y_min: 0.0, resolution_m: 0.5 };
+            let g = CellGraph { grid: &grid, values: &values, occupied: &occupied };
+            let (s, t) = (ends.0 as usize % n, ends.1 as usize % n);
+            match (g.shortest_path(s, t, threshold), g.any_angle_path(s, t, threshold)) {
+                (Ok(grid_path), Ok(path)) => {
+                    prop_assert!(path.distance_m <= grid_path.distance_m + 1e-9,
+                        "{} > {}", path.distance_m, grid_path.distance_m);
+                    prop_assert_eq!(path.vertices.first(), Some(&s));
+                    prop_assert_eq!(path.vertices.last(), Some(&t));
+                    for pair in path.vertices.windows(2) {
+                        let (a, b) = (grid.cell_of(pair[0]), grid.cell_of(pair[1]));
+                        for (c, &occupied_c) in occupied.iter().enumerate() {
+                            let (crosses, touches) = meets(a, b, grid.cell_of(c));
+                            if crosses {
+                                prop_assert!(g.is_feasible(c, threshold), "{:?}→{:?} crosses {:?}", a, b, grid.cell_of(c));
+                            }
+                            if touches {
+                                prop_assert!(!occupied_c, "{:?}→{:?} touches occupied {:?}", a, b, grid.cell_of(c));
+                            }
+                        }
+                    }
+                }
+                (Err(e), Err(f)) => prop_assert_eq!(e, f),
+                (a, b) => prop_assert!(false, "grid {:?} vs any-angle {:?}", a.is_ok(), b.is_ok()),
+            }
+        }
+    }
+
+    /// In the open, the any-angle path is the straight segment, √(dx² + dy²) cells long, where
+    /// the grid path is dx − dy + √2·dy.
+    #[test]
+    fn in_the_open_the_path_is_straight() {
+        let grid = Grid {
+            nx: 30,
+            ny: 20,
+            x_min: 0.0,
+            y_min: 0.0,
+            resolution_m: 1.0,
+        };
+        let values = vec![1.0; grid.cells()];
+        let occupied = vec![false; grid.cells()];
+        let g = CellGraph {
+            grid: &grid,
+            values: &values,
+            occupied: &occupied,
+        };
+        let (s, t) = (grid.index(2, 3), grid.index(27, 14));
+        let path = g.any_angle_path(s, t, 0.0).unwrap();
+        assert_eq!(path.vertices, vec![s, t]);
+        assert!((path.distance_m - 25f64.hypot(11.0)).abs() < 1e-12);
+        let grid_path = g.shortest_path(s, t, 0.0).unwrap();
+        assert!((grid_path.distance_m - (14.0 + 11.0 * std::f64::consts::SQRT_2)).abs() < 1e-9);
+    }
+}
