@@ -34,7 +34,7 @@ fn two_unequal_aps() -> Scenario {
     second.bandwidth_mhz = Some(40.0);
     let mut value = serde_json::to_value(s.with_access_points(vec![first, second]).unwrap())
         .expect("a scenario serialises");
-    value["mru"]["antenna_gain_dbi"] = 1.5.into();
+    value["channel"]["rx_antenna_gain_dbi"] = 1.5.into();
     value["channel"]["fade_margin_db"] = 4.0.into();
     Scenario::from_value(value).unwrap()
 }
@@ -228,7 +228,7 @@ fn one_users_rate_map_agrees_with_the_gain_map_in_bit_per_hz() {
     value["srus"][0]["min_rate_bps_hz"] = 0.0.into();
     value["ap"]["antenna_gain_dbi"] = 3.0.into();
     value["ap"]["bandwidth_mhz"] = 20.0.into();
-    value["mru"]["antenna_gain_dbi"] = 2.0.into();
+    value["channel"]["rx_antenna_gain_dbi"] = 2.0.into();
     value["channel"]["fade_margin_db"] = 6.0.into();
     let s = Scenario::from_value(value).unwrap();
     let gain = build(&s, MapKind::Gain, PhaseMode::Continuous, None);
@@ -300,14 +300,61 @@ fn units_a_map_cannot_answer_are_refused_with_the_reason() {
         "channel.fade_margin_db"
     );
     let mut value = serde_json::to_value(&s).unwrap();
-    value["mru"]["antenna_gain_dbi"] = 80.0.into();
+    value["channel"]["rx_antenna_gain_dbi"] = 80.0.into();
     assert_eq!(
         Scenario::from_value(value).unwrap_err().field,
-        "mru.antenna_gain_dbi"
+        "channel.rx_antenna_gain_dbi"
     );
     // At their defaults the new fields stay out of the document, so ids are unchanged.
     let text = serde_json::to_string(&s).unwrap();
     for field in ["antenna_gain_dbi", "bandwidth_mhz", "fade_margin_db"] {
+        // (rx_antenna_gain_dbi contains antenna_gain_dbi: one check covers both.)
         assert!(!text.contains(field), "{field} in {text}");
     }
+}
+
+/// The Monte Carlo check compares each waypoint with the gain its serving AP gives: on a floor
+/// where the stronger transmitter serves cells with the weaker channel, the sampled mean matches
+/// that gain (within sampling noise), not the best AP's.
+#[test]
+fn the_monte_carlo_check_uses_the_serving_aps_gain() {
+    let s = two_unequal_aps();
+    let map = build(&s, MapKind::Gain, PhaseMode::Continuous, None);
+    let path = planner::plan(
+        &map,
+        Unit::GainDb,
+        Default::default(),
+        [-9.0, 8.0],
+        [8.0, -8.0],
+        Threshold::Max,
+        1.0,
+    )
+    .unwrap();
+    assert!(path.feasible);
+    let report = irs_model::montecarlo::check_path(
+        &s,
+        &map,
+        &path,
+        4000,
+        7,
+        &irs_model::radiomap::Progress::default(),
+    )
+    .unwrap();
+    let mut weaker = 0;
+    for (w, check) in path.waypoints.iter().zip(&report.waypoints) {
+        let user = &check.users[0];
+        assert!(
+            user.gap.abs() <= 5.0 * user.std_error + 0.05,
+            "cell ({}, {}): bound {} vs mean {}",
+            w.i,
+            w.j,
+            user.bound,
+            user.monte_carlo_mean
+        );
+        weaker += usize::from(user.bound < w.value - 1e-9);
+    }
+    assert!(
+        weaker > 0,
+        "the path never met a cell served by the weaker channel"
+    );
 }

@@ -119,8 +119,8 @@ pub struct Layout {
 }
 
 impl Layout {
-    /// The layout for a map; `None` when the plot would exceed [`MAX_SIDE_PX`].
-    pub fn new(map: &RadioMap, cell_px: Option<usize>) -> Option<Layout> {
+    /// The layout for a map shown in `unit`; `None` when the plot would exceed [`MAX_SIDE_PX`].
+    pub fn new(map: &RadioMap, unit: Unit, cell_px: Option<usize>) -> Option<Layout> {
         let cell_px = cell_px.unwrap_or_else(|| default_cell_px(map));
         let (plot_width, plot_height) = (map.grid.nx * cell_px, map.grid.ny * cell_px);
         if plot_width > MAX_SIDE_PX || plot_height > MAX_SIDE_PX {
@@ -137,7 +137,7 @@ impl Layout {
         // right: the colour bar and its labels; bottom: tick labels and the x caption.
         let (left, top) = (7 * glyph, 4 * glyph);
         let (right, bottom) = (12 * glyph, 5 * glyph);
-        let title_width = glyph * (title(map).chars().count() + 2);
+        let title_width = glyph * (title(map, unit).chars().count() + 2);
         Some(Layout {
             cell_px,
             left,
@@ -283,7 +283,7 @@ pub fn png(
 ) -> Result<Option<Vec<u8>>, FieldError> {
     let unit = options.unit.unwrap_or(map.native_unit());
     let values = map.values_in(unit)?;
-    let Some(layout) = Layout::new(map, options.cell_px) else {
+    let Some(layout) = Layout::new(map, unit, options.cell_px) else {
         return Ok(None);
     };
     let mut canvas = Canvas::new(layout.width, layout.height);
@@ -297,7 +297,7 @@ pub fn png(
     let (low, high) = (low.unwrap_or(0.0), high.unwrap_or(1.0));
     let span = if high > low { high - low } else { 1.0 };
     draw_cells(&mut canvas, map, &values, &layout, options, low, span);
-    draw_axes(&mut canvas, map, &layout);
+    draw_axes(&mut canvas, map, &layout, unit);
     let bar = ColourBar {
         threshold: options.threshold,
         low,
@@ -374,7 +374,7 @@ fn draw_cells(
     }
 }
 
-fn draw_axes(canvas: &mut Canvas, map: &RadioMap, layout: &Layout) {
+fn draw_axes(canvas: &mut Canvas, map: &RadioMap, layout: &Layout, unit: Unit) {
     let s = layout.text_scale;
     let glyph = 8 * s as i64;
     let (left, top) = (layout.left as i64, layout.top as i64);
@@ -405,18 +405,24 @@ fn draw_axes(canvas: &mut Canvas, map: &RadioMap, layout: &Layout) {
     let cw = Canvas::text_width(caption, s);
     canvas.text(left + w / 2 - cw / 2, top + h + glyph * 2, caption, s, INK);
     canvas.text(left - glyph * 6, top - glyph * 2, "y (m)", s, INK);
-    canvas.text(glyph / 2, glyph / 2, &title(map), s, INK);
+    canvas.text(glyph / 2, glyph / 2, &title(map, unit), s, INK);
 }
 
-/// "channel power gain map, phases 2" / "MRU rate map, NOMA, phases continuous".
-fn title(map: &RadioMap) -> String {
-    match (map.key.kind, map.key.access) {
+/// "channel power gain map, phases 2" / "MRU rate map, NOMA, phases continuous", with the
+/// unit shown when it is not the map's own ("…, shown in dBm").
+fn title(map: &RadioMap, unit: Unit) -> String {
+    let kind = match (map.key.kind, map.key.access) {
         (MapKind::Rate, Some(access)) => format!(
             "MRU rate map, {}, phases {}",
             access.to_string().to_uppercase(),
             map.key.phases
         ),
         _ => format!("channel power gain map, phases {}", map.key.phases),
+    };
+    if unit == map.native_unit() {
+        kind
+    } else {
+        format!("{kind}, shown in {}", unit.symbol())
     }
 }
 
@@ -559,7 +565,7 @@ mod tests {
         )
         .unwrap();
         let options = RenderOptions::for_path(&map, &answer);
-        let layout = Layout::new(&map, None).unwrap();
+        let layout = Layout::new(&map, map.native_unit(), None).unwrap();
         let (width, height, buf) = decode(png(&map, &s, &options).unwrap().unwrap());
         assert_eq!((width, height), (layout.width, layout.height));
         assert!(width > layout.plot_width && height > layout.plot_height);
@@ -617,7 +623,7 @@ mod tests {
         .unwrap();
         assert!(!answer.feasible);
         let options = RenderOptions::for_path(&map, &answer);
-        let layout = Layout::new(&map, None).unwrap();
+        let layout = Layout::new(&map, map.native_unit(), None).unwrap();
         let (width, _, buf) = decode(png(&map, &s, &options).unwrap().unwrap());
         let (x, y) = layout.cell_centre(&map, answer.start.i, answer.start.j);
         let at = (y * width + x) * 3;

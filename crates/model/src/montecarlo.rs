@@ -115,7 +115,15 @@ pub fn check_path(
             // the cell's side (any-angle routes) and its value may be in another unit.
             let [x, y] = map.grid.centre(wp.i, wp.j);
             let mru = [x, y, height];
-            let bound = map.values[map.grid.index(wp.i, wp.j)];
+            let cell = map.grid.index(wp.i, wp.j);
+            // The gain the serving AP gives there: the map's value unless another AP (of a
+            // weaker budget) has the better channel (docs/model.md §3).
+            let bound = match &map.cells {
+                CellSolutions::Gain {
+                    serving_gain_db, ..
+                } if !serving_gain_db.is_empty() => serving_gain_db[cell],
+                _ => map.values[cell],
+            };
             let theta = wp.config.concatenated_phases();
             let theta_opt = (!theta.is_empty()).then_some(theta.as_slice());
             let users = match &map.cells {

@@ -98,13 +98,13 @@ pub struct PowerSplit {
 impl RateModel {
     /// The scenario's users: P_max and σ² from the AP, r̄_s from each SRU. The antenna gains
     /// and the fade margin of the link budget (docs/model.md §3.1) enter as an effective noise
-    /// σ² − G_tx − G_rx + M (dB), so that P_max and the power split stay transmit powers; all
-    /// three are 0 unless the scenario states them.
+    /// σ² − G_tx − G_rx + M (dB), shared by every user as σ² is, so that P_max and the power
+    /// split stay transmit powers; all three are 0 unless the scenario states them.
     pub fn for_scenario(scenario: &Scenario, access: Access) -> RateModel {
         let targets: Vec<f64> = scenario.srus.iter().map(|s| s.min_rate_bps_hz).collect();
         let ap = scenario.ap();
-        let budget =
-            ap.antenna_gain_dbi + scenario.mru.antenna_gain_dbi - scenario.channel.fade_margin_db;
+        let channel = &scenario.channel;
+        let budget = ap.antenna_gain_dbi + channel.rx_antenna_gain_dbi - channel.fade_margin_db;
         RateModel::new(
             access,
             dbm_to_watts(ap.tx_power_dbm),

@@ -224,7 +224,7 @@ pub struct PathAnswer<P = SurfaceRadians> {
 /// One point of a threshold sweep (paper Figs. 7 and 9).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepPoint {
-    /// γ, in the map's unit.
+    /// γ, in the sweep's unit.
     pub threshold: f64,
     /// Whether a path exists at γ.
     pub feasible: bool,
@@ -292,7 +292,10 @@ fn relocate(
         return (cell, end);
     }
     let [px, py] = end.requested;
-    let reach = (tolerance_m / grid.resolution_m).ceil() as usize + 1;
+    // At most the grid's side: a tolerance of many cells is the whole grid, not an overflow.
+    let reach = ((tolerance_m / grid.resolution_m).ceil() as usize)
+        .saturating_add(1)
+        .min(grid.nx.max(grid.ny));
     let (i_lo, i_hi) = (
         end.i.saturating_sub(reach),
         (end.i + reach).min(grid.nx - 1),
@@ -366,11 +369,6 @@ impl UnitIndex {
             converted,
             bottlenecks,
         })
-    }
-
-    /// The unit of the values.
-    pub fn unit(&self) -> Unit {
-        self.unit
     }
 
     /// The values in the index's unit; `map` must be the map the index was built from.
@@ -460,8 +458,13 @@ fn set_poses<P>(waypoints: &mut [Waypoint<P>], v_max_mps: f64) {
     }
 }
 
-/// A route's waypoints as (flat cell index, point) and its length (m).
-type Route = (Vec<(usize, [f64; 2])>, f64);
+/// A route: its waypoints as (flat cell index, point), the indices of its vertices among them,
+/// and its length (m).
+struct Route {
+    points: Vec<(usize, [f64; 2])>,
+    vertices: Vec<usize>,
+    distance_m: f64,
+}
 
 /// The route of a feasible path as its waypoints' cells and points, and its length (m): the
 /// 8-connected path's cell centres, or an any-angle path's entry points and vertex centres.
@@ -480,12 +483,26 @@ fn route(
     match shape {
         PathShape::Grid => {
             let path = graph.shortest_path(start, goal, threshold)?;
-            let points = path.cells.iter().map(|&c| (c, centre(c))).collect();
-            Ok((points, path.distance_m))
+            let points: Vec<_> = path.cells.iter().map(|&c| (c, centre(c))).collect();
+            // A vertex wherever the step (Δi, Δj) changes, with both ends.
+            let step = |k: usize| {
+                let (a, b) = (grid.cell_of(path.cells[k]), grid.cell_of(path.cells[k + 1]));
+                (b.0 as isize - a.0 as isize, b.1 as isize - a.1 as isize)
+            };
+            let n = points.len();
+            let vertices = (0..n)
+                .filter(|&k| k == 0 || k + 1 == n || step(k - 1) != step(k))
+                .collect();
+            Ok(Route {
+                points,
+                vertices,
+                distance_m: path.distance_m,
+            })
         }
         PathShape::AnyAngle => {
             let path = graph.any_angle_path(start, goal, threshold)?;
             let mut points = vec![(start, centre(start))];
+            let mut vertices = vec![0];
             for pair in path.vertices.windows(2) {
                 let (a, b) = (centre(pair[0]), centre(pair[1]));
                 any_angle::segment_cells(
@@ -500,29 +517,16 @@ fn route(
                     },
                 );
                 // The vertex itself, where the route turns (or ends).
+                vertices.push(points.len());
                 points.push((pair[1], b));
             }
-            Ok((points, path.distance_m))
+            Ok(Route {
+                points,
+                vertices,
+                distance_m: path.distance_m,
+            })
         }
     }
-}
-
-/// Indices of the waypoints where the route's heading changes, with the first and the last.
-fn vertices<P>(waypoints: &[Waypoint<P>]) -> Vec<usize> {
-    let n = waypoints.len();
-    (0..n)
-        .filter(|&k| {
-            k == 0 || k + 1 == n || {
-                let (a, b, c) = (&waypoints[k - 1], &waypoints[k], &waypoints[k + 1]);
-                // Collinear points: the cross product of the two moves vanishes (to rounding;
-                // moves are at least a fraction of a cell long).
-                let cross = (b.x - a.x) * (c.y - b.y) - (b.y - a.y) * (c.x - b.x);
-                let scale = (b.x - a.x).hypot(b.y - a.y) * (c.x - b.x).hypot(c.y - b.y);
-                cross.abs() > 1e-9 * scale
-                    || (b.x - a.x) * (c.x - b.x) + (b.y - a.y) * (c.y - b.y) < 0.0
-            }
-        })
-        .collect()
 }
 
 fn plan_with(
@@ -585,7 +589,12 @@ fn plan_with(
         vertices: Vec::new(),
         handovers: Vec::new(),
     };
-    if let Ok((points, distance_m)) = result {
+    if let Ok(Route {
+        points,
+        vertices,
+        distance_m,
+    }) = result
+    {
         answer.distance_m = Some(distance_m);
         answer.travel_time_s = Some(distance_m / v_max_mps);
         // A vertex cell of an any-angle route has two waypoints (entry and centre): its
@@ -614,7 +623,7 @@ fn plan_with(
             })
             .collect();
         set_poses(&mut answer.waypoints, v_max_mps);
-        answer.vertices = vertices(&answer.waypoints);
+        answer.vertices = vertices;
         answer.handovers = answer
             .waypoints
             .windows(2)

@@ -201,7 +201,9 @@ impl<P> CellConfig<P> {
 }
 
 impl RadioMap {
-    /// The configuration achieving `values[index]`.
+    /// The configuration to apply at cell `index`: on a rate map the one achieving its value;
+    /// on a gain map the serving AP's (the one received strongest), which achieves `values`
+    /// unless another AP, of a weaker budget, has the better channel there (docs/model.md §3).
     pub fn cell_config(&self, index: usize) -> CellConfig {
         match &self.cells {
             CellSolutions::Gain {
@@ -254,12 +256,21 @@ impl RadioMap {
 /// its centre, the square widened by the robot's radius (docs/model.md §1), so no move between
 /// free cells crosses an obstacle or comes closer to one than the radius.
 pub fn occupancy(scenario: &Scenario, grid: &Grid) -> Vec<bool> {
-    let obstructions = scenario.obstructions();
-    let mut occupied = vec![false; grid.cells()];
     // The robot's radius inflates each cell's square: an obstacle within r of the square in
     // any direction (at most r·√2 at its corners) occupies the cell, so every move between
     // free cells keeps at least r from every obstacle.
-    let h = grid.resolution_m / 2.0 + scenario.mru.radius_m;
+    overlapped(
+        scenario,
+        grid,
+        grid.resolution_m / 2.0 + scenario.mru.radius_m,
+    )
+}
+
+/// Per cell of `grid`: true when something on the floor overlaps the open square of half-side
+/// `h` around the cell's centre.
+pub(crate) fn overlapped(scenario: &Scenario, grid: &Grid, h: f64) -> Vec<bool> {
+    let obstructions = scenario.obstructions();
+    let mut occupied = vec![false; grid.cells()];
     obstructions.mark_boxes_and_walls(grid, h, &mut occupied);
     if let Some(raster) = &obstructions.raster {
         occupied

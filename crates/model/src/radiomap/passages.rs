@@ -43,13 +43,13 @@ pub struct ClosedPassages {
 /// The passages the conservative occupancy `occupied` closes on `grid`.
 pub fn closed_passages(scenario: &Scenario, grid: &Grid, occupied: &[bool]) -> ClosedPassages {
     let obstructions = scenario.obstructions();
-    let h = scenario.mru.radius_m + 1e-6 * grid.resolution_m;
-    let narrowed: Vec<bool> = (0..grid.cells())
-        .map(|c| {
-            let (i, j) = grid.cell_of(c);
-            let [x, y] = grid.centre(i, j);
-            occupied[c] && !obstructions.overlaps_square(x, y, h)
-        })
+    // The centre's own square: 1 µm wide beyond the radius, above the 10⁻⁹ m below which
+    // footprints are taken to touch rather than overlap.
+    let centre_blocked = super::overlapped(scenario, grid, scenario.mru.radius_m + 1e-6);
+    let narrowed: Vec<bool> = occupied
+        .iter()
+        .zip(&centre_blocked)
+        .map(|(&square, &centre)| square && !centre)
         .collect();
     if !narrowed.iter().any(|&n| n) {
         return ClosedPassages::default();

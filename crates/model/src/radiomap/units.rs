@@ -103,7 +103,7 @@ pub struct LinkBudget {
 impl LinkBudget {
     /// The link budget of every AP of a scenario, in scenario order.
     pub fn for_scenario(scenario: &Scenario) -> Vec<LinkBudget> {
-        let common = scenario.mru.antenna_gain_dbi - scenario.channel.fade_margin_db;
+        let common = scenario.channel.rx_antenna_gain_dbi - scenario.channel.fade_margin_db;
         scenario
             .access_points()
             .iter()
@@ -117,11 +117,12 @@ impl LinkBudget {
             .collect()
     }
 
-    /// A gain (dB) through this AP in `unit` (one of the link units, not [`Unit::GainDb`]
-    /// on its own meaning; see [`RadioMap::values_in`]). NaN stays NaN.
+    /// A gain (dB) through this AP in one of the link budget's units (dBm, SNR, bit/s/Hz,
+    /// Mbit/s; a gain stays a gain). NaN stays NaN.
     fn convert_gain_db(&self, unit: Unit, gain_db: f64) -> f64 {
         let snr_db = gain_db + self.offset_dbm - self.noise_dbm;
         match unit {
+            // Not reached: a gain map gives its own values in dB (the best AP's gain).
             Unit::GainDb => gain_db,
             Unit::Dbm => gain_db + self.offset_dbm,
             Unit::SnrDb => snr_db,

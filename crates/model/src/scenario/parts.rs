@@ -152,10 +152,6 @@ pub struct Mru {
     /// form at 0, so scenarios written before it keep their ids.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub radius_m: f64,
-    /// The robot antenna's gain (dBi), added to the link budget like the AP's. Left out of the
-    /// canonical form at 0.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub antenna_gain_dbi: f64,
 }
 
 fn is_zero(value: &f64) -> bool {
@@ -191,6 +187,11 @@ pub struct ChannelSpec {
     /// The path-loss model (default and only one: `3gpp_inf_sh`).
     #[serde(default)]
     pub path_loss: PathLossModel,
+    /// G_rx (dBi), the receive antenna gain of every robot (like `noise_dbm`, one value for the
+    /// moving and the static robots), added to every link budget (docs/model.md §3.1). Left out
+    /// of the canonical form at 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub rx_antenna_gain_dbi: f64,
     /// A fade margin (dB) taken off every link budget (received power, SNR, rates; not the
     /// channel gain), so that thresholds hold with that much to spare. Left out of the canonical
     /// form at 0.
@@ -207,6 +208,7 @@ impl Default for ChannelSpec {
         ChannelSpec {
             rician_k_db: default_rician_k_db(),
             path_loss: PathLossModel::default(),
+            rx_antenna_gain_dbi: 0.0,
             fade_margin_db: 0.0,
         }
     }

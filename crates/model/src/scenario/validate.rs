@@ -228,6 +228,14 @@ impl Scenario {
             finite_all(&f("position"), &ap.position)?;
             finite(&f("tx_power_dbm"), ap.tx_power_dbm)?;
             finite(&f("noise_dbm"), ap.noise_dbm)?;
+            // Far beyond any radio (1 µW to 1 MW; thermal noise over 1 Hz is −174 dBm), and
+            // bounded so that powers and their ratios stay finite in f64.
+            if !(-30.0..=90.0).contains(&ap.tx_power_dbm) {
+                return err(&f("tx_power_dbm"), "must lie in [-30, 90] dBm");
+            }
+            if !(-250.0..=30.0).contains(&ap.noise_dbm) {
+                return err(&f("noise_dbm"), "must lie in [-250, 30] dBm");
+            }
             finite(&f("carrier_ghz"), ap.carrier_ghz)?;
             if !(ap.carrier_ghz > 0.0 && ap.carrier_ghz <= 100.0) {
                 return err(
@@ -328,7 +336,6 @@ impl Scenario {
                 "must be at least 0 and less than half the room's shorter side",
             );
         }
-        antenna_gain("mru.antenna_gain_dbi", self.mru.antenna_gain_dbi)?;
 
         if self.srus.len() > MAX_SRUS {
             return Err(FieldError::new(
@@ -364,6 +371,10 @@ impl Scenario {
         if self.channel.rician_k_db.abs() > 60.0 {
             return err("channel.rician_k_db", "must lie in [-60, 60] dB");
         }
+        antenna_gain(
+            "channel.rx_antenna_gain_dbi",
+            self.channel.rx_antenna_gain_dbi,
+        )?;
         finite("channel.fade_margin_db", self.channel.fade_margin_db)?;
         if !(0.0..=MAX_FADE_MARGIN_DB).contains(&self.channel.fade_margin_db) {
             return err(

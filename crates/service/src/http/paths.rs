@@ -19,7 +19,7 @@ use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::route::{self, RouteFormat};
 use irs_answers::timing::Timed;
-use irs_model::input::{parse_finite, present};
+use irs_model::input::{FieldError, parse_finite, present};
 use irs_model::montecarlo;
 use irs_model::planner::{self, PathShape, SweepAnswer, Threshold};
 use irs_model::radiomap::{MapKind, RadioMap, Unit, WorkError, body};
@@ -57,9 +57,19 @@ pub(super) async fn coverage(
         .transpose()?;
     let map = state.map(&caller, &map_id).await?;
     let unit = unit.unwrap_or(map.native_unit());
-    let values = map.values_in(unit)?;
-    let eta = body::coverage(&values, &map.occupied, threshold);
     let free = map.free_cells();
+    let eta = if unit == map.native_unit() {
+        map.coverage(threshold)
+    } else {
+        // Converting a million cells is work for the query pool; the converted values are kept
+        // with the map's index in that unit for the next query.
+        let (cache, id, cells) = (state.cache().clone(), map_id.clone(), map.grid.cells());
+        heavy(&state, "coverage", cells, move |_| {
+            let index = cache.unit_index(&id, &map, unit)?;
+            Ok::<_, FieldError>(body::coverage(index.values(&map), &map.occupied, threshold))
+        })
+        .await??
+    };
     Ok(Json(Coverage {
         map_id,
         unit: unit.symbol(),
