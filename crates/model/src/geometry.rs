@@ -16,7 +16,9 @@
 
 use nalgebra::Vector3;
 
+mod nearby;
 mod sightlines;
+pub use nearby::Nearby;
 pub use sightlines::SightLines;
 
 type P3 = Vector3<f64>;
@@ -143,6 +145,11 @@ impl Aabb {
         slab_row(a[1], self.lo[1], self.hi[1], (t_low, t_high), ys, blocked);
     }
 
+    /// The footprint's [x, y] spans.
+    fn footprint_bounds(&self) -> [[f64; 2]; 2] {
+        [[self.lo[0], self.hi[0]], [self.lo[1], self.hi[1]]]
+    }
+
     /// True when (x, y) lies in or on the footprint.
     fn covers(&self, x: f64, y: f64) -> bool {
         x >= self.lo[0] - ON_BOUNDARY_M
@@ -168,6 +175,24 @@ impl Aabb {
 #[inline]
 fn overlap(a0: f64, a1: f64, b0: f64, b1: f64) -> bool {
     a1.min(b1) - a0.max(b0) > ON_BOUNDARY_M
+}
+
+/// The cells of `grid` whose squares of half-side `h` can reach the `[x, y]` spans `bounds`,
+/// one more each side for rounding: a superset of those a footprint inside `bounds` overlaps.
+fn cells_reaching(
+    grid: &crate::scenario::Grid,
+    bounds: [[f64; 2]; 2],
+    h: f64,
+) -> impl Iterator<Item = (usize, usize)> {
+    let range = |[lo, hi]: [f64; 2], min: f64, n: usize| {
+        let first = (((lo - h - min) / grid.resolution_m).floor() as i64 - 1).max(0);
+        let last = (((hi + h - min) / grid.resolution_m).ceil() as i64 + 1).min(n as i64 - 1);
+        // Empty when the footprint lies off the grid (last < first).
+        first as usize..(last + 1).max(first) as usize
+    };
+    let columns = range(bounds[0], grid.x_min, grid.nx);
+    let rows = range(bounds[1], grid.y_min, grid.ny);
+    columns.flat_map(move |i| rows.clone().map(move |j| (i, j)))
 }
 
 /// A straight wall of any direction: the footprint is the rectangle swept by a segment of
@@ -250,6 +275,18 @@ impl Wall {
 
     fn contains(&self, p: &P3) -> bool {
         self.local.contains(&self.local_coordinates(p))
+    }
+
+    /// The [x, y] spans of the footprint's bounding box.
+    fn footprint_bounds(&self) -> [[f64; 2]; 2] {
+        let c = self.corners();
+        let span = |k: usize| {
+            c.iter()
+                .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], p| {
+                    [lo.min(p[k]), hi.max(p[k])]
+                })
+        };
+        [span(0), span(1)]
     }
 
     /// The footprint's corners: (0, −t/2), (L, −t/2), (L, t/2), (0, t/2) in the wall's frame.
@@ -582,39 +619,21 @@ impl Obstructions {
         h: f64,
         occupied: &mut [bool],
     ) {
-        let mut mark = |bounds: [[f64; 2]; 2], overlaps: &dyn Fn(f64, f64) -> bool| {
-            // Cells whose squares can reach the bounds, one more each side for rounding.
-            let range = |lo: f64, hi: f64, min: f64, n: usize| {
-                let first = (((lo - h - min) / grid.resolution_m).floor() as i64 - 1).max(0);
-                let last =
-                    (((hi + h - min) / grid.resolution_m).ceil() as i64 + 1).min(n as i64 - 1);
-                // Empty when the footprint lies off the grid (last < first).
-                first as usize..(last + 1).max(first) as usize
-            };
-            let [[x0, x1], [y0, y1]] = bounds;
-            for i in range(x0, x1, grid.x_min, grid.nx) {
-                for j in range(y0, y1, grid.y_min, grid.ny) {
-                    let [x, y] = grid.centre(i, j);
-                    if overlaps(x, y) {
-                        occupied[i * grid.ny + j] = true;
-                    }
+        for bx in &self.boxes {
+            for (i, j) in cells_reaching(grid, bx.footprint_bounds(), h) {
+                let [x, y] = grid.centre(i, j);
+                if bx.overlaps_square(x, y, h) {
+                    occupied[grid.index(i, j)] = true;
                 }
             }
-        };
-        for bx in &self.boxes {
-            mark([[bx.lo[0], bx.hi[0]], [bx.lo[1], bx.hi[1]]], &|x, y| {
-                bx.overlaps_square(x, y, h)
-            });
         }
         for wall in &self.walls {
-            let c = wall.corners();
-            let span = |k: usize| {
-                c.iter()
-                    .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], p| {
-                        [lo.min(p[k]), hi.max(p[k])]
-                    })
-            };
-            mark([span(0), span(1)], &|x, y| wall.overlaps_square(x, y, h));
+            for (i, j) in cells_reaching(grid, wall.footprint_bounds(), h) {
+                let [x, y] = grid.centre(i, j);
+                if wall.overlaps_square(x, y, h) {
+                    occupied[grid.index(i, j)] = true;
+                }
+            }
         }
     }
 

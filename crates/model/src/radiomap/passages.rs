@@ -10,6 +10,7 @@
 //! cells of two or more components of the free space is a closed passage: with a finer grid those
 //! components may join.
 
+use crate::geometry::Nearby;
 use crate::scenario::{Grid, Scenario};
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -42,7 +43,6 @@ pub struct ClosedPassages {
 
 /// The passages the conservative occupancy `occupied` closes on `grid`.
 pub fn closed_passages(scenario: &Scenario, grid: &Grid, occupied: &[bool]) -> ClosedPassages {
-    let obstructions = scenario.obstructions();
     // The centre's own square: 1 µm wide beyond the radius, above the 10⁻⁹ m below which
     // footprints are taken to touch rather than overlap.
     let centre_blocked = super::overlapped(scenario, grid, scenario.mru.radius_m + 1e-6);
@@ -55,6 +55,10 @@ pub fn closed_passages(scenario: &Scenario, grid: &Grid, occupied: &[bool]) -> C
         return ClosedPassages::default();
     }
     let component = free_components(grid, occupied);
+    // A step from a narrowed cell's centre to a neighbour's, shifted by ε, stays in the square
+    // of half-side 1.01 Δ around the first.
+    let obstructions = scenario.obstructions();
+    let nearby = Nearby::new(&obstructions, grid, &narrowed, 1.01 * grid.resolution_m);
     // Low above the floor: what a robot drives through. A segment that only grazes an
     // obstacle (along a wall's end face) is not a way through, so the two segments beside it,
     // ε to either side, must be clear too.
@@ -66,7 +70,11 @@ pub fn closed_passages(scenario: &Scenario, grid: &Grid, occupied: &[bool]) -> C
         let length = (x1 - x0).hypot(y1 - y0);
         let (nx, ny) = (-(y1 - y0) / length * eps, (x1 - x0) / length * eps);
         [0.0, 1.0, -1.0].iter().all(|&k| {
-            !obstructions.blocks([x0 + k * nx, y0 + k * ny, z], [x1 + k * nx, y1 + k * ny, z])
+            !nearby.blocks(
+                a,
+                [x0 + k * nx, y0 + k * ny, z],
+                [x1 + k * nx, y1 + k * ny, z],
+            )
         })
     };
     let mut seen = vec![false; grid.cells()];
