@@ -1,7 +1,7 @@
 //! A compact binary form of a built map, for storage (`serve --data-dir`): what the build
 //! computed, without what the scenario determines.
 //!
-//! Stored: the map key (as JSON), the build time, and per cell the value (f64), the occupancy
+//! Stored: the map key (as JSON), the build's duration and end, and per cell the value (f64), the occupancy
 //! (one byte) and the per-cell solution (gain maps: the serving AP, one byte, only with several
 //! APs, and its gain where another AP has the best one; rate maps: the upper bound, N phase codes (`u16`, as the map holds them), the power split
 //! and the decoding order). Not stored: the grid, the channel models and the rate model, which
@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 
 /// Bumped whenever the layout below changes; a stored map of another version is not decoded
 /// (it is rebuilt on request).
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 #[derive(Serialize, Deserialize)]
 struct Stored {
@@ -30,6 +30,7 @@ struct Stored {
     /// forms, which postcard does not carry.
     key: String,
     build_seconds: f64,
+    built_at_unix_s: u64,
     values: Vec<f64>,
     occupied: Vec<bool>,
     cells: StoredCells,
@@ -58,6 +59,7 @@ pub fn encode(map: &RadioMap) -> Vec<u8> {
         version: FORMAT_VERSION,
         key: serde_json::to_string(&map.key).expect("keys serialise"),
         build_seconds: map.build_seconds,
+        built_at_unix_s: map.built_at_unix_s,
         values: map.values.clone(),
         occupied: map.occupied.clone(),
         cells: map.stored_cells(),
@@ -107,6 +109,7 @@ pub fn decode(bytes: &[u8], scenario: &Scenario) -> Result<RadioMap, DecodeError
         key,
         id,
         stored.build_seconds,
+        stored.built_at_unix_s,
         stored.values,
         stored.occupied,
         stored.cells,
@@ -130,6 +133,7 @@ mod tests {
         let back = decode(&bytes, scenario).expect("decodes");
         assert_eq!(back.key, map.key);
         assert_eq!(back.build_seconds.to_bits(), map.build_seconds.to_bits());
+        assert_eq!(back.built_at_unix_s, map.built_at_unix_s);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&back.values), bits(&map.values));
         assert_eq!(back.occupied, map.occupied);

@@ -54,6 +54,8 @@ pub struct Nav2Mask {
     pub kind: MaskKind,
     /// The YAML and the PGM it names.
     pub files: EncodedMap,
+    /// When the map was built (seconds since the Unix epoch): the files' date in an archive.
+    pub built_at_unix_s: u64,
 }
 
 impl Nav2Mask {
@@ -66,7 +68,8 @@ impl Nav2Mask {
         format!("{}.pgm", self.kind.stem())
     }
 
-    /// Both files in one tar archive (mode 0644, time 0, so the bytes depend on the map only).
+    /// Both files in one tar archive, mode 0644 and dated when the map was built, so the bytes
+    /// depend on the map only (the same on every replica, before and after a restart).
     pub fn tar(&self) -> Vec<u8> {
         let mut builder = tar::Builder::new(Vec::new());
         for (name, data) in [
@@ -76,7 +79,7 @@ impl Nav2Mask {
             let mut header = tar::Header::new_gnu();
             header.set_size(data.len() as u64);
             header.set_mode(0o644);
-            header.set_mtime(0);
+            header.set_mtime(self.built_at_unix_s);
             builder
                 .append_data(&mut header, name, data)
                 .expect("writing into memory cannot fail");
@@ -164,7 +167,11 @@ pub fn nav2_mask(
         mode,
         &format!("{}.pgm", kind.stem()),
     );
-    Ok(Nav2Mask { kind, files })
+    Ok(Nav2Mask {
+        kind,
+        files,
+        built_at_unix_s: map.built_at_unix_s,
+    })
 }
 
 /// The map's values in `unit` as a NumPy `.npy` file: float32, shape (nx, ny), `a[i, j]` the
@@ -300,12 +307,27 @@ mod tests {
         let mask = nav2_mask(&map, Unit::GainDb, MaskKind::Keepout, -70.0, None).unwrap();
         let bytes = mask.tar();
         let mut archive = tar::Archive::new(bytes.as_slice());
-        let names: Vec<String> = archive
+        let entries: Vec<(String, u64)> = archive
             .entries()
             .unwrap()
-            .map(|e| e.unwrap().path().unwrap().display().to_string())
+            .map(|e| {
+                let e = e.unwrap();
+                (
+                    e.path().unwrap().display().to_string(),
+                    e.header().mtime().unwrap(),
+                )
+            })
             .collect();
-        assert_eq!(names, ["keepout.yaml", "keepout.pgm"]);
+        let built = map.built_at_unix_s;
+        // Dated when the map was built: after this file was written, not 1970.
+        assert!(built > 1_780_000_000, "{built}");
+        assert_eq!(
+            entries,
+            [
+                ("keepout.yaml".into(), built),
+                ("keepout.pgm".into(), built)
+            ]
+        );
         assert!(mask.files.yaml.contains("image: keepout.pgm"));
     }
 

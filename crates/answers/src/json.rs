@@ -31,6 +31,34 @@ impl fmt::Display for Path<'_> {
     }
 }
 
+/// Deserialises `value` as `T`, an error naming the JSON path of the field it is about. A
+/// missing field is named itself (`mru.v_max_mps`), where serde's error sits on the object that
+/// lacks it; paths are written as [`check_unique_keys`] writes them.
+pub fn from_value_at_path<T: de::DeserializeOwned>(
+    value: serde_json::Value,
+) -> Result<T, FieldError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = match e.path().to_string() {
+            p if p == "." || p.is_empty() => None,
+            p => Some(p),
+        };
+        let reason = e.into_inner().to_string();
+        match (missing_field(&reason), path) {
+            (Some(name), Some(parent)) => {
+                FieldError::new(format!("{parent}.{name}"), "required, but missing")
+            }
+            (Some(name), None) => FieldError::new(name, "required, but missing"),
+            (None, path) => FieldError::new(path.unwrap_or_else(|| "$".into()), reason),
+        }
+    })
+}
+
+/// The field serde's message ``missing field `name` `` names (its wording since serde 1.0).
+fn missing_field(reason: &str) -> Option<&str> {
+    let rest = reason.strip_prefix("missing field `")?;
+    rest.find('`').map(|end| &rest[..end])
+}
+
 /// Checks that no object in the JSON text `bytes` repeats a key. The error names the object's
 /// path (`$` for the top level) and the key: ``duplicate key `x` ``. Text that is not JSON at
 /// all is reported at `$`; callers parse it first, so their own syntax errors come first.

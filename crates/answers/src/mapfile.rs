@@ -24,7 +24,8 @@ struct MapYaml {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     mode: Option<MapMode>,
     resolution: f64,
-    origin: Vec<f64>,
+    /// Written `[x, y, yaw]` on one line, as map_server writes it.
+    origin: serde_saphyr::FlowSeq<Vec<f64>>,
     negate: Negate,
     occupied_thresh: f64,
     free_thresh: f64,
@@ -100,7 +101,7 @@ pub fn resolve_map_reference(
         ("free_thresh", yaml.free_thresh),
     ]
     .into_iter()
-    .chain(yaml.origin.iter().map(|&v| ("origin", v)));
+    .chain(yaml.origin.0.iter().map(|&v| ("origin", v)));
     for (key, value) in numbers {
         if !value.is_finite() {
             let written = if value.is_nan() {
@@ -114,11 +115,11 @@ pub fn resolve_map_reference(
             )));
         }
     }
-    let origin: [f64; 3] = yaml.origin.as_slice().try_into().map_err(|_| {
+    let origin: [f64; 3] = yaml.origin.0.as_slice().try_into().map_err(|_| {
         field(format!(
             "{}: origin must have 3 elements [x, y, yaw], not {}",
             yaml_path.display(),
-            yaml.origin.len()
+            yaml.origin.0.len()
         ))
     })?;
     let image_path = yaml_path
@@ -206,7 +207,7 @@ pub fn encode_map(
         image: image_name.to_string(),
         mode: Some(mode),
         resolution,
-        origin: vec![origin[0], origin[1], 0.0],
+        origin: serde_saphyr::FlowSeq(vec![origin[0], origin[1], 0.0]),
         negate: Negate(false),
         occupied_thresh,
         free_thresh,
@@ -352,10 +353,19 @@ mod tests {
         let scale = encode_map(&values, width, 0.25, [1.0, 2.0], MapMode::Scale, "m.pgm");
         let yaml: MapYaml = serde_saphyr::from_str(&scale.yaml).unwrap();
         assert_eq!(yaml.image, "m.pgm");
+        // One line, as map_server writes it (and people read it).
+        assert!(
+            scale
+                .yaml
+                .lines()
+                .any(|l| l.starts_with("origin: [") && l.ends_with(']')),
+            "{}",
+            scale.yaml
+        );
         let p = FloorPlan {
             image: b64(&scale.pgm).into(),
             resolution: yaml.resolution,
-            origin: [yaml.origin[0], yaml.origin[1], yaml.origin[2]],
+            origin: [yaml.origin.0[0], yaml.origin.0[1], yaml.origin.0[2]],
             negate: yaml.negate,
             occupied_thresh: yaml.occupied_thresh,
             free_thresh: yaml.free_thresh,

@@ -90,7 +90,7 @@ impl ScenarioDocument for Scenario {
 
     fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
         mapfile::reject_map_reference(&value)?;
-        deserialize_tracking_path(value)?.validated(&image_file)
+        crate::json::from_value_at_path::<Scenario>(value)?.validated(&image_file)
     }
 
     fn from_file(path: &Path) -> Result<Scenario, FieldError> {
@@ -180,20 +180,6 @@ fn write_canonical(value: &serde_json::Value, out: &mut String) {
     }
 }
 
-/// Deserialises while tracking the JSON path, so serde's own errors (unknown or missing fields,
-/// wrong types) name the field too.
-fn deserialize_tracking_path(value: serde_json::Value) -> Result<Scenario, FieldError> {
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let path = e.path().to_string();
-        let field = if path == "." || path.is_empty() {
-            "$".to_string()
-        } else {
-            path
-        };
-        FieldError::new(field, e.into_inner())
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -277,6 +263,19 @@ mod tests {
         type Mutation = Box<dyn FnOnce(&mut serde_json::Value)>;
         let cases: Vec<(Mutation, &str)> = vec![
             (Box::new(|v| v["room"]["bogus"] = 1.into()), "room.bogus"),
+            // A missing field is named itself, not the object that lacks it.
+            (
+                Box::new(|v| {
+                    v["mru"].as_object_mut().unwrap().remove("v_max_mps");
+                }),
+                "mru.v_max_mps",
+            ),
+            (
+                Box::new(|v| {
+                    v.as_object_mut().unwrap().remove("room");
+                }),
+                "room",
+            ),
             // An explicit null is not "absent": it is rejected, naming the field.
             (Box::new(|v| v["irs"] = serde_json::Value::Null), "irs"),
             (

@@ -277,6 +277,11 @@ impl Wall {
         self.local.contains(&self.local_coordinates(p))
     }
 
+    /// The height it stands to (m).
+    pub fn height(&self) -> f64 {
+        self.local.hi[2]
+    }
+
     /// The [x, y] spans of the footprint's bounding box.
     fn footprint_bounds(&self) -> [[f64; 2]; 2] {
         let c = self.corners();
@@ -363,7 +368,8 @@ impl Raster {
     }
 
     #[inline]
-    fn is_occupied(&self, c: i64, r: i64) -> bool {
+    /// True when pixel (c, r) lies on the map and is occupied.
+    pub(crate) fn is_occupied(&self, c: i64, r: i64) -> bool {
         c >= 0
             && r >= 0
             && (c as usize) < self.width

@@ -384,9 +384,43 @@ pub fn candidates(base: &Scenario, search: &Search) -> Result<Vec<Candidate>, Fi
         .map(|(center, normal)| Candidate {
             center,
             normal,
-            scenario: moved(center, normal),
+            scenario: moved(center, normal).map(|mut s| {
+                s.name = Some(candidate_name(base.name.as_deref(), search.what, center));
+                s
+            }),
         })
         .collect())
+}
+
+/// A candidate's scenario name: its parent's and where the device went, `warehouse @ IRS
+/// (29.75, -5.5)` (an AP with its height), so that kept candidates tell themselves apart in a
+/// listing. A long parent name is cut, with an ellipsis, to keep the whole within
+/// [`MAX_NAME_CHARS`](crate::scenario::MAX_NAME_CHARS).
+fn candidate_name(parent: Option<&str>, what: What, at: [f64; 3]) -> String {
+    // Millimetres are as fine as a mounting position is meant.
+    let mm = |v: f64| {
+        let text = format!("{v:.3}");
+        let text = text.trim_end_matches('0').trim_end_matches('.');
+        if text == "-0" {
+            "0".to_string()
+        } else {
+            text.to_string()
+        }
+    };
+    let place = match what {
+        What::Irs => format!("IRS ({}, {})", mm(at[0]), mm(at[1])),
+        What::Ap => format!("AP ({}, {}, {})", mm(at[0]), mm(at[1]), mm(at[2])),
+    };
+    let Some(parent) = parent else {
+        return place;
+    };
+    let room = crate::scenario::MAX_NAME_CHARS - place.chars().count() - " @ ".len();
+    if parent.chars().count() <= room {
+        format!("{parent} @ {place}")
+    } else {
+        let cut: String = parent.chars().take(room - 1).collect();
+        format!("{cut}… @ {place}")
+    }
 }
 
 /// The horizontal normal of a wall sample that faces into the room: of the two perpendiculars
@@ -746,4 +780,36 @@ pub fn rank_candidates(
         },
         scenarios,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::MAX_NAME_CHARS;
+
+    #[test]
+    fn candidates_are_named_after_their_parent_and_place() {
+        let name = |parent, what, at| candidate_name(parent, what, at);
+        assert_eq!(
+            name(Some("warehouse"), What::Irs, [29.75, -5.5000000001, 1.8]),
+            "warehouse @ IRS (29.75, -5.5)"
+        );
+        assert_eq!(
+            name(Some("floor"), What::Ap, [-0.0001, 3.0, 2.25]),
+            "floor @ AP (0, 3, 2.25)"
+        );
+        assert_eq!(name(None, What::Irs, [1.0, 2.0, 3.0]), "IRS (1, 2)");
+        let long = "x".repeat(MAX_NAME_CHARS);
+        let cut = name(Some(&long), What::Irs, [-123.456, 78.9, 0.0]);
+        assert_eq!(cut.chars().count(), MAX_NAME_CHARS);
+        assert!(cut.ends_with("xx… @ IRS (-123.456, 78.9)"), "{cut}");
+        let fits = "y".repeat(MAX_NAME_CHARS - " @ IRS (1, 2)".len());
+        assert_eq!(
+            name(Some(&fits), What::Irs, [1.0, 2.0, 0.0])
+                .chars()
+                .count(),
+            MAX_NAME_CHARS
+        );
+        assert!(!name(Some(&fits), What::Irs, [1.0, 2.0, 0.0]).contains('…'));
+    }
 }

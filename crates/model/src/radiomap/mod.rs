@@ -163,6 +163,9 @@ pub struct RadioMap {
     pub links: Vec<LinkBudget>,
     /// Wall-clock build time (s).
     pub build_seconds: f64,
+    /// When the build finished (seconds since the Unix epoch): exported files are dated by it,
+    /// so the same map exports the same bytes on every replica and after every restart.
+    pub built_at_unix_s: u64,
 }
 
 /// Splits a concatenated phase vector into the surfaces' vectors (lengths N_s in order).
@@ -336,5 +339,8 @@ pub fn build(
         cells,
         links,
         build_seconds: started.elapsed().as_secs_f64(),
+        built_at_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
     })
 }

@@ -66,6 +66,7 @@ impl RadioMap {
         key: MapKey,
         id: String,
         build_seconds: f64,
+        built_at_unix_s: u64,
         values: Vec<f64>,
         occupied: Vec<bool>,
         stored: StoredCells,
@@ -173,6 +174,7 @@ impl RadioMap {
             cells: solutions,
             links: super::LinkBudget::for_scenario(scenario),
             build_seconds,
+            built_at_unix_s,
         })
     }
 }

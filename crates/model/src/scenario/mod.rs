@@ -12,6 +12,8 @@
 //! `validate` the checks, one concern per function.
 
 mod grid;
+mod mount;
+pub use mount::MAX_MOUNT_WITHIN_M;
 pub mod parts;
 mod validate;
 

@@ -118,6 +118,17 @@ pub struct Irs {
         skip_serializing_if = "Option::is_none"
     )]
     pub element_pitch_m: Option<f64>,
+    /// Mount the surface on the nearest wall, obstacle side or floor-plan edge within this
+    /// distance (m, horizontal, at most 5) that faces the way `normal` does; `center` and
+    /// `normal` become the mounted pose (docs/scenarios.md, "Mounting a surface"). Only read:
+    /// the scenario keeps the mounted pose, not this field, so it never reaches the canonical
+    /// form.
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub mount_within_m: Option<f64>,
 }
 
 impl Irs {

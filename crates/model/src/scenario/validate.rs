@@ -34,6 +34,7 @@ impl Scenario {
         self.decode_floor_plan(image)?;
         let obstructions = self.obstructions();
         self.validate_access_points(&obstructions)?;
+        self.mount_surfaces(&obstructions)?;
         self.validate_surfaces(&obstructions)?;
         self.validate_robots(&obstructions)?;
         self.validate_channel()
@@ -635,7 +636,8 @@ impl Scenario {
                     return Err(FieldError::new(
                         format!("{at}.center"),
                         "lies inside a wall or the floor plan's occupied pixels: put it on the \
-                         surface (for a floor plan, on a pixel edge at origin + k·resolution)",
+                         surface (for a floor plan, on a pixel edge at origin + k·resolution), \
+                         or add mount_within_m to mount it on the nearest face",
                     ));
                 }
                 (false, true) => {
@@ -653,7 +655,8 @@ impl Scenario {
                 format!("{at}.center"),
                 "the IRS is on no wall and no obstacle face: put its centre on a wall of the room \
                  (e.g. y = room.y_min), on an obstacle's or a wall's side, or on the edge of \
-                 the floor plan's occupied pixels",
+                 the floor plan's occupied pixels; or add mount_within_m (e.g. 0.5) to mount it \
+                 on the nearest one",
             ));
         }
         if !on.iter().any(|d| d[0] * n[0] + d[1] * n[1] > 0.0) {

@@ -377,12 +377,6 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let value: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|e| ApiError::malformed_json(e.to_string()))?;
     unique_keys()?;
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let path = e.path().to_string();
-        app::Error::invalid(
-            if path == "." { "$".to_string() } else { path },
-            e.into_inner().to_string(),
-        )
-        .into()
-    })
+    irs_answers::json::from_value_at_path(value)
+        .map_err(|e| ApiError::from(app::Error::invalid(e.field, e.reason)))
 }
