@@ -2420,6 +2420,19 @@ async fn tenants_see_and_touch_only_their_own() {
     let (s, placed) = as_alice("POST", "/v1/placements".into(), Some(placement.clone())).await;
     assert_eq!(s, StatusCode::OK, "{placed}");
     let pid = placed["placement_id"].as_str().unwrap().to_string();
+    // A Monte Carlo check long enough to be a job (on a built-in floor, everybody's).
+    let paper = server.scenario_id("paper-single-user").await;
+    let (s, checking) = as_alice(
+        "POST",
+        "/v1/paths".into(),
+        Some(
+            json!({"map": {"scenario_id": paper, "kind": "gain"}, "start": [-10, 0],
+                    "goal": [10, 0], "threshold": -64, "monte_carlo_draws": 2500}),
+        ),
+    )
+    .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{checking}");
+    let cid = checking["job_id"].as_str().unwrap().to_string();
 
     let path_query =
         json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": "max"});
@@ -2491,6 +2504,9 @@ async fn tenants_see_and_touch_only_their_own() {
                 ("get", "/v1/placements/{placement_id}") => {
                     (Class::Alices, format!("/v1/placements/{pid}"), None)
                 }
+                ("get", "/v1/checks/{check_id}") => {
+                    (Class::Alices, format!("/v1/checks/{cid}"), None)
+                }
                 ("post", "/v1/paths") => (Class::Alices, route.clone(), Some(path_query.clone())),
                 ("post", "/v1/sweeps") => (Class::Alices, route.clone(), Some(sweep.clone())),
                 other => panic!("{other:?}: a route the tenants' matrix does not know; add it"),
@@ -2523,6 +2539,13 @@ async fn tenants_see_and_touch_only_their_own() {
                         && status == StatusCode::CONFLICT =>
                 {
                     assert_eq!(answer["code"], "job_finished", "{answer}");
+                    continue;
+                }
+                // Her check may still be queued behind her rate map: 409, the state she can see.
+                (Class::Alices, Who::Alice)
+                    if path.starts_with("/v1/checks/") && status == StatusCode::CONFLICT =>
+                {
+                    assert_eq!(answer["code"], "check_not_ready", "{answer}");
                     continue;
                 }
                 (Class::Registration, _) | (Class::Alices, Who::Alice) => {
@@ -2754,4 +2777,64 @@ async fn a_full_registry_refuses_only_the_tenant_that_filled_it() {
             .send_as(Some(ALICE), "DELETE", &format!("/v1/jobs/{job}"), None)
             .await;
     }
+}
+
+/// A Monte Carlo check estimated over 2 s of CPU is a job (kind `check`): its result is read
+/// at its `result_href` once done, it shows progress, it can be cancelled, and the answer is
+/// the path answer with the report (as the synchronous form answers smaller checks).
+#[tokio::test]
+async fn long_monte_carlo_checks_are_jobs_with_progress_and_cancel() {
+    let server = start(&["--workers", "1"]);
+    let id = server.scenario_id("paper-single-user").await;
+    let query = |draws: u64| {
+        json!({"map": {"scenario_id": id, "kind": "gain"}, "start": [-10, 0], "goal": [10, 0],
+               "threshold": -64, "monte_carlo_draws": draws, "seed": 7})
+    };
+    // ~41 waypoints × 1 200 elements: 100 draws are milliseconds, answered at once.
+    let (status, small) = server.post("/v1/paths", query(100)).await;
+    assert_eq!(status, StatusCode::OK, "{small}");
+    assert!(small["monte_carlo"].is_object(), "{small}");
+
+    // 40 000 draws are estimated at ~40 s: a job, cancelled once it has started.
+    let (status, job) = server.post("/v1/paths", query(40_000)).await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    assert_eq!(job["kind"], "check");
+    let job_id = job["job_id"].as_str().unwrap().to_string();
+    assert_eq!(job["result_href"], format!("/v1/checks/{job_id}"));
+    let (status, body) = server.get(&format!("/v1/checks/{job_id}")).await;
+    problem(status, &body, StatusCode::CONFLICT, "check_not_ready");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let (_, j) = server.get(&format!("/v1/jobs/{job_id}")).await;
+        if j["cells_done"].as_u64().unwrap() > 0 {
+            assert!(j["cells_total"].as_u64().unwrap() > j["cells_done"].as_u64().unwrap());
+            break;
+        }
+        assert!(Instant::now() < deadline, "the check never started: {j}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let (status, _) = server
+        .send("DELETE", &format!("/v1/jobs/{job_id}"), None)
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED);
+    assert_eq!(server.wait_job(&job_id).await["state"], "cancelled");
+    let (status, body) = server.get(&format!("/v1/checks/{job_id}")).await;
+    problem(status, &body, StatusCode::CONFLICT, "job_finished");
+
+    // 2 500 draws (~2.5 s estimated) run to the end: the path answer with the report.
+    let (status, job) = server.post("/v1/paths", query(2_500)).await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{job}");
+    let job_id = job["job_id"].as_str().unwrap();
+    assert_eq!(server.wait_job(job_id).await["state"], "done");
+    let (status, checked) = server.get(&format!("/v1/checks/{job_id}")).await;
+    assert_eq!(status, StatusCode::OK, "{checked}");
+    assert_eq!(checked["waypoints"], small["waypoints"], "the same path");
+    let report = &checked["monte_carlo"];
+    assert_eq!(report["draws"], 2_500, "{report}");
+    assert!(checked["took_ms"].as_f64().unwrap() > 0.0);
+    // Not someone else's: an unknown id, or a placement's, is not a check.
+    let (status, body) = server
+        .get("/v1/checks/00000000000000000000000000000000")
+        .await;
+    problem(status, &body, StatusCode::NOT_FOUND, "not_found");
 }

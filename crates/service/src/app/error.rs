@@ -72,6 +72,9 @@ pub(crate) enum Error {
     /// The placement search is still running.
     #[error("placement {job_id} is still running; poll /v1/jobs/{job_id}")]
     PlacementNotReady { job_id: JobId },
+    /// The Monte Carlo check is still running.
+    #[error("check {job_id} is still running; poll /v1/jobs/{job_id}")]
+    CheckNotReady { job_id: JobId },
     /// The job ended already (`state`: done, failed or cancelled).
     #[error("job {job_id} is already {state}")]
     JobFinished { job_id: JobId, state: JobState },

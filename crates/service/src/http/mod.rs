@@ -95,6 +95,7 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
             get(placements::get_placement),
         ),
         ("/v1/paths", &["post"], post(paths::plan_path)),
+        ("/v1/checks/{check_id}", &["get"], get(paths::get_check)),
         ("/v1/sweeps", &["post"], post(paths::sweep)),
     ]
 }

@@ -9,8 +9,9 @@ use crate::app::App;
 use crate::app::Error;
 use crate::app::answers::{OpenAnswer, PathQuery};
 use crate::app::identity::Caller;
+use crate::app::jobs::{SYNC_CHECK_S, Work};
 use crate::app::maps::{Obtained, check_budget};
-use crate::ids::MapId;
+use crate::ids::{JobId, MapId, ScenarioId};
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, header};
@@ -278,14 +279,36 @@ pub(super) async fn plan_path(
     let monte_carlo = match request.monte_carlo_draws {
         Some(draws) if path.feasible => {
             let rate = map.key.kind == MapKind::Rate;
+            let estimated_s =
+                montecarlo::check_seconds(&scenario, path.waypoints.len(), draws, rate);
             check_budget(
                 "monte_carlo_draws",
                 "Monte Carlo check",
-                montecarlo::check_seconds(&scenario, path.waypoints.len(), draws, rate),
+                estimated_s,
                 state.limits().max_check_cpu_s,
             )?;
-            let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
             let seed = request.seed.unwrap_or(1);
+            if estimated_s > SYNC_CHECK_S {
+                // Longer than a request should wait: a job with progress and cancel, its
+                // answer (this body with the report) at the job's `result_href`.
+                let scenario_id = ScenarioId::of_key(&map.key);
+                let job = state
+                    .jobs()
+                    .check(scenario_id, caller.owner(), move |progress| {
+                        let started = Instant::now();
+                        let report = path::check(&scenario, &map, &path, draws, seed, progress)?;
+                        let checked = CheckedPath {
+                            path,
+                            monte_carlo: Some(report),
+                        };
+                        let mut answer = serde_json::to_value(&checked).expect("answers serialise");
+                        answer["took_ms"] =
+                            serde_json::json!(started.elapsed().as_secs_f64() * 1e3);
+                        Ok(answer)
+                    })?;
+                return Ok(accepted(job.view()));
+            }
+            let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
             // Thousands of draws per waypoint: always a heavy query, cancelled with its client.
             let report = state
                 .queries()
@@ -371,4 +394,30 @@ pub(super) async fn sweep(
         WorkError::Cancelled(c) => Error::internal(c.to_string()),
     })?;
     Ok(Json(Timed::since(started, answer)).into_response())
+}
+
+/// `GET /v1/checks/{check_id}`: a Monte Carlo check that ran as a job — the path answer with
+/// its report, once the job is done.
+pub(super) async fn get_check(
+    State(state): State<App>,
+    caller: Caller,
+    Path(check_id): Path<JobId>,
+) -> Result<Response, ApiError> {
+    let job = state
+        .jobs()
+        .get(&check_id)
+        .filter(|j| matches!(j.work, Work::Check { .. }) && j.visible_to(&caller))
+        .ok_or_else(|| Error::not_found("check", &check_id))?;
+    match job.check() {
+        Some(outcome) => Ok(Json(&outcome.answer).into_response()),
+        None if job.state().is_terminal() => Err(Error::JobFinished {
+            job_id: job.id.clone(),
+            state: job.state(),
+        }
+        .into()),
+        None => Err(Error::CheckNotReady {
+            job_id: job.id.clone(),
+        }
+        .into()),
+    }
 }

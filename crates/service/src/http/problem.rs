@@ -301,6 +301,13 @@ impl From<app::Error> for ApiError {
                 detail,
             )
             .with_job(job_id),
+            E::CheckNotReady { job_id } => Self::new(
+                StatusCode::CONFLICT,
+                "check_not_ready",
+                "Check not ready",
+                detail,
+            )
+            .with_job(job_id),
             E::JobFinished { .. } => Self::new(
                 StatusCode::CONFLICT,
                 "job_finished",

@@ -1,6 +1,7 @@
 //! One job: its state, its kind, what it does ([`Work`]), its times and error, how a map job
 //! delivers its map to the requests waiting for it, and waiting for it to end.
 
+use super::checks::CheckOutcome;
 use super::placements::PlacementOutcome;
 use crate::app::identity::{Caller, Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
@@ -79,14 +80,31 @@ pub enum JobKind {
     Map,
     /// Ranks placement candidates.
     Placement,
+    /// Checks a path's bounds by Monte Carlo.
+    Check,
 }
 
 impl JobKind {
+    const ALL: [JobKind; 3] = [JobKind::Map, JobKind::Placement, JobKind::Check];
+
     pub fn as_str(self) -> &'static str {
         match self {
             JobKind::Map => "map",
             JobKind::Placement => "placement",
+            JobKind::Check => "check",
         }
+    }
+}
+
+impl<'de> Deserialize<'de> for JobKind {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        JobKind::ALL
+            .into_iter()
+            .find(|kind| kind.as_str() == name)
+            .ok_or_else(|| {
+                serde::de::Error::invalid_value(serde::de::Unexpected::Str(&name), &"a job kind")
+            })
     }
 }
 
@@ -107,6 +125,10 @@ pub enum Work {
     /// Ranks placement candidates; the answer is kept here once the job is done.
     Placement {
         outcome: OnceLock<Arc<PlacementOutcome>>,
+    },
+    /// Checks a path by Monte Carlo; the path answer with its report is kept here once done.
+    Check {
+        outcome: OnceLock<Arc<CheckOutcome>>,
     },
 }
 
@@ -223,6 +245,7 @@ impl Job {
         match &self.work {
             Work::Map { .. } => JobKind::Map,
             Work::Placement { .. } => JobKind::Placement,
+            Work::Check { .. } => JobKind::Check,
         }
     }
 
@@ -230,7 +253,7 @@ impl Job {
     pub fn map_id(&self) -> Option<&MapId> {
         match &self.work {
             Work::Map { map_id, .. } => Some(map_id),
-            Work::Placement { .. } => None,
+            Work::Placement { .. } | Work::Check { .. } => None,
         }
     }
 
@@ -272,8 +295,24 @@ impl Job {
     pub fn placement(&self) -> Option<Arc<PlacementOutcome>> {
         match &self.work {
             Work::Placement { outcome } => outcome.get().cloned(),
-            Work::Map { .. } => None,
+            Work::Map { .. } | Work::Check { .. } => None,
         }
+    }
+
+    /// A Monte Carlo check's outcome, once it is done.
+    pub fn check(&self) -> Option<Arc<CheckOutcome>> {
+        match &self.work {
+            Work::Check { outcome } => outcome.get().cloned(),
+            Work::Map { .. } | Work::Placement { .. } => None,
+        }
+    }
+
+    /// The bytes its kept answer weighs in the job history (nothing for a map job).
+    pub(super) fn answer_bytes(&self) -> usize {
+        self.placement()
+            .map(|o| o.bytes)
+            .or_else(|| self.check().map(|o| o.bytes))
+            .unwrap_or(0)
     }
 
     /// Waits until the job ends.

@@ -1,14 +1,17 @@
-//! Jobs: map builds and placement searches. Every job runs on tokio's blocking pool (never on
+//! Jobs: map builds, placement searches and Monte Carlo checks. Every job runs on tokio's blocking pool (never on
 //! the async runtime's threads), at most `workers` at once behind one semaphore, with at most
 //! `queue` more waiting. This file holds the table of jobs (admission, running, history,
 //! listing, cancellation); [`job`] one job, [`record`] its view and record, [`maps`] the map
-//! builds' single flight, [`placements`] the placement searches.
+//! builds' single flight, [`placements`] the placement searches, [`checks`] the Monte Carlo
+//! checks of paths.
 
+mod checks;
 mod job;
 mod maps;
 mod placements;
 mod record;
 
+pub use checks::SYNC_CHECK_S;
 use job::JobTimes;
 pub use job::{Job, JobState, Withdrawn, Work};
 pub use maps::MapRequestOutcome;
@@ -330,7 +333,7 @@ struct History {
 
 impl History {
     fn push(&mut self, job: &Job) {
-        let weight = job.placement().map_or(0, |outcome| outcome.bytes);
+        let weight = job.answer_bytes();
         self.push_weighed(job.id.clone(), weight);
     }
 

@@ -2,6 +2,7 @@
 //! ([`JobRecord`], persisted: records written by earlier releases must stay readable, so a
 //! field added must default when absent); and a [`Job`] turned into each and back.
 
+use super::checks::CheckOutcome;
 use super::job::{Job, JobKind, JobState, JobTimes, MapDelivery, Work, from_unix, unix};
 use super::placements::PlacementOutcome;
 use crate::app::identity::{Owner, Owners};
@@ -19,6 +20,10 @@ use tokio::sync::{Notify, watch};
 #[derive(Debug, Clone, Deserialize)]
 pub struct JobView {
     pub job_id: JobId,
+    /// The kind as recorded; records written before checks existed have none, and their kind
+    /// follows from `key` ([`JobView::kind`]).
+    #[serde(default, rename = "kind")]
+    pub recorded_kind: Option<JobKind>,
     pub scenario_id: ScenarioId,
     /// Map jobs: the key of the map being built (null for placements; its hash is the map id).
     pub key: Option<MapKey>,
@@ -33,10 +38,10 @@ pub struct JobView {
 
 impl JobView {
     pub fn kind(&self) -> JobKind {
-        match self.key {
+        self.recorded_kind.unwrap_or(match self.key {
             Some(_) => JobKind::Map,
             None => JobKind::Placement,
-        }
+        })
     }
 
     /// cells_done / cells_total (0 before the build starts).
@@ -54,9 +59,10 @@ impl Serialize for JobView {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeStruct as _;
         let map_id = self.key.as_ref().map(MapId::of);
-        let result_href = match &map_id {
-            Some(map_id) => map_id.href(),
-            None => self.job_id.placement_href(),
+        let result_href = match (self.kind(), &map_id) {
+            (JobKind::Map, Some(map_id)) => map_id.href(),
+            (JobKind::Check, _) => self.job_id.check_href(),
+            _ => self.job_id.placement_href(),
         };
         let mut job = serializer.serialize_struct("JobView", 15)?;
         job.serialize_field("job_id", &self.job_id)?;
@@ -73,7 +79,8 @@ impl Serialize for JobView {
         job.serialize_field("finished_at", &self.finished_at)?;
         job.serialize_field("error", &self.error)?;
         job.serialize_field("href", &self.job_id.href())?;
-        // Where the result is read once the job is done: the map, or the placement answer.
+        // Where the result is read once the job is done: the map, the placement answer or the
+        // checked path.
         job.serialize_field("result_href", &result_href)?;
         job.end()
     }
@@ -96,6 +103,9 @@ pub(crate) struct JobRecord {
     pub owners: Vec<String>,
     /// Placement jobs that finished: the answer and how many candidates were registered.
     pub placement: Option<(serde_json::Value, usize)>,
+    /// Check jobs that finished: the checked path's answer. Absent from older records.
+    #[serde(default)]
+    pub check: Option<serde_json::Value>,
 }
 
 impl JobRecord {
@@ -104,6 +114,7 @@ impl JobRecord {
         JobRecord {
             view: JobView {
                 job_id: JobId::random(),
+                recorded_kind: Some(JobKind::Map),
                 scenario_id: ScenarioId::of_key(key),
                 key: Some(key.clone()),
                 state: JobState::Queued,
@@ -118,6 +129,7 @@ impl JobRecord {
             owner: owner.map(|o| o.to_string()),
             owners: owner.map(|o| o.to_string()).into_iter().collect(),
             placement: None,
+            check: None,
         }
     }
 
@@ -136,10 +148,11 @@ impl Job {
         let times = *self.times.lock().expect("job lock");
         JobView {
             job_id: self.id.clone(),
+            recorded_kind: Some(self.kind()),
             scenario_id: self.scenario_id.clone(),
             key: match &self.work {
                 Work::Map { key, .. } => Some(key.clone()),
-                Work::Placement { .. } => None,
+                Work::Placement { .. } | Work::Check { .. } => None,
             },
             state: self.state(),
             cells_done: self.progress.cells_done(),
@@ -162,6 +175,7 @@ impl Job {
             placement: self
                 .placement()
                 .map(|outcome| (outcome.answer.clone(), outcome.registered)),
+            check: self.check().map(|outcome| outcome.answer.clone()),
         }
     }
 
@@ -173,25 +187,33 @@ impl Job {
             view,
             seq,
             placement,
+            check,
             ..
         } = record;
         if !view.state.is_terminal() {
             return None;
         }
-        let work = match (view.key, placement) {
-            (Some(key), None) => Work::Map {
+        let work = match (view.kind(), view.key, placement, check) {
+            (JobKind::Map, Some(key), None, None) => Work::Map {
                 map_id: MapId::of(&key),
                 key,
                 delivery: Mutex::new(MapDelivery::default()),
             },
-            (None, placement) => {
+            (JobKind::Placement, None, placement, None) => {
                 let outcome = OnceLock::new();
                 if let Some((answer, registered)) = placement {
                     let _ = outcome.set(Arc::new(PlacementOutcome::new(answer, registered)));
                 }
                 Work::Placement { outcome }
             }
-            (Some(_), Some(_)) => return None,
+            (JobKind::Check, None, None, check) => {
+                let outcome = OnceLock::new();
+                if let Some(answer) = check {
+                    let _ = outcome.set(Arc::new(CheckOutcome::new(answer)));
+                }
+                Work::Check { outcome }
+            }
+            _ => return None,
         };
         let progress = Progress::default();
         progress.start(view.cells_total);
@@ -225,6 +247,9 @@ mod tests {
 
     /// A finished placement job's record.
     const PLACEMENT_RECORD: &str = r#"{"job_id":"fedcba9876543210fedcba9876543210","seq":8,"owner":null,"owners":[],"scenario_id":"5c3na410","key":null,"state":"failed","cells_done":3,"cells_total":12,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":null,"error":"it broke","placement":[{"best":1},2]}"#;
+
+    /// A finished Monte Carlo check's record: records carry their kind since checks exist.
+    const CHECK_RECORD: &str = r#"{"job_id":"00112233445566778899aabbccddeeff","seq":9,"owner":null,"owners":[],"scenario_id":"5c3na410","kind":"check","key":null,"state":"done","cells_done":5,"cells_total":5,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":1700000009.0,"error":null,"placement":null,"check":{"feasible":true}}"#;
 
     /// A record reads back as the record it was, and carries every field of today's format
     /// (so the release before this one reads it too).
@@ -266,5 +291,25 @@ mod tests {
         let job = Job::restore(placement).unwrap();
         assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
         round_trip(&job.record(), PLACEMENT_RECORD);
+
+        let check: JobRecord = serde_json::from_str(CHECK_RECORD).unwrap();
+        let expected = r#"{"job_id":"00112233445566778899aabbccddeeff","kind":"check","scenario_id":"5c3na410","map_id":null,"key":null,"state":"done","cells_done":5,"cells_total":5,"progress":1.0,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":1700000009.0,"error":null,"href":"/v1/jobs/00112233445566778899aabbccddeeff","result_href":"/v1/checks/00112233445566778899aabbccddeeff"}"#;
+        assert_eq!(serde_json::to_string(&check.view).unwrap(), expected);
+        let job = Job::restore(check).unwrap();
+        assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
+        assert_eq!(
+            job.check().unwrap().answer,
+            serde_json::json!({"feasible": true})
+        );
+        round_trip(&job.record(), CHECK_RECORD);
+    }
+
+    /// A record whose kind and contents disagree is not restored.
+    #[test]
+    fn a_record_of_one_kind_with_another_kinds_answer_is_refused() {
+        let odd = CHECK_RECORD.replace(r#""kind":"check""#, r#""kind":"map""#);
+        assert!(Job::restore(serde_json::from_str(&odd).unwrap()).is_none());
+        let odd = PLACEMENT_RECORD.replace(r#""placement":"#, r#""kind":"check","placement":"#);
+        assert!(Job::restore(serde_json::from_str(&odd).unwrap()).is_none());
     }
 }
