@@ -22,13 +22,15 @@ use crate::input::FieldError;
 pub const MAX_MOUNT_WITHIN_M: f64 = 5.0;
 
 /// A face a surface can hang on: the segment `a`→`b` seen from above, the unit horizontal
-/// `normal` pointing out of it into free space, and the height it reaches.
+/// `normal` pointing out of it into free space, and the height it reaches. `pixel_edge` marks one
+/// unit edge of the floor plan, which grows into its straight run once chosen ([`run_through`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Face {
     a: [f64; 2],
     b: [f64; 2],
     normal: [f64; 2],
     height: f64,
+    pixel_edge: bool,
 }
 
 impl Face {
@@ -93,6 +95,7 @@ impl Scenario {
             b,
             normal,
             height,
+            pixel_edge: false,
         };
         let mut faces = vec![
             face(
@@ -194,7 +197,7 @@ fn mount(
     for (_, t, face) in near {
         // A pixel edge grows into its straight stretch, and t is measured on that.
         let (face, t) = match obstructions.raster.as_deref() {
-            Some(r) if raster.contains(&face) => {
+            Some(r) if face.pixel_edge => {
                 let run = run_through(r, face);
                 (run, run.nearest([x, y]).0)
             }
@@ -250,6 +253,7 @@ fn raster_faces(r: &Raster, p: [f64; 2], within: f64) -> Vec<Face> {
                     b: [x(c), y(q + 1)],
                     normal,
                     height: r.obstacle_height,
+                    pixel_edge: true,
                 });
             }
         }
@@ -265,6 +269,7 @@ fn raster_faces(r: &Raster, p: [f64; 2], within: f64) -> Vec<Face> {
                     b: [x(c + 1), y(q)],
                     normal,
                     height: r.obstacle_height,
+                    pixel_edge: true,
                 });
             }
         }
