@@ -337,7 +337,10 @@ impl Job {
         let mut times = self.times.lock().expect("job lock");
         match next {
             JobState::Running => times.started = Some(SystemTime::now()),
-            s if s.is_terminal() => times.finished = Some(SystemTime::now()),
+            // Taken already when the record was written first (`Job::record_as`).
+            s if s.is_terminal() => {
+                times.finished.get_or_insert_with(SystemTime::now);
+            }
             _ => {}
         }
     }

@@ -213,9 +213,8 @@ impl Jobs {
         };
         self.queued.fetch_sub(1, Ordering::SeqCst);
         let Some(permit) = permit.filter(|_| !job.progress.is_cancelled()) else {
-            job.set_state(JobState::Cancelled);
             tracing::info!("cancelled while queued");
-            self.retire(&job).await;
+            self.retire(&job, JobState::Cancelled).await;
             return;
         };
         job.set_state(JobState::Running);
@@ -232,54 +231,57 @@ impl Jobs {
         .await;
         drop(permit);
         let seconds = started.elapsed().as_secs_f64();
-        match result {
+        let ended = match result {
             Ok(Ok(output)) => {
                 metrics::histogram!("irs_job_seconds", "kind" => job.kind().as_str())
                     .record(seconds);
                 finish(job.clone(), output).await;
-                job.set_state(JobState::Done);
                 tracing::info!(run_s = seconds, "job done");
+                JobState::Done
             }
             Ok(Err(WorkError::Cancelled(Cancelled))) => {
-                job.set_state(JobState::Cancelled);
                 tracing::info!(
                     run_s = seconds,
                     cells_done = job.progress.cells_done(),
                     "job cancelled"
                 );
+                JobState::Cancelled
             }
             Ok(Err(WorkError::Invalid(e))) => {
                 // Checked before the job was created; kept for completeness.
                 *job.error.lock().expect("job lock") = Some(e.to_string());
-                job.set_state(JobState::Failed);
                 tracing::error!(error = %e, "job failed");
+                JobState::Failed
             }
             Err(panic) => {
                 *job.error.lock().expect("job lock") = Some(format!("the job panicked: {panic}"));
-                job.set_state(JobState::Failed);
                 tracing::error!(error = %panic, "job panicked");
+                JobState::Failed
             }
-        }
-        self.retire(&job).await;
+        };
+        self.retire(&job, ended).await;
     }
 
-    /// Removes a finished job from the in-flight table and forgets the oldest finished jobs
-    /// beyond the history's count or bytes.
-    async fn retire(&self, job: &Arc<Job>) {
+    /// Ends a job in the terminal state `ended`: its record is on disk (with `--data-dir`)
+    /// before anyone can see it ended, so a client told "done" never loses the job to a crash;
+    /// then it leaves the in-flight table, and the oldest finished jobs beyond the history's
+    /// count or bytes are forgotten.
+    async fn retire(&self, job: &Arc<Job>, ended: JobState) {
+        if let Some(disk) = self.disk.clone() {
+            let (id, record) = (job.id.clone(), job.record_as(ended));
+            // A small file, but flushed to disk: off the async threads.
+            let _ = crate::tasks::spawn_blocking(move || {
+                disk.save_json(Kind::Job, id.as_str(), &record)
+            })
+            .await;
+        }
+        job.set_state(ended);
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
             if job.state() != JobState::Done {
                 // No map came of it: the claims made on it while it ran claim nothing.
                 self.map_owners.forget(map_id);
             }
-        }
-        if let Some(disk) = self.disk.clone() {
-            let (id, record) = (job.id.clone(), job.record());
-            // A small file, but flushed to disk: off the async threads.
-            let _ = crate::tasks::spawn_blocking(move || {
-                disk.save_json(Kind::Job, id.as_str(), &record)
-            })
-            .await;
         }
         let forgotten = {
             let mut history = self.history.lock().expect("jobs lock");

@@ -164,6 +164,15 @@ impl Job {
         }
     }
 
+    /// The record of this job as it ends in `ended`, written before the job is seen to end:
+    /// its finish time is taken now, and [`Job::set_state`] keeps it.
+    pub(super) fn record_as(&self, ended: JobState) -> JobRecord {
+        self.times.lock().expect("job lock").finished = Some(SystemTime::now());
+        let mut record = self.record();
+        record.view.state = ended;
+        record
+    }
+
     /// The record a data directory keeps of a finished job (and Redis of a cluster's build).
     pub(crate) fn record(&self) -> JobRecord {
         let owners = self.owners();
