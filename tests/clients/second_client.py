@@ -4,14 +4,16 @@ makes from openapi.yaml, against a running server, with no hand patch:
 
     python3 tests/clients/second_client.py URL DIR_CONTAINING_irs_planner_openapi
 
-list scenarios, request a gain map, plan a path at "max" in each threshold unit, sweep, read the
-PNG, the Nav2 mask archive and the .npy values as bytes, run a Monte Carlo check as a job and read
-its answer, and decode an error. Generated with the generator's default settings (the contract
+register a scenario, list scenarios, request a gain map, plan a path at "max" in each threshold
+unit, sweep, read the PNG, the Nav2 mask archive and the .npy values as bytes, poll a rate-map job
+to done, rank placements, run a Monte Carlo check as a job and read its answer, and decode an
+error. Generated with the generator's default settings (the contract
 validates without --skip-validate-spec).
 Prints "N passed, M failed"; exits 1 on any failure.
 """
 
 import io
+import json
 import pathlib
 import sys
 import tarfile
@@ -30,8 +32,12 @@ CHECKS = kit.Checks()
 check = CHECKS.check
 
 api = api_client.DefaultApi(api_client.ApiClient(api_client.Configuration(host=URL)))
+document = json.loads((pathlib.Path(__file__).resolve().parents[2] / "scenarios" / "small-test.json").read_text())
+document["name"] = "second-client"
+registered = api.register_scenario(api_client.Scenario.from_dict(document))
+small = registered.id
 scenarios = api.list_scenarios()
-small = next(s.id for s in scenarios.scenarios if s.name == "small-test")
+check(any(s.id == small for s in scenarios.scenarios), "register a scenario", small)
 check(len(scenarios.scenarios) >= 3, "list scenarios")
 summary = api.request_map(api_client.MapRequest(api_client.MapRequestById(scenario_id=small, kind="gain")))
 check(summary.map_id and summary.key.kind == "gain", "request a gain map", summary.map_id)
@@ -54,6 +60,18 @@ names = tarfile.open(fileobj=io.BytesIO(bytes(mask))).getnames()
 check(names == ["keepout.yaml", "keepout.pgm"], "the Nav2 mask archive, as bytes", names)
 values = numpy.load(io.BytesIO(bytes(api.get_map_values_npy(summary.map_id))))
 check(values.ndim == 2 and values.dtype == numpy.float32, "the .npy values, as bytes", values.shape)
+rate = api.request_map_with_http_info(api_client.MapRequest(api_client.MapRequestById(
+    scenario_id=small, kind="rate", access="noma")))
+check(rate.status_code == 202 and rate.data.kind == "map", "a rate map is a job (202)", rate.status_code)
+deadline = time.time() + 300
+while api.get_job(rate.data.job_id).state not in ("done", "failed", "cancelled") and time.time() < deadline:
+    time.sleep(0.2)
+check(api.get_job(rate.data.job_id).state == "done", "the rate-map job is polled to done")
+ranking = api.place(api_client.PlacementRequest.from_dict({
+    "scenario_id": small, "candidates": {"walls": [{"from": [0, 0], "to": [6, 0]}], "step_m": 1.0},
+    "objective": {"kind": "coverage", "threshold": -52}}))
+check(len(ranking.candidates) + len(ranking.rejected) == 7 and ranking.candidates[0].center[0] == 3.0,
+      "placements ranked", ranking.candidates[0].center)
 paper = next(s.id for s in scenarios.scenarios if s.name == "paper-single-user")
 response = api.plan_path_with_http_info(api_client.PathRequest(api_client.PathRequestByMap(
     map=api_client.MapRequest(api_client.MapRequestById(scenario_id=paper, kind="gain")),
@@ -71,5 +89,6 @@ try:
     check(False, "an unknown map is an error")
 except api_client.ApiException as error:
     check(error.status == 404 and "not_found" in error.body, "an unknown map is a 404 problem", error.status)
+api.delete_scenario(small)
 
 CHECKS.finish()
