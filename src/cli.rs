@@ -11,7 +11,7 @@ use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
 use irs_answers::route::{self, RouteFormat};
-use irs_answers::scenario::ScenarioDocument;
+use irs_answers::scenario::{Document, ScenarioDocument};
 use irs_answers::timing::Timed;
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::montecarlo::MAX_DRAWS;
@@ -617,7 +617,7 @@ pub fn run_export(args: &ExportArgs) -> Result<(), Failure> {
 
 /// `irs-planner scenario …`: the scenario as the API takes it.
 pub fn run_scenario(args: &ScenarioArgs) -> Result<(), Failure> {
-    print_json(&load_scenario(&args.source)?)
+    print_json(&Document::from(&load_scenario(&args.source)?))
 }
 
 /// `irs-planner place …`

@@ -32,8 +32,10 @@ fn two_unequal_aps() -> Scenario {
     second.tx_power_dbm = 30.0;
     second.noise_dbm = -88.0;
     second.bandwidth_mhz = Some(40.0);
-    let mut value = serde_json::to_value(s.with_access_points(vec![first, second]).unwrap())
-        .expect("a scenario serialises");
+    let mut value = s
+        .with_access_points(vec![first, second])
+        .unwrap()
+        .to_json_value();
     value["channel"]["rx_antenna_gain_dbi"] = 1.5.into();
     value["channel"]["fade_margin_db"] = 4.0.into();
     Scenario::from_value(value).unwrap()
@@ -224,7 +226,7 @@ fn a_throughput_path_with_two_aps_meets_its_threshold_everywhere() {
 /// antenna gains and fade margin included, and Mbit/s is B times either.
 #[test]
 fn one_users_rate_map_agrees_with_the_gain_map_in_bit_per_hz() {
-    let mut value = serde_json::to_value(Scenario::builtin("small-test").unwrap()).unwrap();
+    let mut value = Scenario::builtin("small-test").unwrap().to_json_value();
     value["srus"][0]["min_rate_bps_hz"] = 0.0.into();
     value["ap"]["antenna_gain_dbi"] = 3.0.into();
     value["ap"]["bandwidth_mhz"] = 20.0.into();
@@ -289,24 +291,24 @@ fn units_a_map_cannot_answer_are_refused_with_the_reason() {
     .unwrap_err();
     assert_eq!(e.field, "unit");
     // Scenario fields out of range are refused naming them.
-    let mut value = serde_json::to_value(&s).unwrap();
+    let mut value = s.to_json_value();
     value["ap"]["bandwidth_mhz"] = 0.0.into();
     let e = Scenario::from_value(value).unwrap_err();
     assert_eq!(e.field, "ap.bandwidth_mhz");
-    let mut value = serde_json::to_value(&s).unwrap();
+    let mut value = s.to_json_value();
     value["channel"]["fade_margin_db"] = (-1.0).into();
     assert_eq!(
         Scenario::from_value(value).unwrap_err().field,
         "channel.fade_margin_db"
     );
-    let mut value = serde_json::to_value(&s).unwrap();
+    let mut value = s.to_json_value();
     value["channel"]["rx_antenna_gain_dbi"] = 80.0.into();
     assert_eq!(
         Scenario::from_value(value).unwrap_err().field,
         "channel.rx_antenna_gain_dbi"
     );
     // At their defaults the new fields stay out of the document, so ids are unchanged.
-    let text = serde_json::to_string(&s).unwrap();
+    let text = s.canonical_json();
     for field in ["antenna_gain_dbi", "bandwidth_mhz", "fade_margin_db"] {
         // (rx_antenna_gain_dbi contains antenna_gain_dbi: one check covers both.)
         assert!(!text.contains(field), "{field} in {text}");

@@ -225,7 +225,7 @@ mod tests {
         let threshold = finite.iter().sum::<f64>() / finite.len() as f64;
         let mask = nav2_mask(&map, Unit::GainDb, MaskKind::Keepout, threshold, None).unwrap();
         let yaml: serde_json::Value = serde_saphyr::from_str(&mask.files.yaml).unwrap();
-        let mut document = serde_json::to_value(&s).unwrap();
+        let mut document = s.to_json_value();
         document["obstacles"] = serde_json::json!([]);
         document["floor_plan"] = serde_json::json!({
             "image": base64::engine::general_purpose::STANDARD.encode(&mask.files.pgm),

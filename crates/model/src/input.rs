@@ -39,6 +39,17 @@ impl FieldError {
         };
         FieldError { field, ..self }
     }
+
+    /// The same error with its leading path `from` (the whole path, or followed by `.` or `[`)
+    /// written as `to`: `aps[0].position` as `ap.position` for a document that wrote its one
+    /// AP on its own.
+    pub fn renamed(self, from: &str, to: &str) -> Self {
+        let field = match self.field.strip_prefix(from) {
+            Some(rest) if rest.is_empty() || rest.starts_with(['.', '[']) => format!("{to}{rest}"),
+            _ => self.field,
+        };
+        FieldError { field, ..self }
+    }
 }
 
 /// Parses one of an enum's names as serde spells them, so the CLI, JSON bodies and the docs
@@ -183,6 +194,21 @@ mod tests {
             "map.scenario.ap.position"
         );
         assert_eq!(e.clone().within("").field, "ap.position");
+        let model = |f: &str| FieldError::new(f, "x");
+        assert_eq!(
+            model("aps[0].position").renamed("aps[0]", "ap").field,
+            "ap.position"
+        );
+        assert_eq!(model("aps[0]").renamed("aps[0]", "ap").field, "ap");
+        assert_eq!(
+            model("aps[01].x").renamed("aps[0]", "ap").field,
+            "aps[01].x"
+        );
+        assert_eq!(model("aps[1].x").renamed("aps[0]", "ap").field, "aps[1].x");
+        assert_eq!(
+            model("irss[0].x").renamed("aps[0]", "ap").field,
+            "irss[0].x"
+        );
         let whole = FieldError::new("$", "trailing characters");
         assert_eq!(whole.clone().within("scenario.").field, "scenario");
         assert_eq!(whole.within("").field, "$");

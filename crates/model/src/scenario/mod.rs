@@ -25,8 +25,7 @@ pub use parts::{
 
 use crate::floorplan::FloorPlan;
 use crate::geometry::{Aabb, Obstructions, Raster, Wall};
-use crate::input::{FieldError, present};
-use serde::{Deserialize, Serialize};
+use crate::input::FieldError;
 use std::sync::Arc;
 
 /// Reads a floor plan's image file from the text a document carries in `floor_plan.image`
@@ -86,113 +85,142 @@ const WALL_TOL_M: f64 = 1e-3;
 /// tolerance of the surface still finds it, far thinner than any wall or pixel.
 const MOUNT_PROBE_M: f64 = 2.0 * WALL_TOL_M;
 
-/// A scenario that has passed [`Scenario::validated`]: every field finite and consistent. Its
-/// JSON document (parsing, canonical form, id) is the answers crate's (`irs_answers::scenario`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Scenario {
-    /// Free-text label; part of the document (and so of its hash).
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
+/// An error of the checks (which name the lists `aps[k]` and `irss[k]`) as a document names it
+/// that writes its one AP on its own as `ap` (`lone_ap`) and its one IRS as `irs` (`lone_irs`).
+pub fn as_written(e: FieldError, lone_ap: bool, lone_irs: bool) -> FieldError {
+    let e = if lone_ap {
+        e.renamed("aps[0]", "ap")
+    } else {
+        e
+    };
+    if lone_irs {
+        e.renamed("irss[0]", "irs")
+    } else {
+        e
+    }
+}
+
+/// A scenario as given, before its checks: the pieces of a floor, with the access points and
+/// the surfaces as lists. The answers crate's document reads one from JSON (where one AP or
+/// IRS may also be written on its own); [`Draft::validated`] makes it a [`Scenario`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Draft {
+    /// Free-text label.
     pub name: Option<String>,
     /// The floor's rectangle and height.
     pub room: Room,
     /// The grid spacing.
     pub grid: GridSpec,
     /// Boxes standing on the floor.
-    #[serde(default)]
     pub obstacles: Vec<Obstacle>,
-    /// Straight walls at any angle (what a CAD plan gives). Left out of the canonical form when
-    /// empty, so scenarios written before walls existed keep their ids.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    /// Straight walls at any angle (what a CAD plan gives).
     pub walls: Vec<WallSpec>,
     /// A ROS occupancy-grid map of the floor (see [`crate::floorplan`]).
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
     pub floor_plan: Option<FloorPlan>,
-    /// The decoded floor plan, made once at validation and shared by every map built from it.
-    #[serde(skip)]
-    raster: Option<Arc<Raster>>,
-    /// The access point (the paper's set-up) …
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    ap: Option<AccessPoint>,
-    /// … or several, each on its own channel (docs/model.md §3). As with the IRSs, one AP is
-    /// kept and written as `ap`, so a one-AP scenario has the same id whichever way it was
-    /// written. Read them with [`Scenario::access_points`].
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    aps: Vec<AccessPoint>,
-    #[serde(
-        default,
-        deserialize_with = "present",
-        skip_serializing_if = "Option::is_none"
-    )]
-    irs: Option<Irs>,
-    /// Several IRSs, each with its own pose, sub-surfaces and grouping (docs/model.md §2). One
-    /// surface is kept (and written in the canonical form) as `irs`, two or more as `irss`, so
-    /// a one-IRS scenario has the same id whichever way it was written. Read them with
-    /// [`Scenario::surfaces`].
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    irss: Vec<Irs>,
+    /// The access points, each on its own channel (docs/model.md §3); at least one. Errors
+    /// name them `aps[k]`.
+    pub access_points: Vec<AccessPoint>,
+    /// The IRSs, each with its own pose, sub-surfaces and grouping (docs/model.md §2); their
+    /// phase vectors are concatenated in this order. Errors name them `irss[k]`.
+    pub surfaces: Vec<Irs>,
     /// The mobile robot.
     pub mru: Mru,
     /// The static robots (K ≥ 0; rate maps need at least one).
-    #[serde(default)]
     pub srus: Vec<Sru>,
     /// The channel's parameters.
-    #[serde(default)]
+    pub channel: ChannelSpec,
+}
+
+impl Draft {
+    /// Resolves defaults, checks every field (each error names its path in a document that
+    /// writes the lists as `aps` and `irss`), mounts the surfaces that ask for it and decodes
+    /// the floor plan: its image file's bytes come from `image`, which reads the text of
+    /// `floor_plan.image` (the answers crate decodes the document's base64).
+    pub fn validated(self, image: ImageFile) -> Result<Scenario, FieldError> {
+        Scenario {
+            name: self.name,
+            room: self.room,
+            grid: self.grid,
+            obstacles: self.obstacles,
+            walls: self.walls,
+            floor_plan: self.floor_plan,
+            raster: None,
+            access_points: self.access_points,
+            surfaces: self.surfaces,
+            mru: self.mru,
+            srus: self.srus,
+            channel: self.channel,
+        }
+        .checked(image)
+    }
+}
+
+/// A scenario that has passed its checks ([`Draft::validated`]): every field finite and
+/// consistent. Its JSON document (parsing, canonical form, id) is the answers crate's
+/// (`irs_answers::scenario`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// Free-text label; part of the document (and so of its hash).
+    pub name: Option<String>,
+    /// The floor's rectangle and height.
+    pub room: Room,
+    /// The grid spacing.
+    pub grid: GridSpec,
+    /// Boxes standing on the floor.
+    pub obstacles: Vec<Obstacle>,
+    /// Straight walls at any angle.
+    pub walls: Vec<WallSpec>,
+    /// A ROS occupancy-grid map of the floor (see [`crate::floorplan`]).
+    pub floor_plan: Option<FloorPlan>,
+    /// The decoded floor plan, made once at validation and shared by every map built from it.
+    raster: Option<Arc<Raster>>,
+    /// At least one; read with [`Scenario::access_points`].
+    access_points: Vec<AccessPoint>,
+    /// Read with [`Scenario::surfaces`].
+    surfaces: Vec<Irs>,
+    /// The mobile robot.
+    pub mru: Mru,
+    /// The static robots.
+    pub srus: Vec<Sru>,
+    /// The channel's parameters.
     pub channel: ChannelSpec,
 }
 
 impl Scenario {
-    /// Validates a scenario as its document was read: resolves defaults, checks every field,
-    /// decodes the floor plan (its image file's bytes from `image`, which reads the text of
-    /// `floor_plan.image`: the answers crate decodes the document's base64) and keeps a
-    /// one-element `irss` or `aps` as `irs` or `ap` (the canonical form). Every way to make a
-    /// scenario ends here; a scenario derived from a validated one keeps its decoded raster, so
-    /// `image` is not called again.
-    pub fn validated(mut self, image: ImageFile) -> Result<Scenario, FieldError> {
+    /// Every way to make a scenario ends here: defaults resolved, every field checked, the
+    /// floor plan decoded (a scenario derived from a validated one keeps its decoded raster,
+    /// so `image` is not called again) and the surfaces mounted.
+    fn checked(mut self, image: ImageFile) -> Result<Scenario, FieldError> {
         self.resolve_defaults();
         self.validate(image)?;
-        if self.irss.len() == 1 {
-            self.irs = self.irss.pop();
-        }
-        if self.aps.len() == 1 {
-            self.ap = self.aps.pop();
-        }
         Ok(self)
+    }
+
+    /// [`Scenario::checked`] for a scenario derived from a validated one, whose errors name
+    /// the fields as its canonical document does (one AP as `ap`, one IRS as `irs`).
+    fn rechecked(self) -> Result<Scenario, FieldError> {
+        let one_ap = self.access_points.len() == 1;
+        let one_irs = self.surfaces.len() == 1;
+        self.checked(&kept_raster)
+            .map_err(|e| as_written(e, one_ap, one_irs))
     }
 
     /// The IRSs, in scenario order (empty without one); their phase vectors are concatenated
     /// in this order (docs/model.md §2).
     pub fn surfaces(&self) -> &[Irs] {
-        match &self.irs {
-            Some(one) => std::slice::from_ref(one),
-            None => &self.irss,
-        }
+        &self.surfaces
     }
 
     /// The access points, in scenario order (at least one).
     pub fn access_points(&self) -> &[AccessPoint] {
-        match &self.ap {
-            Some(one) => std::slice::from_ref(one),
-            None => &self.aps,
-        }
+        &self.access_points
     }
 
-    /// The JSON path of access point `k` in the document (`ap` or `aps[k]`), for errors that
-    /// name one of its fields.
+    /// The path of access point `k`'s fields in the scenario's canonical document, for errors
+    /// found after validation: `ap` when there is one (the canonical form writes one AP on its
+    /// own), `aps[k]` otherwise.
     pub fn ap_field(&self, k: usize) -> String {
-        if self.ap.is_some() {
+        if self.access_points.len() == 1 {
             "ap".to_string()
         } else {
             format!("aps[{k}]")
@@ -202,37 +230,32 @@ impl Scenario {
     /// The first access point: its carrier sets λ for the IRS's default pitch, and it is the
     /// AP of rate maps (which take one AP).
     pub fn ap(&self) -> &AccessPoint {
-        &self.access_points()[0]
+        &self.access_points[0]
     }
 
     /// The same scenario with other access points, validated again (a derived scenario keeps
     /// its decoded floor plan).
-    pub fn with_access_points(&self, mut aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
-        // One AP as `ap`, so errors name `ap.…` as they would in a document.
-        let ap = (aps.len() == 1).then(|| aps.remove(0));
+    pub fn with_access_points(&self, aps: Vec<AccessPoint>) -> Result<Scenario, FieldError> {
         Scenario {
-            ap,
-            aps,
+            access_points: aps,
             ..self.clone()
         }
-        .validated(&kept_raster)
+        .rechecked()
     }
 
     /// The same scenario with other surfaces, validated again.
-    pub fn with_surfaces(&self, mut surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
-        let irs = (surfaces.len() == 1).then(|| surfaces.remove(0));
+    pub fn with_surfaces(&self, surfaces: Vec<Irs>) -> Result<Scenario, FieldError> {
         Scenario {
-            irs,
-            irss: surfaces,
+            surfaces,
             ..self.clone()
         }
-        .validated(&kept_raster)
+        .rechecked()
     }
 
     /// The same scenario with surface `index` replaced by `irs`, validated again (a placement
     /// candidate).
     pub fn with_surface(&self, index: usize, irs: Irs) -> Result<Scenario, FieldError> {
-        let mut surfaces = self.surfaces().to_vec();
+        let mut surfaces = self.surfaces.clone();
         *surfaces
             .get_mut(index)
             .ok_or_else(|| FieldError::new("index", "the scenario has no IRS of that index"))? =
@@ -242,7 +265,7 @@ impl Scenario {
 
     /// The same scenario with access point `index` moved to `position`, validated again.
     pub fn with_ap_at(&self, index: usize, position: [f64; 3]) -> Result<Scenario, FieldError> {
-        let mut aps = self.access_points().to_vec();
+        let mut aps = self.access_points.clone();
         aps.get_mut(index)
             .ok_or_else(|| FieldError::new("index", "the scenario has no AP of that index"))?
             .position = position;
@@ -314,24 +337,51 @@ impl Scenario {
         Scenario::builtin_with(name, |_| {}).map(|s| s.expect("built-in scenarios are valid"))
     }
 
-    /// A variant of a built-in scenario: `edit` changes its JSON document first.
+    /// A variant of a built-in scenario: `edit` changes its JSON document first. The
+    /// document is read piece by piece (the answers crate's parser is the real one), `ap` and
+    /// `irs` as one-element lists.
     pub(crate) fn builtin_with(
         name: &str,
         edit: impl FnOnce(&mut serde_json::Value),
     ) -> Option<Result<Scenario, FieldError>> {
+        use serde_json::Value;
         let text = match name {
             "paper-single-user" => include_str!("../../../../scenarios/paper-single-user.json"),
             "paper-multi-user" => include_str!("../../../../scenarios/paper-multi-user.json"),
             "small-test" => include_str!("../../../../scenarios/small-test.json"),
             _ => return None,
         };
-        let mut document: serde_json::Value = serde_json::from_str(text).expect("JSON");
+        let mut document: Value = serde_json::from_str(text).expect("JSON");
         edit(&mut document);
-        let scenario: Scenario = match serde_json::from_value(document) {
-            Ok(s) => s,
-            Err(e) => return Some(Err(FieldError::new("$", e))),
+        let doc = document.as_object_mut().expect("an object");
+        fn part<T: serde::de::DeserializeOwned>(v: Option<Value>) -> Option<T> {
+            v.filter(|v| !v.is_null())
+                .map(|v| serde_json::from_value(v).expect("a valid part"))
+        }
+        let list = |one: &str, many: &str, doc: &mut serde_json::Map<String, Value>| {
+            let one = doc.remove(one).filter(|v| !v.is_null());
+            let many = doc.remove(many).unwrap_or(Value::Array(vec![]));
+            let mut items = many.as_array().cloned().unwrap_or_default();
+            items.extend(one);
+            Value::Array(items)
         };
-        Some(scenario.validated(&kept_raster))
+        let aps = list("ap", "aps", doc);
+        let irss = list("irs", "irss", doc);
+        let draft = Draft {
+            name: part(doc.remove("name")),
+            room: part(doc.remove("room")).expect("a room"),
+            grid: part(doc.remove("grid")).expect("a grid"),
+            obstacles: part(doc.remove("obstacles")).unwrap_or_default(),
+            walls: part(doc.remove("walls")).unwrap_or_default(),
+            floor_plan: part(doc.remove("floor_plan")),
+            access_points: part(Some(aps)).unwrap_or_default(),
+            surfaces: part(Some(irss)).unwrap_or_default(),
+            mru: part(doc.remove("mru")).expect("an mru"),
+            srus: part(doc.remove("srus")).unwrap_or_default(),
+            channel: part(doc.remove("channel")).unwrap_or_default(),
+        };
+        assert!(doc.is_empty(), "unknown fields {doc:?}");
+        Some(draft.validated(&kept_raster))
     }
 
     /// The built-in small floor with a second IRS on its east wall (a test fixture).

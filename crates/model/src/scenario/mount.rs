@@ -64,25 +64,15 @@ impl Scenario {
     /// then dropped, so the scenario keeps (and hashes) the mounted pose. Errors name the
     /// surface's field.
     pub(super) fn mount_surfaces(&mut self, obstructions: &Obstructions) -> Result<(), FieldError> {
-        let one = self.irs.is_some();
         let faces = self.mounting_faces(obstructions);
-        let mut surfaces: Vec<Irs> = self.surfaces().to_vec();
+        let mut surfaces = std::mem::take(&mut self.surfaces);
         for (k, irs) in surfaces.iter_mut().enumerate() {
             let Some(within) = irs.mount_within_m.take() else {
                 continue;
             };
-            let at = if one {
-                "irs".to_string()
-            } else {
-                format!("irss[{k}]")
-            };
-            mount(irs, within, &faces, obstructions, &at)?;
+            mount(irs, within, &faces, obstructions, &format!("irss[{k}]"))?;
         }
-        if one {
-            self.irs = surfaces.pop();
-        } else {
-            self.irss = surfaces;
-        }
+        self.surfaces = surfaces;
         Ok(())
     }
 

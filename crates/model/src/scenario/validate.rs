@@ -13,7 +13,7 @@ impl Scenario {
             plan.obstacle_height_m = Some(self.room.ceiling_m);
         }
         let lambda = self.wavelength_m();
-        for irs in self.irs.iter_mut().chain(self.irss.iter_mut()) {
+        for irs in &mut self.surfaces {
             if irs.sub_pitch_m.is_none() && lambda.is_finite() {
                 irs.sub_pitch_m = Some(lambda / 2.0);
             }
@@ -194,37 +194,21 @@ impl Scenario {
         Ok(())
     }
 
-    /// The access points, given as `ap` or `aps`: finite, in range, inside the room and outside
+    /// The access points (`aps[k]`): at least one, finite, in range, inside the room and outside
     /// every obstacle.
     fn validate_access_points(&self, obstructions: &Obstructions) -> Result<(), FieldError> {
         let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
-        let access_points: Vec<(String, &AccessPoint)> = match (&self.ap, self.aps.as_slice()) {
-            (Some(_), [_, ..]) => {
-                return err(
-                    "aps",
-                    "give one access point as `ap` or a list as `aps`, not both",
-                );
-            }
-            (None, []) => {
-                return err(
-                    "ap",
-                    "missing: give the access point as `ap` (or several as `aps`)",
-                );
-            }
-            (Some(one), []) => vec![("ap".to_string(), one)],
-            (None, many) => many
-                .iter()
-                .enumerate()
-                .map(|(k, ap)| (format!("aps[{k}]"), ap))
-                .collect(),
-        };
-        if self.aps.len() > MAX_APS {
+        if self.access_points.is_empty() {
+            return err("aps", "give at least one access point");
+        }
+        if self.access_points.len() > MAX_APS {
             return Err(FieldError::new(
                 "aps",
                 format!("more than {MAX_APS} access points"),
             ));
         }
-        for (at, ap) in &access_points {
+        for (k, ap) in self.access_points.iter().enumerate() {
+            let at = format!("aps[{k}]");
             let f = |s: &str| format!("{at}.{s}");
             finite_all(&f("position"), &ap.position)?;
             finite(&f("tx_power_dbm"), ap.tx_power_dbm)?;
@@ -262,33 +246,17 @@ impl Scenario {
         Ok(())
     }
 
-    /// The IRSs, given as `irs` or `irss`, one by one and within the limits on N and M together.
+    /// The IRSs (`irss[k]`), one by one and within the limits on N and M together.
     fn validate_surfaces(&self, obstructions: &Obstructions) -> Result<(), FieldError> {
-        let err = |field: &str, reason: &str| Err(FieldError::new(field, reason));
-        if self.irs.is_some() && !self.irss.is_empty() {
-            return err(
-                "irss",
-                "give one surface as `irs` or a list as `irss`, not both",
-            );
-        }
-        let surfaces: Vec<(String, &Irs)> = match &self.irs {
-            Some(one) => vec![("irs".to_string(), one)],
-            None => self
-                .irss
-                .iter()
-                .enumerate()
-                .map(|(k, irs)| (format!("irss[{k}]"), irs))
-                .collect(),
-        };
-        if self.irss.len() > MAX_SURFACES {
+        if self.surfaces.len() > MAX_SURFACES {
             return Err(FieldError::new(
                 "irss",
                 format!("more than {MAX_SURFACES} surfaces"),
             ));
         }
         let (mut total_n, mut total_m) = (0usize, 0usize);
-        for (at, irs) in &surfaces {
-            self.validate_irs(irs, at, obstructions)?;
+        for (k, irs) in self.surfaces.iter().enumerate() {
+            self.validate_irs(irs, &format!("irss[{k}]"), obstructions)?;
             // Each surface's own products are checked (and so cannot wrap); the sums of at most
             // a few such bounded terms cannot wrap either.
             total_n += irs.subsurfaces();
@@ -386,7 +354,7 @@ impl Scenario {
         Ok(())
     }
 
-    /// Checks one surface; `at` is its JSON path (`irs` or `irss[k]`).
+    /// Checks one surface; `at` is its path (`irss[k]`).
     fn validate_irs(
         &self,
         irs: &Irs,

@@ -12,7 +12,7 @@ use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use irs_model::scenario::Scenario;
+use irs_answers::scenario::Document;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -42,10 +42,10 @@ pub(super) async fn list_scenarios(
 }
 
 #[derive(Serialize)]
-struct ScenarioDocument<'a> {
+struct ScenarioAnswer {
     #[serde(flatten)]
     summary: ScenarioSummary,
-    scenario: &'a Scenario,
+    scenario: Document,
 }
 
 /// A scenario's answer (its summary and document), serialised on the query pool when it
@@ -54,9 +54,9 @@ async fn scenario_answer(state: &App, stored: Arc<StoredScenario>) -> Result<Vec
     let body = state
         .queries()
         .run_sized("scenario", stored.scenario.raster_bytes(), move || {
-            serde_json::to_vec(&ScenarioDocument {
+            serde_json::to_vec(&ScenarioAnswer {
                 summary: stored.summary(),
-                scenario: &stored.scenario,
+                scenario: Document::from(&*stored.scenario),
             })
         })
         .await?

@@ -7,8 +7,13 @@
 //!   and its hash, the scenario id: the same scenario has the same id however it was written.
 //! * The built-in scenarios.
 //!
-//! The JSON entry points are the methods of [`ScenarioDocument`], implemented for the model's
+//! The wire form itself, where one AP or IRS may be written on its own, is [`Document`]; the
+//! JSON entry points are the methods of [`ScenarioDocument`], implemented for the model's
 //! [`Scenario`], so a caller writes `Scenario::from_json(text)` with this trait in scope.
+
+mod document;
+
+pub use document::Document;
 
 use crate::{files, json, mapfile};
 use base64::Engine;
@@ -22,15 +27,15 @@ use std::path::Path;
 pub const BUILTIN: [(&str, &str); 3] = [
     (
         "paper-single-user",
-        include_str!("../../../scenarios/paper-single-user.json"),
+        include_str!("../../../../scenarios/paper-single-user.json"),
     ),
     (
         "paper-multi-user",
-        include_str!("../../../scenarios/paper-multi-user.json"),
+        include_str!("../../../../scenarios/paper-multi-user.json"),
     ),
     (
         "small-test",
-        include_str!("../../../scenarios/small-test.json"),
+        include_str!("../../../../scenarios/small-test.json"),
     ),
 ];
 
@@ -59,6 +64,9 @@ pub trait ScenarioDocument: Sized {
 
     /// Validates a document whose file references (`floor_plan.map`) are relative to `base`.
     fn from_value_with_files(value: serde_json::Value, base: &Path) -> Result<Self, FieldError>;
+
+    /// The document as a JSON value: defaults resolved, one AP as `ap` and one IRS as `irs`.
+    fn to_json_value(&self) -> serde_json::Value;
 
     /// The canonical form: keys sorted, no white space, defaults resolved, −0 written as 0.
     fn canonical_json(&self) -> String;
@@ -90,7 +98,7 @@ impl ScenarioDocument for Scenario {
 
     fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
         mapfile::reject_map_reference(&value)?;
-        crate::json::from_value_at_path::<Scenario>(value)?.validated(&image_file)
+        crate::json::from_value_at_path::<Document>(value)?.validated(&image_file)
     }
 
     fn from_file(path: &Path) -> Result<Scenario, FieldError> {
@@ -107,10 +115,13 @@ impl ScenarioDocument for Scenario {
         Scenario::from_value(value)
     }
 
+    fn to_json_value(&self) -> serde_json::Value {
+        serde_json::to_value(Document::from(self)).expect("a scenario always serialises")
+    }
+
     fn canonical_json(&self) -> String {
-        let value = serde_json::to_value(self).expect("a scenario always serialises");
         let mut out = String::new();
-        write_canonical(&value, &mut out);
+        write_canonical(&self.to_json_value(), &mut out);
         out
     }
 
@@ -225,7 +236,8 @@ mod tests {
     #[test]
     fn the_canonical_form_parses_back_to_the_same_scenario() {
         let doc: serde_json::Value =
-            serde_json::from_str(include_str!("../../../scenarios/paper-multi-user.json")).unwrap();
+            serde_json::from_str(include_str!("../../../../scenarios/paper-multi-user.json"))
+                .unwrap();
         let written = doc.to_string();
         let text = written.replacen(
             "\"v_max_mps\":1.0",
@@ -468,7 +480,7 @@ mod tests {
     #[test]
     fn surfaces_are_checked_one_by_one_and_together() {
         let two = |edit: fn(&mut serde_json::Value)| {
-            let mut v = serde_json::to_value(small_test_two_surfaces(Grouping::Coherent)).unwrap();
+            let mut v = small_test_two_surfaces(Grouping::Coherent).to_json_value();
             edit(&mut v);
             Scenario::from_value(v).unwrap_err()
         };
