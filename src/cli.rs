@@ -13,6 +13,7 @@ use irs_answers::render::{self, RenderOptions};
 use irs_answers::route::{self, RouteFormat};
 use irs_answers::scenario::{Document, ScenarioDocument};
 use irs_answers::timing::Timed;
+use irs_answers::vda5050::{self, OrderParams};
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::montecarlo::MAX_DRAWS;
 use irs_model::phases::PhaseMode;
@@ -26,8 +27,7 @@ use irs_service::config::ServeArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Duration;
-use std::time::Instant;
+use std::time::{Duration, Instant, SystemTime};
 
 #[derive(Debug, Parser)]
 #[command(
@@ -293,13 +293,66 @@ pub struct PlanArgs {
     #[arg(long, value_name = "FRAME", default_value = "map", value_parser = FrameId::parse)]
     pub frame_id: FrameId,
     /// What to print: json (the path answer), nav-msgs-path (a ROS 2 nav_msgs/Path message as
-    /// JSON, which is also the YAML `ros2 topic pub` takes) or csv (x,y,yaw_rad,time_s,
-    /// distance_m,value per waypoint).
+    /// JSON, which is also the YAML `ros2 topic pub` takes), csv (x,y,yaw_rad,time_s,
+    /// distance_m,value per waypoint) or vda5050-order (a VDA 5050 3.0.0 order; its options
+    /// below).
     #[arg(long, value_name = "FORMAT", default_value = "json")]
     pub output: RouteFormat,
     /// Seed of the Monte Carlo check.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    #[command(flatten)]
+    pub order: OrderArgs,
+}
+
+/// The VDA 5050 order's fields that the path does not decide (`--output vda5050-order`).
+#[derive(Debug, Args)]
+#[command(next_help_heading = "VDA 5050 order (--output vda5050-order)")]
+pub struct OrderArgs {
+    /// orderId (default: a hash of the map, the ends and the threshold).
+    #[arg(long, value_name = "ID")]
+    pub order_id: Option<String>,
+    /// orderUpdateId [default: 0].
+    #[arg(long, value_name = "N")]
+    pub order_update_id: Option<u32>,
+    /// headerId [default: 0].
+    #[arg(long, value_name = "N")]
+    pub header_id: Option<u32>,
+    /// The robot's manufacturer [default: empty].
+    #[arg(long, value_name = "NAME")]
+    pub manufacturer: Option<String>,
+    /// The robot's serialNumber [default: empty].
+    #[arg(long, value_name = "NAME")]
+    pub serial_number: Option<String>,
+    /// nodePosition.mapId (default: --frame-id).
+    #[arg(long, value_name = "ID")]
+    pub vda_map_id: Option<String>,
+    /// How far above the threshold, in --unit, every cell from the last released node to the
+    /// next must be [default: 0].
+    #[arg(long, value_name = "VALUE", allow_hyphen_values = true, value_parser = parse_finite)]
+    pub release_margin: Option<f64>,
+}
+
+impl OrderArgs {
+    /// The order's parameters, or `None` when no option was given.
+    fn params(&self) -> Option<OrderParams> {
+        let given = self.order_id.is_some()
+            || self.order_update_id.is_some()
+            || self.header_id.is_some()
+            || self.manufacturer.is_some()
+            || self.serial_number.is_some()
+            || self.vda_map_id.is_some()
+            || self.release_margin.is_some();
+        given.then(|| OrderParams {
+            order_id: self.order_id.clone(),
+            order_update_id: self.order_update_id.unwrap_or(0),
+            header_id: self.header_id.unwrap_or(0),
+            manufacturer: self.manufacturer.clone().unwrap_or_default(),
+            serial_number: self.serial_number.clone().unwrap_or_default(),
+            map_id: self.vda_map_id.clone(),
+            release_margin: self.release_margin.unwrap_or(0.0),
+        })
+    }
 }
 
 /// A CLI failure: the message and whether it was the user's input (exit 2) or not (exit 1).
@@ -497,6 +550,16 @@ pub fn run_estimate(args: &MapArgs) -> Result<(), Failure> {
     }))
 }
 
+/// A field of the order's parameters as its flag (`order.map_id` is `--vda-map-id`).
+fn order_flag(e: &FieldError) -> String {
+    let name = match e.field.strip_prefix("order.") {
+        Some("map_id") => "vda-map-id".to_string(),
+        Some(field) => field.replace('_', "-"),
+        None => e.field.replace('_', "-"),
+    };
+    format!("--{name}: {}", e.reason)
+}
+
 /// `irs-planner plan …`
 pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     if let Some(draws) = args.monte_carlo
@@ -511,6 +574,16 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             "--monte-carlo: its report is part of the json output only",
         ));
     }
+    let order = args.order.params();
+    if order.is_some() && args.output != RouteFormat::Vda5050Order {
+        return Err(Failure::input(
+            "--order-id, --release-margin and the other order options apply to --output vda5050-order only",
+        ));
+    }
+    let order = order.unwrap_or_default();
+    order
+        .validate()
+        .map_err(|e| Failure::input(order_flag(&e)))?;
     if !(0.0..=planner::MAX_TOLERANCE_M).contains(&args.tolerance) {
         return Err(Failure::input(format!(
             "--tolerance: must lie in [0, {}] m",
@@ -570,11 +643,21 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         RouteFormat::Json => print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?,
         RouteFormat::NavMsgsPath => print_json(&route::nav_msgs_path(&path))?,
         RouteFormat::Csv => print!("{}", route::csv(&path)),
+        // No route, no order: the exit status says so.
+        RouteFormat::Vda5050Order if !path.feasible => {}
+        RouteFormat::Vda5050Order => print_json(
+            &vda5050::order(&path, &order, SystemTime::now())
+                .map_err(|e| Failure::input(order_flag(&e)))?,
+        )?,
     }
     match reason {
         None => Ok(()),
         Some(reason) => Err(Failure {
-            message: format!("no path meets the threshold ({reason}); the answer above says why"),
+            message: if args.output == RouteFormat::Vda5050Order {
+                format!("no path meets the threshold ({reason}): no order written")
+            } else {
+                format!("no path meets the threshold ({reason}); the answer above says why")
+            },
             kind: FailureKind::NoPath,
         }),
     }

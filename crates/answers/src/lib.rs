@@ -34,3 +34,4 @@ pub mod render;
 pub mod route;
 pub mod scenario;
 pub mod timing;
+pub mod vda5050;

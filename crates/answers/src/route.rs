@@ -1,5 +1,6 @@
 //! A planned path in the formats a robot stack reads: a ROS `nav_msgs/Path` message and a CSV
-//! of poses, next to the JSON answer ([`RouteFormat`]). Both carry what the answer's waypoints
+//! of poses, next to the JSON answer ([`RouteFormat`]; the VDA 5050 order is
+//! [`crate::vda5050`]'s). Both carry what the answer's waypoints
 //! carry of the route itself (position, heading, time, the map's value), in the answer's frame;
 //! the IRS configuration stays in the JSON answer.
 
@@ -20,6 +21,8 @@ pub enum RouteFormat {
     NavMsgsPath,
     /// One line per waypoint: `x,y,yaw_rad,time_s,distance_m,value`, with a header line.
     Csv,
+    /// A VDA 5050 order (see [`crate::vda5050`]).
+    Vda5050Order,
 }
 
 impl std::str::FromStr for RouteFormat {
@@ -30,8 +33,9 @@ impl std::str::FromStr for RouteFormat {
             "json" => Ok(RouteFormat::Json),
             "nav_msgs_path" | "nav-msgs-path" => Ok(RouteFormat::NavMsgsPath),
             "csv" => Ok(RouteFormat::Csv),
+            "vda5050_order" | "vda5050-order" => Ok(RouteFormat::Vda5050Order),
             other => Err(format!(
-                "expected json, nav_msgs_path or csv, got {other:?}"
+                "expected json, nav_msgs_path, csv or vda5050_order, got {other:?}"
             )),
         }
     }

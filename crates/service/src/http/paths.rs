@@ -20,6 +20,7 @@ use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::route::{self, RouteFormat};
 use irs_answers::timing::Timed;
+use irs_answers::vda5050::{self, OrderParams};
 use irs_model::input::{FieldError, parse_finite, present};
 use irs_model::montecarlo;
 use irs_model::planner::{self, PathShape, SweepAnswer, Threshold};
@@ -29,6 +30,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
+use std::time::SystemTime;
 
 #[derive(Serialize)]
 pub(super) struct Coverage {
@@ -118,13 +120,54 @@ pub(super) struct PathRequest {
     /// The frame the answer names for its positions (default `map`).
     #[serde(default, deserialize_with = "present")]
     frame_id: Option<FrameId>,
+    /// The VDA 5050 order's own fields (with `Accept: application/vnd.vda5050.order+json`).
+    #[serde(default, deserialize_with = "present")]
+    order: Option<OrderRequest>,
+}
+
+/// The fields of a VDA 5050 order that the path does not decide ([`OrderParams`]).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OrderRequest {
+    #[serde(default, deserialize_with = "present")]
+    order_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    order_update_id: Option<u32>,
+    #[serde(default, deserialize_with = "present")]
+    header_id: Option<u32>,
+    #[serde(default, deserialize_with = "present")]
+    manufacturer: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    serial_number: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    map_id: Option<String>,
+    #[serde(default, deserialize_with = "present")]
+    release_margin: Option<f64>,
+}
+
+impl From<OrderRequest> for OrderParams {
+    fn from(r: OrderRequest) -> OrderParams {
+        OrderParams {
+            order_id: r.order_id,
+            order_update_id: r.order_update_id.unwrap_or(0),
+            header_id: r.header_id.unwrap_or(0),
+            manufacturer: r.manufacturer.unwrap_or_default(),
+            serial_number: r.serial_number.unwrap_or_default(),
+            map_id: r.map_id,
+            release_margin: r.release_margin.unwrap_or(0.0),
+        }
+    }
 }
 
 /// The media type of a path written as a ROS 2 `nav_msgs/Path` message (JSON).
 pub(super) const NAV_MSGS_PATH_JSON: &str = "application/vnd.ros.nav-msgs.path+json";
 
+/// The media type of a path written as a VDA 5050 order.
+pub(super) const VDA5050_ORDER_JSON: &str = "application/vnd.vda5050.order+json";
+
 /// The format an `Accept` header asks a path in: CSV (`text/csv`), a `nav_msgs/Path`
-/// ([`NAV_MSGS_PATH_JSON`]), or else the path answer (JSON). The first of the two named wins.
+/// ([`NAV_MSGS_PATH_JSON`]), a VDA 5050 order ([`VDA5050_ORDER_JSON`]), or else the path answer
+/// (JSON). The first of those named wins.
 fn route_format(headers: &HeaderMap) -> RouteFormat {
     let accept = headers
         .get_all(header::ACCEPT)
@@ -143,6 +186,7 @@ fn route_format(headers: &HeaderMap) -> RouteFormat {
         match media.as_str() {
             "text/csv" => return RouteFormat::Csv,
             NAV_MSGS_PATH_JSON => return RouteFormat::NavMsgsPath,
+            VDA5050_ORDER_JSON => return RouteFormat::Vda5050Order,
             _ => {}
         }
     }
@@ -226,6 +270,17 @@ pub(super) async fn plan_path(
         )
         .into());
     }
+    let order = match request.order {
+        Some(_) if route_format != RouteFormat::Vda5050Order => {
+            return Err(Error::invalid(
+                "order",
+                format!("applies only to a VDA 5050 order (Accept: {VDA5050_ORDER_JSON})"),
+            )
+            .into());
+        }
+        given => OrderParams::from(given.unwrap_or_default()),
+    };
+    order.validate()?;
     let (format, precision) = path::phase_options(request.phase_format, request.phase_precision)?;
     let found = map_for_query(&state, &caller, request.map_id, request.map).await?;
     let (map, scenario) = match found {
@@ -274,6 +329,11 @@ pub(super) async fn plan_path(
         RouteFormat::Csv => {
             let csv = [(header::CONTENT_TYPE, "text/csv; charset=utf-8")];
             return Ok((csv, route::csv(&path)).into_response());
+        }
+        RouteFormat::Vda5050Order => {
+            let order = vda5050::order(&path, &order, SystemTime::now())?;
+            let media = [(header::CONTENT_TYPE, VDA5050_ORDER_JSON)];
+            return Ok((media, Json(order)).into_response());
         }
     }
     let monte_carlo = match request.monte_carlo_draws {
