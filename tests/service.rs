@@ -2499,6 +2499,11 @@ async fn tenants_see_and_touch_only_their_own() {
                 ("get", "/v1/maps/{map_id}/values.npy") => {
                     (Class::Alices, format!("/v1/maps/{mid}/values.npy"), None)
                 }
+                ("get", "/v1/maps/{map_id}/zone-set") => (
+                    Class::Alices,
+                    format!("/v1/maps/{mid}/zone-set?threshold=-80"),
+                    None,
+                ),
                 ("get" | "delete", "/v1/jobs/{job_id}") => {
                     (Class::Alices, format!("/v1/jobs/{jid}"), None)
                 }

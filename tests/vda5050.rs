@@ -1,13 +1,13 @@
 //! Planned paths as VDA 5050 orders, checked against the rules of the specification's §6.1.1
 //! that its JSON schema cannot state (the schema itself is checked in CI by
 //! `tests/exports/vda5050_check.py`), and the released base against its definition evaluated on
-//! the map's own cells.
+//! the map's own cells; zone sets against the cells they must cover.
 
 mod common;
 
 use common::gain_map;
 use irs_answers::scenario::ScenarioDocument;
-use irs_answers::vda5050::{self, OrderParams};
+use irs_answers::vda5050::{self, Header, OrderParams, ZoneParams};
 use irs_model::phases::PhaseMode;
 use irs_model::planner::{self, PathAnswer, PathOptions, PathShape, Threshold};
 use irs_model::radiomap::RadioMap;
@@ -227,7 +227,10 @@ fn no_route_no_order_and_bad_parameters_are_named() {
         ),
         (
             OrderParams {
-                serial_number: "x".repeat(vda5050::MAX_TEXT_CHARS + 1),
+                header: Header {
+                    serial_number: "x".repeat(vda5050::MAX_TEXT_CHARS + 1),
+                    ..Header::default()
+                },
                 ..OrderParams::default()
             },
             "order.serial_number",
@@ -235,5 +238,117 @@ fn no_route_no_order_and_bad_parameters_are_named() {
     ] {
         let e = vda5050::order(&path, &params, SystemTime::now()).unwrap_err();
         assert_eq!(e.field, field);
+    }
+}
+
+/// Whether `q` lies strictly inside the polygon of `vertices` (even-odd rule).
+fn contains(vertices: &[Value], q: [f64; 2]) -> bool {
+    let p: Vec<[f64; 2]> = vertices.iter().map(|v| [f(&v["x"]), f(&v["y"])]).collect();
+    let mut inside = false;
+    for k in 0..p.len() {
+        let (a, b) = (p[k], p[(k + 1) % p.len()]);
+        if (a[1] > q[1]) != (b[1] > q[1])
+            && q[0] < a[0] + (q[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+        {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+/// Every free cell below the threshold lies in a BLOCKED zone, every free cell whose penalty
+/// is at least k/L in a PENALTY zone of factor k/L (and none above its own level in a zone
+/// that covers only such cells' band); zones are counterclockwise with unique ids.
+#[test]
+fn zone_sets_cover_the_cells_they_must() {
+    let (_, map) = floor();
+    // The median value: half the free floor blocked, the band above it penalised.
+    let mut finite: Vec<f64> = map
+        .values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    finite.sort_by(f64::total_cmp);
+    let (threshold, band, levels) = (finite[finite.len() / 2], 6.0, 4);
+    let params = ZoneParams {
+        penalty_band: Some(band),
+        penalty_levels: Some(levels),
+        ..ZoneParams::default()
+    };
+    let zones = vda5050::zone_set(
+        map,
+        map.native_unit(),
+        threshold,
+        &params,
+        SystemTime::now(),
+    )
+    .unwrap();
+    let (blocked, penalty) = zones.counts();
+    assert!(
+        blocked > 0 && penalty > 0,
+        "{blocked} blocked, {penalty} penalty zones"
+    );
+    let message = serde_json::to_value(&zones).unwrap();
+    let all = message["zoneSet"]["zones"].as_array().unwrap();
+    let ids: std::collections::HashSet<&str> =
+        all.iter().map(|z| z["zoneId"].as_str().unwrap()).collect();
+    assert_eq!(ids.len(), all.len(), "zone ids are unique");
+    for z in all {
+        let p: Vec<[f64; 2]> = z["vertices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| [f(&v["x"]), f(&v["y"])])
+            .collect();
+        let twice_area: f64 = (0..p.len())
+            .map(|k| p[k][0] * p[(k + 1) % p.len()][1] - p[(k + 1) % p.len()][0] * p[k][1])
+            .sum();
+        assert!(
+            p.len() >= 4 && twice_area > 0.0,
+            "{} is counterclockwise",
+            z["zoneId"]
+        );
+    }
+    let g = &map.grid;
+    let quarter = g.resolution_m / 4.0;
+    for i in 0..g.nx {
+        for j in 0..g.ny {
+            let k = g.index(i, j);
+            if map.occupied[k] {
+                continue;
+            }
+            let [x, y] = g.centre(i, j);
+            // A point of the cell inside the room and on no cell edge.
+            let q = [
+                x + if i + 1 == g.nx { -quarter } else { quarter },
+                y + if j + 1 == g.ny { -quarter } else { quarter },
+            ];
+            let covered = |kind: &str, factor: Option<f64>| {
+                all.iter().any(|z| {
+                    z["zoneType"] == kind
+                        && factor.is_none_or(|f0| (f(&z["penaltyFactor"]) - f0).abs() < 1e-12)
+                        && contains(z["vertices"].as_array().unwrap(), q)
+                })
+            };
+            let v = map.values[k];
+            if v < threshold || v.is_nan() {
+                assert!(
+                    covered("BLOCKED", None),
+                    "cell ({i}, {j}) at {v} dB is blocked"
+                );
+                continue;
+            }
+            let penalty = ((threshold + band - v) / band).clamp(0.0, 1.0);
+            for level in 1..=levels {
+                let factor = level as f64 / levels as f64;
+                if penalty > (level - 1) as f64 / levels as f64 {
+                    assert!(
+                        covered("PENALTY", Some(factor)),
+                        "cell ({i}, {j}) at {v} dB has penalty ≥ {factor}"
+                    );
+                }
+            }
+        }
     }
 }

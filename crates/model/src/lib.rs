@@ -36,6 +36,7 @@ pub mod geometry;
 pub mod input;
 pub mod montecarlo;
 pub mod numerics;
+pub mod outline;
 pub mod phases;
 pub mod placement;
 pub mod planner;

@@ -1,5 +1,6 @@
 //! The map's exports: `image.png` (with a path drawn on it), `nav2-mask` (a Nav2 keep-out or
-//! cost mask as YAML + PGM in a tar) and `values.npy` (NumPy).
+//! cost mask as YAML + PGM in a tar), `values.npy` (NumPy) and `zone-set` (a VDA 5050 zone
+//! set).
 
 use super::problem::ApiError;
 use super::{heavy, only_query};
@@ -12,10 +13,12 @@ use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use irs_answers::export::{self, MaskKind};
 use irs_answers::render::{self, RenderOptions};
+use irs_answers::vda5050::{self, Header, ZoneParams};
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::planner::{self, PathOptions, PathShape, Threshold};
 use irs_model::radiomap::{Progress, Unit};
 use std::collections::HashMap;
+use std::time::SystemTime;
 
 /// The optional `unit` query parameter.
 fn query_unit(query: &HashMap<String, String>) -> Result<Option<Unit>, Error> {
@@ -191,6 +194,84 @@ pub(super) async fn nav2_mask(
         archive,
     )
         .into_response())
+}
+
+/// The media type of a VDA 5050 zone set.
+const VDA5050_ZONE_SET_JSON: &str = "application/vnd.vda5050.zone-set+json";
+
+/// The map at `threshold` as a VDA 5050 zone set (BLOCKED below it, PENALTY in
+/// `penalty_band` above it).
+pub(super) async fn zone_set(
+    State(state): State<App>,
+    caller: Caller,
+    Path(map_id): Path<MapId>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_query(
+        &query,
+        &[
+            "threshold",
+            "unit",
+            "penalty_band",
+            "penalty_levels",
+            "zone_set_id",
+            "vda_map_id",
+            "header_id",
+            "manufacturer",
+            "serial_number",
+        ],
+    )?;
+    let unit = query_unit(&query)?;
+    let number = |name: &'static str| {
+        query
+            .get(name)
+            .map(|text| parse_finite(text).map_err(|e| Error::invalid(name, e)))
+            .transpose()
+    };
+    let whole = |name: &'static str| {
+        query
+            .get(name)
+            .map(|text| {
+                text.parse::<u32>().map_err(|_| {
+                    Error::invalid(name, "must be a whole number from 0 to 4294967295")
+                })
+            })
+            .transpose()
+    };
+    let threshold = number("threshold")?
+        .ok_or_else(|| Error::invalid("threshold", "the threshold query parameter is required"))?;
+    let params = ZoneParams {
+        header: Header {
+            header_id: whole("header_id")?.unwrap_or(0),
+            manufacturer: query.get("manufacturer").cloned().unwrap_or_default(),
+            serial_number: query.get("serial_number").cloned().unwrap_or_default(),
+            map_id: query.get("vda_map_id").cloned(),
+        },
+        zone_set_id: query.get("zone_set_id").cloned(),
+        penalty_band: number("penalty_band")?,
+        penalty_levels: whole("penalty_levels")?.map(|n| n as usize),
+    };
+    params
+        .validate()
+        .map_err(|e| Error::invalid(vda_field(&e.field), e.reason))?;
+    let map = state.map(&caller, &map_id).await?;
+    let cells = map.grid.cells();
+    let zones = heavy(&state, "zone set", cells, move |_| {
+        let unit = unit.unwrap_or(map.native_unit());
+        let zones = vda5050::zone_set(&map, unit, threshold, &params, SystemTime::now())?;
+        Ok::<_, FieldError>(serde_json::to_vec(&zones).expect("a zone set serialises"))
+    })
+    .await?
+    .map_err(|e| Error::invalid(vda_field(&e.field), e.reason))?;
+    Ok(([(header::CONTENT_TYPE, VDA5050_ZONE_SET_JSON)], zones).into_response())
+}
+
+/// A zone set parameter's query name (the header's `map_id` is `vda_map_id`).
+fn vda_field(field: &str) -> String {
+    match field {
+        "map_id" => "vda_map_id".to_string(),
+        other => other.to_string(),
+    }
 }
 
 /// The map's values as a NumPy `.npy` (float32, shape (nx, ny), NaN where occupied).

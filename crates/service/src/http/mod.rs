@@ -82,6 +82,11 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
             &["get"],
             get(exports::values_npy),
         ),
+        (
+            "/v1/maps/{map_id}/zone-set",
+            &["get"],
+            get(exports::zone_set),
+        ),
         ("/v1/jobs", &["get"], get(jobs::list_jobs)),
         (
             "/v1/jobs/{job_id}",

@@ -20,7 +20,7 @@ use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::route::{self, RouteFormat};
 use irs_answers::timing::Timed;
-use irs_answers::vda5050::{self, OrderParams};
+use irs_answers::vda5050::{self, Header, OrderParams};
 use irs_model::input::{FieldError, parse_finite, present};
 use irs_model::montecarlo;
 use irs_model::planner::{self, PathShape, SweepAnswer, Threshold};
@@ -148,12 +148,14 @@ struct OrderRequest {
 impl From<OrderRequest> for OrderParams {
     fn from(r: OrderRequest) -> OrderParams {
         OrderParams {
+            header: Header {
+                header_id: r.header_id.unwrap_or(0),
+                manufacturer: r.manufacturer.unwrap_or_default(),
+                serial_number: r.serial_number.unwrap_or_default(),
+                map_id: r.map_id,
+            },
             order_id: r.order_id,
             order_update_id: r.order_update_id.unwrap_or(0),
-            header_id: r.header_id.unwrap_or(0),
-            manufacturer: r.manufacturer.unwrap_or_default(),
-            serial_number: r.serial_number.unwrap_or_default(),
-            map_id: r.map_id,
             release_margin: r.release_margin.unwrap_or(0.0),
         }
     }

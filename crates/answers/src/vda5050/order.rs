@@ -1,5 +1,5 @@
-//! A planned path as a VDA 5050 order (version 3.0.0, `json_schemas/order.schema` of
-//! github.com/VDA5050/VDA5050): what a VDA 5050 master sends an AGV to drive it.
+//! A planned path as a VDA 5050 `order` (`json_schemas/order.schema`): what a master sends an
+//! AGV to drive it.
 //!
 //! * One node per vertex of the route (the start, every turn, the goal), with its position in
 //!   the answer's frame and the order's `mapId`; one edge between consecutive nodes, with a
@@ -15,35 +15,24 @@
 //!   none is invented. Node actions and edge actions are empty: the IRS phases are applied by
 //!   the infrastructure, not by the robot, and stay in the JSON path answer.
 
+use super::{Header, VERSION, check_text, timestamp};
 use crate::scenario::hash_hex;
 use irs_model::input::FieldError;
 use irs_model::planner::PathAnswer;
 use serde::Serialize;
 use std::time::SystemTime;
 
-/// The protocol version the orders are written in.
-pub const VERSION: &str = "3.0.0";
-
-/// Longest text accepted for an id or a name of the order (characters).
-pub const MAX_TEXT_CHARS: usize = 200;
-
-/// What the master decides and the path does not: the header, the order's identity, the map's
-/// id in the robot's terms and the margin the released base keeps.
+/// What the master decides and the path does not: the header, the order's identity and the
+/// margin the released base keeps.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct OrderParams {
+    /// The header and the map's id (`nodePosition.mapId`; by default the answer's frame id).
+    pub header: Header,
     /// `orderId`; by default a hash of the map, the ends and the threshold, so the same query
     /// names the same order.
     pub order_id: Option<String>,
     /// `orderUpdateId` (default 0: a new order).
     pub order_update_id: u32,
-    /// `headerId` (default 0).
-    pub header_id: u32,
-    /// `manufacturer` of the robot (default empty).
-    pub manufacturer: String,
-    /// `serialNumber` of the robot (default empty).
-    pub serial_number: String,
-    /// `nodePosition.mapId`; by default the answer's frame id.
-    pub map_id: Option<String>,
     /// How far above the threshold (in the path's unit) every cell from the last released node
     /// to the next must be (default 0).
     pub release_margin: f64,
@@ -52,20 +41,8 @@ pub struct OrderParams {
 impl OrderParams {
     /// Checks the parameters (errors name `order.<field>`).
     pub fn validate(&self) -> Result<(), FieldError> {
-        let texts = [
-            ("order.order_id", self.order_id.as_deref()),
-            ("order.manufacturer", Some(self.manufacturer.as_str())),
-            ("order.serial_number", Some(self.serial_number.as_str())),
-            ("order.map_id", self.map_id.as_deref()),
-        ];
-        for (field, text) in texts {
-            if text.is_some_and(|t| t.chars().count() > MAX_TEXT_CHARS) {
-                return Err(FieldError::new(
-                    field,
-                    format!("longer than {MAX_TEXT_CHARS} characters"),
-                ));
-            }
-        }
+        self.header.validate("order.")?;
+        check_text("order.order_id", self.order_id.as_deref())?;
         if !self.release_margin.is_finite() || self.release_margin < 0.0 {
             return Err(FieldError::new(
                 "order.release_margin",
@@ -170,6 +147,7 @@ pub fn order<P>(
     let values: Vec<f64> = path.waypoints.iter().map(|w| w.value).collect();
     let base_end = last_released(&values, &path.vertices, threshold + params.release_margin);
     let map_id = params
+        .header
         .map_id
         .clone()
         .unwrap_or_else(|| path.frame_id.clone());
@@ -228,11 +206,11 @@ pub fn order<P>(
         )
     });
     Ok(Order {
-        header_id: params.header_id,
-        timestamp: humantime::format_rfc3339_millis(now).to_string(),
+        header_id: params.header.header_id,
+        timestamp: timestamp(now),
         version: VERSION,
-        manufacturer: params.manufacturer.clone(),
-        serial_number: params.serial_number.clone(),
+        manufacturer: params.header.manufacturer.clone(),
+        serial_number: params.header.serial_number.clone(),
         order_id,
         order_update_id: params.order_update_id,
         order_description: format!(
