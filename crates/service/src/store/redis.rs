@@ -201,10 +201,15 @@ impl Cluster {
         *state = down;
     }
 
+    /// A command's failure: this request's 503. A lost or refused connection also marks Redis
+    /// down for every request at once; a reply slower than `RESPONSE_TIMEOUT` does not, because
+    /// on a loaded machine one slow reply is not an outage, and marking the store down for it
+    /// failed every replica's readiness together (all three left HAProxy's pool in a CI run).
+    /// A Redis that stops answering fails the health loop's ping within `RESPONSE_TIMEOUT` +
+    /// `HEALTH_PERIOD`, which marks it down then.
     fn error(&self, e: &redis::RedisError) -> Error {
         let reason = format!("Redis: {e}");
-        if e.is_io_error()
-            || e.is_timeout()
+        if e.is_io_error() && !e.is_timeout()
             || e.is_connection_dropped()
             || e.is_connection_refusal()
         {
