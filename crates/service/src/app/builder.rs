@@ -6,6 +6,7 @@ use super::App;
 use crate::app::jobs::{JobRecord, JobState};
 use crate::ids::ScenarioId;
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
+use crate::store::{Entry, Store as _};
 use redis::aio::ConnectionManager;
 use std::sync::{Arc, Mutex};
 
@@ -45,7 +46,12 @@ pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
 /// Builds one stream entry on this replica: the map goes to Redis, the record follows the
 /// build (heartbeats) and ends in its final state; the entry is acknowledged at the end.
 async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
-    let record = cluster.job::<JobRecord>(&build.job_id).await.ok().flatten();
+    let record = state
+        .store()
+        .record::<JobRecord>(Entry::Job(&build.job_id))
+        .await
+        .ok()
+        .flatten();
     // The owners the record names when the build starts; owners who join later are in the
     // store's `irs:job-owners` set, which is what every replica asks.
     let owners = record.as_ref().map(|r| r.owners()).unwrap_or_default();
@@ -66,7 +72,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     });
     // Built already (a build taken over just after its map was stored), or cancelled while
     // it waited: nothing to build.
-    if matches!(cluster.map(&build.map_id).await, Ok(Some(_))) {
+    if matches!(cluster.get(Entry::Map(&build.map_id)).await, Ok(Some(_))) {
         if !record.view.state.is_terminal() {
             let _ = cluster
                 .put_job(&build.job_id, &end(record, JobState::Done, None))

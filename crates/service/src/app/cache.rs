@@ -1,10 +1,10 @@
 //! The map cache: built maps by map id in memory (moka, bounded by bytes through a weigher),
 //! backed by the data directory with `--data-dir`, and each queried map's widest-path index.
 
-use super::map_owners::MapOwners;
 use super::registry::ScenarioRegistry;
 use crate::ids::{MapId, ScenarioId};
 use crate::store::DataDir;
+use crate::store::Store;
 use irs_model::input::FieldError;
 use irs_model::planner::UnitIndex;
 use irs_model::radiomap::{RadioMap, Unit};
@@ -34,9 +34,9 @@ pub struct MapDisk {
 }
 
 impl MapCache {
-    /// `owners` are the claims on the maps: a map the cache lets go of (evicted, removed) and
-    /// the data directory does not keep takes its claims with it.
-    pub fn new(budget_bytes: u64, disk: Option<MapDisk>, owners: Arc<MapOwners>) -> Self {
+    /// `store` keeps the claims on the maps: a map the cache lets go of (evicted, removed)
+    /// and the data directory does not keep takes its claims with it.
+    pub fn new(budget_bytes: u64, disk: Option<MapDisk>, store: Arc<dyn Store>) -> Self {
         // Least recently used, not moka's default TinyLFU: TinyLFU may refuse a new entry it
         // has seen once, and a map is requested once before it is built, so a map that was
         // just built (minutes of CPU) could be dropped at once while old ones stay.
@@ -48,7 +48,7 @@ impl MapCache {
             })
             .eviction_listener(move |id: Arc<MapId>, _, cause| {
                 if cause != moka::notification::RemovalCause::Replaced {
-                    owners.forget_unless_kept(&id);
+                    store.forget_claims(&id);
                 }
             })
             .build();

@@ -80,10 +80,6 @@ impl Owners {
         self.0.contains(owner)
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
-    }
-
     pub fn len(&self) -> usize {
         self.0.len()
     }

@@ -3,8 +3,8 @@
 //! ask [`App::map`], [`App::map_with_scenario`] or [`App::request_map`] and never choose
 //! between the cache, the disk and Redis themselves.
 //!
-//! With tokens on, every map is reached through the caller's claim (`app::map_owners`, or the
-//! shared store's set in a cluster): a tenant that never asked for a map is told it does not
+//! With tokens on, every map is reached through the caller's claim (kept by the
+//! [`crate::store::Store`]): a tenant that never asked for a map is told it does not
 //! exist (404, as for an unknown id, never 403), a listing shows only the caller's maps, and a
 //! `DELETE` withdraws the caller's claim, deleting the map only with the last one. Asking for
 //! a map another tenant already has adds a claim and answers as a new request would; only the
@@ -15,6 +15,7 @@ use super::scenarios::{Named, ScenarioRef};
 use super::{App, Error};
 use crate::app::jobs::{JobRecord, JobState, JobView, MapRequestOutcome};
 use crate::ids::{MapId, ScenarioId};
+use crate::store::Entry;
 use crate::store::redis::Cluster;
 use irs_model::phases::PhaseMode;
 use irs_model::radiomap::{MapKey, MapKind, RadioMap, cost};
@@ -74,11 +75,7 @@ impl App {
         let Some(owner) = caller.owner() else {
             return Ok(());
         };
-        match self.cluster() {
-            Some(cluster) => cluster.claim_map(map_id, &owner.to_string()).await?,
-            None => self.map_owners().claim(map_id, &owner),
-        }
-        Ok(())
+        Ok(self.store().claim_map(map_id, &owner.to_string()).await?)
     }
 
     /// May `caller` see and touch the map? Always with authentication off; with it on, only a
@@ -87,10 +84,7 @@ impl App {
         Ok(match caller {
             Caller::Open => true,
             Caller::Anonymous => false,
-            Caller::Owner(me) => match self.cluster() {
-                Some(cluster) => cluster.map_claimed(map_id, &me.to_string()).await?,
-                None => self.map_owners().has(map_id, me),
-            },
+            Caller::Owner(me) => self.store().map_claimed(map_id, &me.to_string()).await?,
         })
     }
 
@@ -133,9 +127,7 @@ impl App {
                 job_id: job.id.clone(),
             });
         }
-        if let Some(cluster) = self.cluster()
-            && let Some(job_id) = cluster.building(map_id).await?
-        {
+        if let Some(job_id) = self.store().building(map_id).await? {
             return Err(Error::MapNotReady {
                 map_id: map_id.clone(),
                 job_id,
@@ -170,7 +162,7 @@ impl App {
         let (scenario, key) = self.resolve(caller, spec, prefix).await?;
         let cheap =
             key.kind == MapKind::Gain && scenario.grid().cells() <= self.limits().sync_cells;
-        let found = match self.cluster() {
+        let found = match self.build_stream() {
             Some(cluster) => self.obtain_shared(cluster, caller, key, cheap).await?,
             None => self.obtain(caller, scenario.clone(), key, cheap).await?,
         };
@@ -194,12 +186,8 @@ impl App {
             });
         }
         if let Caller::Owner(me) = caller {
-            let left = match self.cluster() {
-                // The last claim deletes the shared copy in the same script.
-                Some(cluster) => cluster.withdraw_map(map_id, &me.to_string()).await?,
-                None => self.map_owners().withdraw(map_id, me),
-            };
-            match left {
+            // The last claim deletes the store's copy with it.
+            match self.store().withdraw_map(map_id, &me.to_string()).await? {
                 None => return Err(Error::not_found("map", map_id)),
                 Some(0) => {
                     self.cache().remove(map_id).await;
@@ -211,11 +199,8 @@ impl App {
             }
             return Ok(());
         }
-        let mut removed = self.cache().remove(map_id).await;
-        if let Some(cluster) = self.cluster() {
-            removed |= cluster.delete_map(map_id).await?;
-        }
-        if !removed {
+        let removed_here = self.cache().remove(map_id).await;
+        if !(self.store().delete(Entry::Map(map_id)).await? || removed_here) {
             return Err(Error::not_found("map", map_id));
         }
         tracing::info!(map_id = %map_id, "map deleted");
@@ -360,11 +345,15 @@ impl App {
                 })
             };
             if !cheap {
-                return Ok(Err(record(cluster.job(&job_id).await?).view));
+                return Ok(Err(
+                    record(self.store().record(Entry::Job(&job_id)).await?).view
+                ));
             }
             loop {
-                let found = cluster.job(&job_id).await?;
-                if found.is_none() && cluster.building(&map_id).await?.as_ref() != Some(&job_id) {
+                let found = self.store().record(Entry::Job(&job_id)).await?;
+                if found.is_none()
+                    && self.store().building(&map_id).await?.as_ref() != Some(&job_id)
+                {
                     if let Some(map) = self.shared_map(&map_id).await? {
                         return Ok(Ok(map));
                     }
@@ -395,8 +384,8 @@ impl App {
         ))
     }
 
-    /// A built map by id: in this replica's cache (or data directory), else (in a cluster) in
-    /// the shared store, decoded against its scenario and cached here.
+    /// A built map by id: in this replica's cache (or data directory), else in the store
+    /// (another replica's), decoded against its scenario and cached here.
     async fn shared_map(
         &self,
         map_id: &MapId,
@@ -404,10 +393,8 @@ impl App {
         if let Some(map) = self.cache().get(map_id).await {
             return Ok(Some(map));
         }
-        let Some(cluster) = self.cluster() else {
-            return Ok(None);
-        };
-        let Some(encoded) = cluster.map(map_id).await? else {
+        let store = self.store();
+        let Some(encoded) = store.get(Entry::Map(map_id)).await? else {
             return Ok(None);
         };
         // A map that frames correctly but does not decode to itself was not written by this
@@ -415,7 +402,7 @@ impl App {
         let key = match irs_answers::encoding::peek_key(&encoded) {
             Ok(key) => key,
             Err(e) => {
-                cluster.discard_map(map_id, &e.to_string()).await;
+                store.discard(Entry::Map(map_id), &e.to_string()).await;
                 return Ok(None);
             }
         };
@@ -431,11 +418,13 @@ impl App {
         let map = match decoded {
             Ok(map) if map.id == map_id.as_str() => map,
             Ok(_) => {
-                cluster.discard_map(map_id, "it holds another map").await;
+                store
+                    .discard(Entry::Map(map_id), "it holds another map")
+                    .await;
                 return Ok(None);
             }
             Err(e) => {
-                cluster.discard_map(map_id, &e.to_string()).await;
+                store.discard(Entry::Map(map_id), &e.to_string()).await;
                 return Ok(None);
             }
         };

@@ -11,7 +11,6 @@ pub(crate) mod cache;
 pub(crate) mod error;
 pub(crate) mod identity;
 pub(crate) mod jobs;
-pub(crate) mod map_owners;
 pub(crate) mod maps;
 pub(crate) mod queries;
 pub(crate) mod registry;
@@ -22,7 +21,7 @@ pub(crate) use error::Error;
 
 use crate::config::ServeArgs;
 use crate::ids::ScenarioId;
-use crate::store::{self, redis::Cluster};
+use crate::store::{self, Store, redis::Cluster};
 use answers::AnswerCache;
 use cache::{MapCache, MapDisk};
 use identity::{Caller, Tokens};
@@ -30,7 +29,6 @@ use irs_answers::scenario::BUILTIN;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
 use jobs::Jobs;
-use map_owners::MapOwners;
 use metrics_exporter_prometheus::PrometheusHandle;
 use queries::QueryPool;
 use registry::{ScenarioRecord, ScenarioRegistry, ScenarioSource, StoredScenario};
@@ -67,16 +65,18 @@ struct Inner {
     limits: Limits,
     registry: Arc<ScenarioRegistry>,
     cache: MapCache,
-    /// Who asked for each map (one replica's; a cluster's are in the shared store).
-    map_owners: Arc<MapOwners>,
+    /// What the deployment's nodes share: the claims on maps and, in a cluster, every
+    /// replica's scenarios, maps, build locks and job records.
+    store: Arc<dyn Store>,
+    /// `--redis-url`, if set: the cluster's build stream (the store, seen as the queue every
+    /// replica's builds go through).
+    stream: Option<Arc<Cluster>>,
     answers: AnswerCache,
     jobs: Arc<Jobs>,
     queries: QueryPool,
     tokens: Tokens,
     /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
     disk: Option<Arc<store::DataDir>>,
-    /// `--redis-url`, if set: the store shared with the other replicas.
-    cluster: Option<Arc<Cluster>>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
 }
@@ -107,14 +107,22 @@ impl App {
             mb(args.registry_mb),
             disk.clone(),
         ));
-        let map_owners = Arc::new(MapOwners::new(disk.clone()));
+        let stream = match &args.redis_url {
+            Some(url) => Some(Arc::new(Cluster::new(url)?)),
+            None => None,
+        };
+        let store: Arc<dyn Store> = match (&stream, &disk) {
+            (Some(cluster), _) => cluster.clone(),
+            (None, Some(dir)) => dir.clone(),
+            (None, None) => Arc::new(store::Memory::default()),
+        };
         let cache = MapCache::new(
             args.cache_mb.saturating_mul(1024 * 1024),
             disk.clone().map(|dir| MapDisk {
                 dir,
                 scenarios: registry.clone(),
             }),
-            map_owners.clone(),
+            store.clone(),
         );
         Ok(App {
             inner: Arc::new(Inner {
@@ -133,7 +141,8 @@ impl App {
                 },
                 registry,
                 cache,
-                map_owners: map_owners.clone(),
+                store: store.clone(),
+                stream,
                 answers: AnswerCache::new(args.answer_cache_mb.saturating_mul(1024 * 1024)),
                 jobs: Arc::new(Jobs::new(
                     args.workers(),
@@ -141,15 +150,11 @@ impl App {
                     args.job_history,
                     args.job_history_mb.saturating_mul(1 << 20),
                     disk.clone(),
-                    map_owners,
+                    store,
                 )),
                 queries: QueryPool::new(args.query_workers(), args.query_queue)?,
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
                 disk,
-                cluster: match &args.redis_url {
-                    Some(url) => Some(Arc::new(Cluster::new(url)?)),
-                    None => None,
-                },
                 ready: AtomicBool::new(false),
                 metrics,
             }),
@@ -164,8 +169,9 @@ impl App {
     pub(crate) fn cache(&self) -> &MapCache {
         &self.inner.cache
     }
-    pub(crate) fn map_owners(&self) -> &MapOwners {
-        &self.inner.map_owners
+    /// The state the deployment's nodes share (see [`Store`]).
+    pub(crate) fn store(&self) -> &dyn Store {
+        &*self.inner.store
     }
     pub(crate) fn answers(&self) -> &AnswerCache {
         &self.inner.answers
@@ -228,8 +234,10 @@ impl App {
             .await?
     }
 
-    pub(crate) fn cluster(&self) -> Option<&Arc<Cluster>> {
-        self.inner.cluster.as_ref()
+    /// In a cluster, the stream every replica's map builds queue in: the one thing a lone
+    /// node does differently (its builds queue in its own pool).
+    pub(crate) fn build_stream(&self) -> Option<&Arc<Cluster>> {
+        self.inner.stream.as_ref()
     }
 
     /// `--data-dir`, if set (for its write probe and `/readyz`).

@@ -9,6 +9,7 @@ use super::queries::{INLINE_BYTES, json_weight};
 use super::{App, Error, registrants};
 use crate::app::registry::{ScenarioRecord, ScenarioSource, StoredScenario};
 use crate::ids::ScenarioId;
+use crate::store::Entry;
 use irs_answers::scenario::ScenarioDocument as _;
 use irs_model::scenario::Scenario;
 use std::sync::Arc;
@@ -43,10 +44,11 @@ impl App {
         if let Some(stored) = self.registry().get(id) {
             return Ok(Some(stored));
         }
-        let Some(cluster) = self.cluster() else {
-            return Ok(None);
-        };
-        let Some(record) = cluster.scenario::<ScenarioRecord>(id).await? else {
+        let Some(record) = self
+            .store()
+            .record::<ScenarioRecord>(Entry::Scenario(id))
+            .await?
+        else {
             return Ok(None);
         };
         let weight = json_weight(&record.document, INLINE_BYTES);
@@ -67,7 +69,7 @@ impl App {
         let scenario = match parsed {
             Ok(scenario) => scenario,
             Err(why) => {
-                cluster.discard_scenario(id, &why).await;
+                self.store().discard(Entry::Scenario(id), &why).await;
                 return Ok(None);
             }
         };
@@ -156,23 +158,23 @@ impl App {
         Ok((stored, created))
     }
 
-    /// In a cluster: publishes an API scenario (document and owners) for the other replicas;
-    /// `replace` false leaves a record already there as it is (see
-    /// [`crate::store::redis::Cluster::put_scenario`]).
+    /// Publishes an API scenario (document and owners) for the other replicas (nothing on a
+    /// lone node); `replace` false leaves a record already there as it is (see
+    /// [`crate::store::Store::put_scenario`]).
     pub(super) async fn share_scenario(
         &self,
         stored: &StoredScenario,
         replace: bool,
     ) -> Result<(), Error> {
-        match self.cluster() {
-            Some(cluster) if stored.source == ScenarioSource::Api => {
-                cluster
-                    .put_scenario(&stored.id, &stored.record(), replace)
-                    .await?;
-                Ok(())
-            }
-            _ => Ok(()),
+        if stored.source != ScenarioSource::Api {
+            return Ok(());
         }
+        // Written only by a store that shares it: a floor plan's record is megabytes.
+        let record = || serde_json::to_vec(&stored.record()).expect("records serialise");
+        Ok(self
+            .store()
+            .put_scenario(&stored.id, &record, replace)
+            .await?)
     }
 
     /// Deletes the caller's registration of an API scenario; with the last registration the
@@ -196,9 +198,7 @@ impl App {
         }
         if self.registry().delete(id, caller)? {
             self.cache().remove_scenario_maps(id).await;
-            if let Some(cluster) = self.cluster() {
-                cluster.delete_scenario(id).await?;
-            }
+            self.store().delete(Entry::Scenario(id)).await?;
             tracing::info!(scenario_id = %id, "scenario deleted");
         }
         Ok(())

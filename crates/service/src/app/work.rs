@@ -7,6 +7,7 @@ use super::identity::Caller;
 use super::{App, Error};
 use crate::app::jobs::{Job, JobRecord, JobView};
 use crate::ids::JobId;
+use crate::store::Entry;
 
 impl App {
     /// May `caller` see the job `id`? Its owners decide: a local job's own, or in a cluster a
@@ -19,7 +20,7 @@ impl App {
         local: Option<&Job>,
     ) -> Result<bool, Error> {
         let shared = self
-            .cluster()
+            .build_stream()
             .filter(|_| local.is_none_or(|j| j.map_id().is_some()));
         match (caller, shared, local) {
             (Caller::Owner(me), Some(cluster), _) => {
@@ -41,9 +42,7 @@ impl App {
         if let Some(job) = local {
             return Ok(job.view());
         }
-        if let Some(cluster) = self.cluster()
-            && let Some(record) = cluster.job::<JobRecord>(id).await?
-        {
+        if let Some(record) = self.store().record::<JobRecord>(Entry::Job(id)).await? {
             return Ok(record.view);
         }
         Err(Error::not_found("job", id))
@@ -59,7 +58,7 @@ impl App {
             return Err(Error::not_found("job", id));
         }
         let shared = self
-            .cluster()
+            .build_stream()
             .filter(|_| local.as_ref().is_none_or(|j| j.map_id().is_some()));
         let Some(cluster) = shared else {
             let (job, _) = self.jobs().cancel(id, caller)?;
@@ -67,7 +66,7 @@ impl App {
             return Ok(job.view());
         };
         // A cluster's map build: its record says where it is, its owners are in the store.
-        let view = match cluster.job::<JobRecord>(id).await? {
+        let view = match self.store().record::<JobRecord>(Entry::Job(id)).await? {
             Some(record) => record.view,
             None => match &local {
                 Some(job) => job.view(),
@@ -109,17 +108,7 @@ impl App {
         let (Some(me), Some(map_id)) = (caller.owner(), map_id) else {
             return;
         };
-        let withdrawn = match self.cluster() {
-            Some(cluster) => cluster
-                .withdraw_map(map_id, &me.to_string())
-                .await
-                .map(|_| ()),
-            None => {
-                self.map_owners().withdraw(map_id, &me);
-                Ok(())
-            }
-        };
-        if let Err(e) = withdrawn {
+        if let Err(e) = self.store().withdraw_map(map_id, &me.to_string()).await {
             tracing::warn!(map_id = %map_id, error = %e, "a cancelled build's claim not withdrawn");
         }
     }
@@ -127,7 +116,7 @@ impl App {
     /// Whether the shared store can be used now (always, without one): `/readyz` reports a
     /// replica whose store is down as not ready.
     pub(crate) fn store_available(&self) -> Result<(), Error> {
-        match self.cluster().and_then(|c| c.unavailable()) {
+        match self.store().unavailable() {
             Some(reason) => Err(Error::unavailable(reason)),
             None => Ok(()),
         }

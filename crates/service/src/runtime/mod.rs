@@ -198,7 +198,7 @@ async fn serve_app(
             upkeep.run_upkeep();
         }
     }));
-    if let Some(cluster) = state.cluster().cloned() {
+    if let Some(cluster) = state.build_stream().cloned() {
         let health = cluster.clone();
         background.push(tasks::spawn(async move { health.watch_health().await }));
         background.push(tasks::spawn(app::builder::run(

@@ -58,7 +58,7 @@ pub(crate) enum Kind {
     Scenario,
     Map,
     Job,
-    /// Who asked for a map (`app::map_owners`).
+    /// Who asked for a map (`store::on_disk`).
     MapOwners,
 }
 
@@ -94,6 +94,8 @@ pub(crate) struct DataDir {
     unwritable: Mutex<Option<String>>,
     /// Distinguishes the temporary files of concurrent writes.
     writes: AtomicU64,
+    /// Serialises each read-modify-write of a map's claims (`store::on_disk`).
+    pub(super) claims_serial: Mutex<()>,
 }
 
 /// Ids are lower-case hex (content hashes, UUIDs without dashes): nothing else is a file name.
@@ -150,6 +152,7 @@ impl DataDir {
             max_map_file_bytes: maps_budget_bytes.min(cache_bytes),
             unwritable: Mutex::new(None),
             writes: AtomicU64::new(0),
+            claims_serial: Mutex::new(()),
         };
         // A write test now, so an operator sees at start-up that writes will fail.
         if let Err(reason) = store.probe() {

@@ -38,8 +38,8 @@
 //! as JSON text and reads them back as the type it is asked for, so it depends on no type
 //! above it.
 
-use super::Error;
 use super::disk as store;
+use super::{Entry, Error, Store};
 use crate::ids::{JobId, MapId, ScenarioId};
 use irs_model::radiomap::MapKey;
 use redis::aio::{ConnectionManager, ConnectionManagerConfig};
@@ -49,7 +49,6 @@ use redis::streams::{
 };
 use redis::{AsyncCommands, ExistenceCheck, SetExpiry, SetOptions};
 use serde::Serialize;
-use serde::de::DeserializeOwned;
 use std::sync::{Mutex, RwLock};
 use std::time::{Duration, Instant};
 
@@ -183,11 +182,6 @@ impl Cluster {
             .await
     }
 
-    /// Why Redis cannot be used now, if it cannot.
-    pub fn unavailable(&self) -> Option<String> {
-        self.down.lock().expect("cluster lock").clone()
-    }
-
     fn mark(&self, down: Option<String>) {
         let mut state = self.down.lock().expect("cluster lock");
         if state.is_some() != down.is_some() {
@@ -220,7 +214,7 @@ impl Cluster {
 
     /// Deletes `key`, which held what this build does not write there (`what` names it in the
     /// counter), so that it is rebuilt or registered again rather than failing forever.
-    async fn discard(
+    async fn discard_key(
         &self,
         conn: &mut ConnectionManager,
         key: &str,
@@ -248,45 +242,10 @@ impl Cluster {
         match conn.get::<_, Option<T>>(key).await {
             Ok(value) => Ok(value),
             Err(e) if e.code() == Some("WRONGTYPE") => {
-                self.discard(conn, key, what, "wrong Redis type").await;
+                self.discard_key(conn, key, what, "wrong Redis type").await;
                 Ok(None)
             }
             Err(e) => Err(self.error(&e)),
-        }
-    }
-
-    /// A JSON record at `key`, or `None`; one that does not parse as `R` is deleted.
-    async fn record<R: DeserializeOwned>(
-        &self,
-        key: &str,
-        what: &'static str,
-    ) -> Result<Option<R>, Error> {
-        let mut conn = self.conn()?;
-        let Some(json) = self.get_or_repair::<String>(&mut conn, key, what).await? else {
-            return Ok(None);
-        };
-        match serde_json::from_str(&json) {
-            Ok(record) => Ok(Some(record)),
-            Err(e) => {
-                self.discard(&mut conn, key, what, &e.to_string()).await;
-                Ok(None)
-            }
-        }
-    }
-
-    /// Deletes a scenario record the application found invalid (it parsed as a record, but
-    /// its document is not a scenario of this build, or not the one its id names).
-    pub async fn discard_scenario(&self, id: &ScenarioId, why: &str) {
-        if let Ok(mut conn) = self.conn() {
-            self.discard(&mut conn, &scenario_key(id), "scenario", why)
-                .await;
-        }
-    }
-
-    /// Deletes a map the application could not decode (its frame was intact).
-    pub async fn discard_map(&self, id: &MapId, why: &str) {
-        if let Ok(mut conn) = self.conn() {
-            self.discard(&mut conn, &map_key(id), "map", why).await;
         }
     }
 
@@ -336,7 +295,7 @@ impl Cluster {
         match created {
             Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
             Err(e) if e.code() == Some("WRONGTYPE") => {
-                self.discard(conn, STREAM, "stream", "wrong Redis type")
+                self.discard_key(conn, STREAM, "stream", "wrong Redis type")
                     .await;
                 let created: redis::RedisResult<()> =
                     conn.xgroup_create_mkstream(STREAM, GROUP, "0").await;
@@ -349,108 +308,12 @@ impl Cluster {
         }
     }
 
-    /// Publishes a scenario's record; with `replace` false only when Redis has none yet (a
-    /// map request must make its scenario readable, not upload a floor plan each time).
-    pub async fn put_scenario(
-        &self,
-        id: &ScenarioId,
-        record: &impl Serialize,
-        replace: bool,
-    ) -> Result<(), Error> {
-        let mut conn = self.conn()?;
-        if !replace {
-            let present: bool = conn
-                .exists(scenario_key(id))
-                .await
-                .map_err(|e| self.error(&e))?;
-            if present {
-                return Ok(());
-            }
-        }
-        let json = serde_json::to_string(record).expect("records serialise");
-        conn.set::<_, _, ()>(scenario_key(id), json)
-            .await
-            .map_err(|e| self.error(&e))
-    }
-
-    pub async fn scenario<R: DeserializeOwned>(&self, id: &ScenarioId) -> Result<Option<R>, Error> {
-        self.record(&scenario_key(id), "scenario").await
-    }
-
-    pub async fn delete_scenario(&self, id: &ScenarioId) -> Result<(), Error> {
-        let mut conn = self.conn()?;
-        conn.del::<_, ()>(scenario_key(id))
-            .await
-            .map_err(|e| self.error(&e))
-    }
-
     /// Stores a map's encoded bytes, framed with their digest.
     pub async fn put_map(&self, id: &MapId, encoded: &[u8]) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
             .await
             .map_err(|e| self.error(&e))
-    }
-
-    /// A map's encoded bytes, if Redis has it and its digest checks out.
-    pub async fn map(&self, id: &MapId) -> Result<Option<Vec<u8>>, Error> {
-        let mut conn = self.conn()?;
-        let key = map_key(id);
-        let Some(framed) = self
-            .get_or_repair::<Vec<u8>>(&mut conn, &key, "map")
-            .await?
-        else {
-            return Ok(None);
-        };
-        match store::unframe(&framed) {
-            Ok(payload) => Ok(Some(payload.to_vec())),
-            Err(reason) => {
-                self.discard(&mut conn, &key, "map", reason).await;
-                Ok(None)
-            }
-        }
-    }
-
-    pub async fn delete_map(&self, id: &MapId) -> Result<bool, Error> {
-        let mut conn = self.conn()?;
-        let removed: usize = conn
-            .del(&[map_key(id), map_owners_key(id)])
-            .await
-            .map_err(|e| self.error(&e))?;
-        Ok(removed > 0)
-    }
-
-    /// Records that `owner` (a digest) asked for the map.
-    pub async fn claim_map(&self, id: &MapId, owner: &str) -> Result<(), Error> {
-        let mut conn = self.conn()?;
-        conn.sadd::<_, _, ()>(map_owners_key(id), owner)
-            .await
-            .map_err(|e| self.error(&e))
-    }
-
-    /// Whether `owner` asked for the map.
-    pub async fn map_claimed(&self, id: &MapId, owner: &str) -> Result<bool, Error> {
-        let mut conn = self.conn()?;
-        conn.sismember(map_owners_key(id), owner)
-            .await
-            .map_err(|e| self.error(&e))
-    }
-
-    /// Withdraws `owner`'s claim on a map, deleting the map with the last claim (atomically,
-    /// so a claim made meanwhile on another replica is never left on a deleted map). The
-    /// owners left, or `None` if `owner` had no claim.
-    pub async fn withdraw_map(&self, id: &MapId, owner: &str) -> Result<Option<usize>, Error> {
-        let mut conn = self.conn()?;
-        let left: i64 = redis::Script::new(WITHDRAW)
-            .key(map_owners_key(id))
-            .key(map_key(id))
-            .arg(owner)
-            .arg("del")
-            .arg(0)
-            .invoke_async(&mut conn)
-            .await
-            .map_err(|e| self.error(&e))?;
-        Ok(usize::try_from(left).ok())
     }
 
     /// Records that `owner` shares the build `id` (kept as long as job records are).
@@ -500,10 +363,6 @@ impl Cluster {
             .map_err(|e| self.error(&e))
     }
 
-    pub async fn job<R: DeserializeOwned>(&self, id: &JobId) -> Result<Option<R>, Error> {
-        self.record(&job_key(id), "job").await
-    }
-
     pub async fn request_cancel(&self, id: &JobId) -> Result<(), Error> {
         let mut conn = self.conn()?;
         conn.set_ex::<_, _, ()>(cancel_key(id), 1, RECORD_TTL_S)
@@ -516,12 +375,6 @@ impl Cluster {
             return false;
         };
         conn.exists(cancel_key(id)).await.unwrap_or(false)
-    }
-
-    /// The job building `map_id` somewhere in the cluster, if one is.
-    pub async fn building(&self, map_id: &MapId) -> Result<Option<JobId>, Error> {
-        let mut conn = self.conn()?;
-        self.lock_holder(&mut conn, map_id).await
     }
 
     /// The job a build lock names. Every lock this build takes expires ([`LEASE`], renewed by
@@ -696,6 +549,115 @@ impl Cluster {
         if holder.as_deref() == Some(build.job_id.as_str()) {
             let _: redis::RedisResult<()> = conn.del(lock_key(&build.map_id)).await;
         }
+    }
+}
+
+fn entry_key(entry: Entry<'_>) -> String {
+    match entry {
+        Entry::Scenario(id) => scenario_key(id),
+        Entry::Map(id) => map_key(id),
+        Entry::Job(id) => job_key(id),
+    }
+}
+
+#[async_trait::async_trait]
+impl Store for Cluster {
+    fn unavailable(&self) -> Option<String> {
+        self.down.lock().expect("cluster lock").clone()
+    }
+
+    async fn claim_map(&self, id: &MapId, owner: &str) -> Result<(), Error> {
+        let mut conn = self.conn()?;
+        conn.sadd::<_, _, ()>(map_owners_key(id), owner)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    async fn map_claimed(&self, id: &MapId, owner: &str) -> Result<bool, Error> {
+        let mut conn = self.conn()?;
+        conn.sismember(map_owners_key(id), owner)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    async fn withdraw_map(&self, id: &MapId, owner: &str) -> Result<Option<usize>, Error> {
+        let mut conn = self.conn()?;
+        let left: i64 = redis::Script::new(WITHDRAW)
+            .key(map_owners_key(id))
+            .key(map_key(id))
+            .arg(owner)
+            .arg("del")
+            .arg(0)
+            .invoke_async(&mut conn)
+            .await
+            .map_err(|e| self.error(&e))?;
+        Ok(usize::try_from(left).ok())
+    }
+
+    /// A key of another Redis type is deleted and read as missing, as is a map whose digest
+    /// fails.
+    async fn get(&self, entry: Entry<'_>) -> Result<Option<Vec<u8>>, Error> {
+        let mut conn = self.conn()?;
+        let key = entry_key(entry);
+        let Some(bytes) = self
+            .get_or_repair::<Vec<u8>>(&mut conn, &key, entry.what())
+            .await?
+        else {
+            return Ok(None);
+        };
+        if !matches!(entry, Entry::Map(_)) {
+            return Ok(Some(bytes));
+        }
+        match store::unframe(&bytes) {
+            Ok(payload) => Ok(Some(payload.to_vec())),
+            Err(reason) => {
+                self.discard_key(&mut conn, &key, "map", reason).await;
+                Ok(None)
+            }
+        }
+    }
+
+    async fn put_scenario(
+        &self,
+        id: &ScenarioId,
+        record: &(dyn Fn() -> Vec<u8> + Sync),
+        replace: bool,
+    ) -> Result<(), Error> {
+        let mut conn = self.conn()?;
+        if !replace {
+            let present: bool = conn
+                .exists(scenario_key(id))
+                .await
+                .map_err(|e| self.error(&e))?;
+            if present {
+                return Ok(());
+            }
+        }
+        conn.set::<_, _, ()>(scenario_key(id), record())
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    async fn delete(&self, entry: Entry<'_>) -> Result<bool, Error> {
+        let mut conn = self.conn()?;
+        let mut keys = vec![entry_key(entry)];
+        if let Entry::Map(id) = entry {
+            keys.push(map_owners_key(id));
+        }
+        let removed: usize = conn.del(&keys).await.map_err(|e| self.error(&e))?;
+        Ok(removed > 0)
+    }
+
+    async fn discard(&self, entry: Entry<'_>, why: &str) {
+        if let Ok(mut conn) = self.conn() {
+            self.discard_key(&mut conn, &entry_key(entry), entry.what(), why)
+                .await;
+        }
+    }
+
+    async fn building(&self, map_id: &MapId) -> Result<Option<JobId>, Error> {
+        let mut conn = self.conn()?;
+        self.lock_holder(&mut conn, map_id).await
     }
 }
 

@@ -20,8 +20,8 @@ pub(crate) use record::{JobRecord, JobView};
 
 use crate::app::Error;
 use crate::app::identity::{Caller, Owner, Owners};
-use crate::app::map_owners::MapOwners;
 use crate::ids::{JobId, MapId, ScenarioId};
+use crate::store::Store;
 use crate::store::{DataDir, Kind};
 use irs_model::radiomap::{Cancelled, Progress, WorkError};
 use std::collections::{HashMap, VecDeque};
@@ -41,7 +41,7 @@ pub struct Jobs {
     /// With `--data-dir`: finished jobs are recorded there, and forgotten there too.
     disk: Option<Arc<DataDir>>,
     /// The claims on maps: a build that ends without its map leaves no claim behind.
-    map_owners: Arc<MapOwners>,
+    store: Arc<dyn Store>,
 }
 
 impl Jobs {
@@ -53,7 +53,7 @@ impl Jobs {
         history_limit: usize,
         history_bytes: u64,
         disk: Option<Arc<DataDir>>,
-        map_owners: Arc<MapOwners>,
+        store: Arc<dyn Store>,
     ) -> Self {
         Jobs {
             next_seq: AtomicU64::new(0),
@@ -69,7 +69,7 @@ impl Jobs {
             by_id: Mutex::new(HashMap::new()),
             in_flight: tokio::sync::Mutex::new(HashMap::new()),
             disk,
-            map_owners,
+            store,
         }
     }
 
@@ -280,7 +280,7 @@ impl Jobs {
             self.in_flight.lock().await.remove(map_id);
             if job.state() != JobState::Done {
                 // No map came of it: the claims made on it while it ran claim nothing.
-                self.map_owners.forget(map_id);
+                self.store.forget_claims(map_id);
             }
         }
         let forgotten = {
