@@ -4,12 +4,16 @@ use clap::{Args, ValueEnum};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+/// How log lines are written (`--log-format`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LogFormat {
+    /// Human-readable lines with their fields.
     Text,
+    /// One JSON object a line, for log collectors.
     Json,
 }
 
+/// The server's settings: the flags of `irs-planner serve`, each also an `IRS_*` variable.
 #[derive(Debug, Clone, Args)]
 pub struct ServeArgs {
     /// Address to listen on (port 0 picks a free port, printed at start-up).
@@ -153,12 +157,14 @@ pub struct ServeArgs {
 }
 
 impl ServeArgs {
+    /// Map-build workers: `--workers`, else one a core.
     pub fn workers(&self) -> usize {
         self.workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()))
             .max(1)
     }
 
+    /// Heavy-query workers: `--query-workers`, else half the cores (at least one).
     pub fn query_workers(&self) -> usize {
         self.query_workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()) / 2)

@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! The HTTP planning service: axum on tokio, maps cached in moka, builds on a bounded blocking
 //! pool, `tracing` spans per request and per job, Prometheus metrics. The contract is
 //! `openapi.yaml`.
@@ -14,8 +15,9 @@
 //!   `registry` (the scenarios), `cache` (maps and their widest-path indexes), `answers` (path
 //!   answers kept for repeated queries), `jobs` (map builds and placement searches, their view
 //!   and record), `queries` (admission of heavy queries);
-//! * `store`: the data directory of `--data-dir` and the Redis store of `--redis-url`, which
-//!   keep the application's records without knowing their types;
+//! * `store`: the state a deployment's nodes share, one trait with three implementations
+//!   (memory, the data directory of `--data-dir`, the Redis store of `--redis-url`), which keep
+//!   the application's records without knowing their types;
 //! * leaves: [`config`] (flags and environment), `ids` (map, scenario and job ids and the
 //!   links built from them), `tasks` (spawning with the server's metrics registry),
 //!   `priority`, [`probe`], `viewer` (the built-in map viewer at `/`).

@@ -245,6 +245,7 @@ impl App {
         self.inner.disk.as_ref()
     }
 
+    /// Whether the server has finished starting (and not begun stopping).
     pub fn is_ready(&self) -> bool {
         self.inner.ready.load(Ordering::Relaxed)
     }

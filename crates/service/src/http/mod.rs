@@ -105,6 +105,7 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
     ]
 }
 
+/// Every route of the API, the viewer and the operations endpoints, without the middleware.
 pub fn router() -> Router<App> {
     route_table()
         .into_iter()

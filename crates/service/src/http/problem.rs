@@ -15,16 +15,24 @@ use serde::de::DeserializeOwned;
 /// The body of every error answer (RFC 9457).
 #[derive(Debug, Clone, Serialize)]
 pub struct Problem {
+    /// A URI naming the kind of problem (`type`).
     #[serde(rename = "type")]
     pub kind: String,
+    /// The stable machine-readable code clients branch on.
     pub code: &'static str,
+    /// A short summary of the kind of problem.
     pub title: &'static str,
+    /// The HTTP status, repeated in the body.
     pub status: u16,
+    /// What went wrong with this request, and what to do about it.
     pub detail: String,
+    /// The request's JSON path (or query parameter) at fault, when one is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub field: Option<String>,
+    /// The limit that was exceeded, in the unit `detail` names.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub limit: Option<u64>,
+    /// The job concerned (a map not ready yet, a scenario in use).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub job_id: Option<String>,
 }
