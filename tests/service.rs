@@ -1278,7 +1278,11 @@ async fn operations_endpoints() {
         (StatusCode::OK, json!({"status": "ok"}))
     );
     let (s, ready) = server.get("/readyz").await;
-    assert_eq!((s, ready["scenarios"].as_u64()), (StatusCode::OK, Some(3)));
+    assert_eq!(
+        ready,
+        json!({"status": "ready", "scenarios": 3, "degraded": []})
+    );
+    assert_eq!(s, StatusCode::OK);
     let (_, version) = server.get("/version").await;
     assert_eq!(version["version"], env!("CARGO_PKG_VERSION"));
     server.get("/v1/scenarios").await;
@@ -2319,9 +2323,10 @@ async fn bad_scenario_files_are_skipped_and_the_rest_served() {
 }
 
 /// A data directory holding FIFOs under record names starts without waiting on them; one that
-/// cannot be written starts too, serves, and `/readyz` says why until it can be written again.
+/// cannot be written starts too, serves, and `/readyz` stays 200 (a load balancer keeps routing
+/// to it) but says `degraded` and why, until it can be written again.
 #[tokio::test]
-async fn an_unwritable_data_dir_starts_and_readyz_says_why() {
+async fn an_unwritable_data_dir_starts_degraded_and_readyz_says_why() {
     let dir = std::env::temp_dir().join(format!("irs-unwritable-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     for sub in ["maps", "scenarios"] {
@@ -2336,14 +2341,14 @@ async fn an_unwritable_data_dir_starts_and_readyz_says_why() {
     let (s, ready) = tokio::time::timeout(Duration::from_secs(20), server.get("/readyz"))
         .await
         .expect("start-up does not wait on the FIFOs");
-    problem(
-        s,
-        &ready,
-        StatusCode::SERVICE_UNAVAILABLE,
-        "data_dir_unwritable",
-    );
+    assert_eq!(s, StatusCode::OK, "{ready}");
+    assert_eq!(ready["status"], "degraded", "{ready}");
+    let degraded = ready["degraded"].as_array().unwrap();
+    assert_eq!(degraded.len(), 1, "{ready}");
+    assert_eq!(degraded[0]["component"], "data_dir");
+    assert_eq!(degraded[0]["code"], "data_dir_unwritable");
     assert!(
-        ready["detail"].as_str().unwrap().contains("jobs"),
+        degraded[0]["reason"].as_str().unwrap().contains("jobs"),
         "{ready}"
     );
     let (s, _) = server.get("/v1/scenarios").await;
@@ -2354,10 +2359,12 @@ async fn an_unwritable_data_dir_starts_and_readyz_says_why() {
     let deadline = Instant::now() + Duration::from_secs(15);
     loop {
         let (s, ready) = server.get("/readyz").await;
-        if s == StatusCode::OK {
+        assert_eq!(s, StatusCode::OK, "{ready}");
+        if ready["status"] == "ready" {
+            assert_eq!(ready["degraded"], json!([]));
             break;
         }
-        assert!(Instant::now() < deadline, "still not ready: {ready}");
+        assert!(Instant::now() < deadline, "still degraded: {ready}");
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     drop(server);

@@ -11,9 +11,11 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * a job's progress and its cancellation work from a replica that does not run it;
   * killing (SIGKILL) the replica that runs a build: another claims it, the job finishes,
     and the map is bit-identical to the CLI's single-process build;
-  * Redis stopped: /readyz 503 with the reason, a cached map still answers path queries,
-    a request that needs Redis gets 503 with Retry-After, no replica dies; Redis restarted
-    (its AOF): every replica ready again by itself, the maps still there;
+  * Redis stopped for 20 s under load: every replica degraded, not down (/readyz 200
+    "degraded" naming Redis, so HAProxy keeps routing), 0 failed path queries through HAProxy
+    on a map the replicas hold, a request that needs Redis gets 503 with Retry-After, no
+    replica dies; Redis restarted (its AOF): every replica ready again by itself, the maps
+    still there;
   * path-query throughput through HAProxy against one replica hit directly (wrk, same run);
   * Redis content this build did not write (a record that is no scenario, a map that does not
     decode, keys of the wrong type, a lock without expiry, a stream that is not one) repaired
@@ -173,6 +175,39 @@ def wrk(url, body, seconds=5, connections=16):
     return float(line.split()[1])
 
 
+class Load:
+    """Two clients sending path queries like `body` back to back until stopped, each with a
+    new threshold (no answer-cache hit), recording every answer that is not a 200."""
+
+    def __init__(self, base, body):
+        self.base, self.body = base, body
+        self.done, self.failures, self.running = 0, [], True
+        self.lock = threading.Lock()
+        self.threads = [threading.Thread(target=self.run, args=(k,)) for k in range(2)]
+        for t in self.threads:
+            t.start()
+
+    def run(self, k):
+        n = 0
+        while self.running:
+            n += 1
+            body = {**self.body, "threshold": self.body["threshold"] - (2 * n + k) * 1e-9}
+            try:
+                status, answer, _ = request(self.base, "POST", "/v1/paths", body, timeout=10)
+            except Exception as e:  # noqa: BLE001 - a transport failure is a failure too
+                status, answer = None, repr(e)
+            with self.lock:
+                self.done += 1
+                if status != 200:
+                    self.failures.append((status, str(answer)[:200]))
+
+    def stop(self):
+        self.running = False
+        for t in self.threads:
+            t.join()
+        return self.done, self.failures
+
+
 def throughputs(direct_base, proxy_base, bodies, behind):
     """wrk against one replica directly, then through HAProxy, per named path query: the ratios."""
     ratios = {}
@@ -279,12 +314,28 @@ def main():
     alone = json.loads(cli.stdout)
     check(shared["values"] == alone["values"], "bit-identical to a single-process build (every cell)")
 
-    # Redis goes away.
+    # Redis goes away, under load. The paper map is held by both survivors first (a path
+    # query on each), as a map in use is.
     cached = survivors[0]
+    wait_until("HAProxy routes to the survivors only", lambda: kit.ready(proxy.base), 15)
+    paper = kit.scenario_id(proxy.base, "paper-single-user")
+    status, built, _ = request(proxy.base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
+    small_path = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    for r in survivors:
+        request(r.base, "POST", "/v1/paths", small_path)
+        request(r.base, "POST", "/v1/paths", path)
+    load = Load(proxy.base, small_path)
+    time.sleep(1)
     redis.stop()
-    wait_until("readyz 503 everywhere", lambda: all(request(r.base, "GET", "/readyz", timeout=5)[0] == 503 for r in survivors), 10)
-    status, problem, _ = request(cached.base, "GET", "/readyz")
-    check("Redis" in problem.get("detail", ""), f"readyz names the reason: {problem.get('detail')!r}")
+    stopped_at = time.time()
+
+    def degraded(r):
+        status, ready, _ = request(r.base, "GET", "/readyz", timeout=5)
+        names = [d.get("component") for d in ready.get("degraded", [])] if status == 200 else []
+        return status == 200 and ready.get("status") == "degraded" and names == ["shared_store"]
+    wait_until("every replica degraded, still ready", lambda: all(degraded(r) for r in survivors), 10)
+    status, ready, _ = request(cached.base, "GET", "/readyz")
+    check("Redis" in ready["degraded"][0].get("reason", ""), f"readyz names the reason: {ready['degraded']}")
     status, _, _ = request(cached.base, "POST", "/v1/paths", path)
     check(status == 200, "a cached map still answers path queries")
     status, problem, headers = request(cached.base, "POST", "/v1/scenarios", scenario("small-test", lambda d: d.__setitem__("name", "while-down")))
@@ -292,6 +343,12 @@ def main():
     status, _, headers = request(cached.base, "GET", "/v1/maps/0123456789abcdef0123456789abcdef")
     check(status == 503, f"an unknown map cannot be looked up: {status}")
     check(all(r.proc.poll() is None for r in survivors), "no replica died")
+    time.sleep(max(0.0, 20 - (time.time() - stopped_at)))
+    done, failures = load.stop()
+    print(f"Redis stopped for {time.time() - stopped_at:.0f} s: {done} path queries through HAProxy, "
+          f"{len(failures)} failed", flush=True)
+    check(done > 0 and not failures, f"0 failed path queries on a held map while Redis was down "
+                                     f"({len(failures)} of {done}: {failures[:3]})")
     redis.start()
     wait_until("every replica ready again by itself", lambda: all(r.ready() for r in survivors), 15)
     status, _, _ = request(survivors[1].base, "GET", f"/v1/maps/{job['map_id']}/coverage?threshold=1")
@@ -300,14 +357,6 @@ def main():
     # Throughput: HAProxy in front of the two survivors against one of them directly, on
     # the paper's map (41², about a millisecond a query: HAProxy's own cost shows) and on the
     # 1001² one (a search of a million cells a query: two replicas share the load).
-    wait_until("HAProxy has the replicas back", lambda: kit.ready(proxy.base), 15)
-    time.sleep(1.5)  # both survivors back in rotation (rise 2 at 500 ms)
-    paper = kit.scenario_id(proxy.base, "paper-single-user")
-    status, built, _ = request(proxy.base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
-    small_path = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
-    for r in survivors:
-        request(r.base, "POST", "/v1/paths", small_path)
-        request(r.base, "POST", "/v1/paths", path)
     ratios = throughputs(cached.base, proxy.base, {"41² paper map": small_path, "1001² map": path}, "two")
     # On the 41² map a query costs about what HAProxy's own hop costs, and on a two-core
     # machine wrk, HAProxy and the replicas share the same cores, so the ratio there measures

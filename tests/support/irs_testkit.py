@@ -363,8 +363,10 @@ def metric(base, name, timeout=10):
 
 
 def ready(base, timeout=5):
-    """Whether /readyz answers 200."""
-    return get(base, "/readyz", timeout=timeout).status == 200
+    """Whether /readyz answers 200 `ready`: started, and nothing degraded (a replica not yet
+    connected to its Redis is degraded, and would refuse what needs it)."""
+    answer = get(base, "/readyz", timeout=timeout)
+    return answer.status == 200 and isinstance(answer.body, dict) and answer.body.get("status") == "ready"
 
 
 # ------------------------------------------------------------------------------------- waits

@@ -17,6 +17,8 @@ pub(crate) mod registry;
 pub(crate) mod scenarios;
 mod work;
 
+pub(crate) use work::Component;
+
 pub(crate) use error::Error;
 
 use crate::config::ServeArgs;

@@ -5,6 +5,7 @@
 
 use super::identity::Caller;
 use super::{App, Error};
+
 use crate::app::jobs::{Job, JobRecord, JobView};
 use crate::ids::JobId;
 use crate::store::Entry;
@@ -113,12 +114,40 @@ impl App {
         }
     }
 
-    /// Whether the shared store can be used now (always, without one): `/readyz` reports a
-    /// replica whose store is down as not ready.
-    pub(crate) fn store_available(&self) -> Result<(), Error> {
-        match self.store().unavailable() {
-            Some(reason) => Err(Error::unavailable(reason)),
-            None => Ok(()),
-        }
+    /// What this node works without for now, and why. A degraded node still serves what it
+    /// can (maps it holds, path queries on them) and refuses only what needs the missing part
+    /// (503 naming it), so a load balancer keeps routing to it: when Redis is away from every
+    /// replica, taking them all out of rotation would refuse even the answers they can give.
+    pub(crate) fn degradations(&self) -> Vec<Degradation> {
+        let store = self.store().unavailable().map(|reason| Degradation {
+            component: Component::SharedStore,
+            reason,
+        });
+        let disk = self
+            .data_dir()
+            .and_then(|dir| dir.unwritable())
+            .map(|reason| Degradation {
+                component: Component::DataDir,
+                reason,
+            });
+        store.into_iter().chain(disk).collect()
     }
+}
+
+/// A part of the deployment a node works without for now.
+pub(crate) struct Degradation {
+    pub component: Component,
+    pub reason: String,
+}
+
+/// The parts a node can lose and keep serving.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum Component {
+    /// The store shared with the other replicas (`--redis-url`) cannot be reached: requests
+    /// that need it answer 503 `store_unavailable`.
+    SharedStore,
+    /// The data directory (`--data-dir`) cannot be written (read-only, full): the node serves
+    /// from memory and what it can read, and what it builds is not kept across a restart.
+    DataDir,
 }

@@ -1,8 +1,10 @@
-//! The operations endpoints: `/healthz` (the process answers), `/readyz` (ready to serve: in a
-//! cluster the shared store reachable, with `--data-dir` the directory writable), `/version` and `/metrics` (Prometheus text).
+//! The operations endpoints: `/healthz` (the process answers), `/readyz` (started and not
+//! stopping; 200 `degraded` naming what it works without, e.g. an unreachable Redis or an
+//! unwritable data directory, so a load balancer keeps routing to it), `/version` and
+//! `/metrics` (Prometheus text).
 
 use super::problem::ApiError;
-use crate::app::App;
+use crate::app::{App, Component};
 use axum::Json;
 use axum::extract::State;
 use axum::http::header;
@@ -20,22 +22,52 @@ pub(super) async fn healthz() -> Json<Health> {
 }
 
 #[derive(Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum ReadyState {
+    Ready,
+    Degraded,
+}
+
+#[derive(Serialize)]
 pub(super) struct Readiness {
-    status: &'static str,
+    status: ReadyState,
     scenarios: usize,
+    /// What the node works without for now (empty when ready).
+    degraded: Vec<DegradedView>,
+}
+
+#[derive(Serialize)]
+pub(super) struct DegradedView {
+    component: Component,
+    /// The problem code a request that needs the component answers with.
+    code: &'static str,
+    reason: String,
 }
 
 pub(super) async fn readyz(State(state): State<App>) -> Result<Json<Readiness>, ApiError> {
     if !state.is_ready() {
         return Err(ApiError::not_ready());
     }
-    state.store_available()?;
-    if let Some(reason) = state.data_dir().and_then(|dir| dir.unwritable()) {
-        return Err(ApiError::data_dir_unwritable(reason));
-    }
+    let degraded: Vec<DegradedView> = state
+        .degradations()
+        .into_iter()
+        .map(|d| DegradedView {
+            component: d.component,
+            code: match d.component {
+                Component::SharedStore => "store_unavailable",
+                Component::DataDir => "data_dir_unwritable",
+            },
+            reason: d.reason,
+        })
+        .collect();
     Ok(Json(Readiness {
-        status: "ready",
+        status: if degraded.is_empty() {
+            ReadyState::Ready
+        } else {
+            ReadyState::Degraded
+        },
         scenarios: state.registry().len(),
+        degraded,
     }))
 }
 

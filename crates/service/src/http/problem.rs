@@ -177,18 +177,6 @@ impl ApiError {
             "the service is starting or shutting down",
         )
     }
-    /// `/readyz` with a data directory that cannot be written (full, read-only): the replica
-    /// still serves what it holds, but should not be sent the writes it would lose.
-    pub fn data_dir_unwritable(reason: String) -> Self {
-        let mut e = Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "data_dir_unwritable",
-            "Data directory not writable",
-            format!("the data directory cannot be written: {reason}"),
-        );
-        e.retry_after_s = Some(5);
-        e
-    }
     pub fn status(&self) -> StatusCode {
         StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
     }

@@ -273,6 +273,7 @@ impl DataDir {
             _ => {}
         }
         *unwritable = result.clone().err();
+        metrics::gauge!("irs_data_dir_writable").set(if result.is_ok() { 1.0 } else { 0.0 });
         result
     }
 
@@ -285,6 +286,7 @@ impl DataDir {
     fn write_failed(&self, error: &std::io::Error) {
         *self.unwritable.lock().expect("store lock") =
             Some(format!("{}: {error}", self.root.display()));
+        metrics::gauge!("irs_data_dir_writable").set(0.0);
     }
 
     /// Writes a record atomically: a temporary file, flushed, renamed over the target.
