@@ -20,6 +20,9 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * Redis content this build did not write (a record that is no scenario, a map that does not
     decode, keys of the wrong type, a lock without expiry, a stream that is not one) repaired
     where it is met; a map finished while Redis was away shared when it returns, built once.
+  * one truth: a scenario deleted through a replica that never loaded it is gone, with its
+    map, from every replica and from Redis within a second, and so is a map deleted through a
+    third replica;
   * tenants: two more replicas with tokens on the same Redis; a map's claims and a shared
     build's owners made on one replica are seen on the other (404 to a tenant without a
     claim, a DELETE withdraws only the caller's claim, a cancel only the caller's interest).
@@ -365,6 +368,55 @@ def main():
     check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
     tenants(redis)
     repairs(redis, survivors)
+    one_truth(redis, survivors)
+
+
+def gone_everywhere(replicas, path, seconds=1.0):
+    """Waits until every replica answers 404 for `path`: the seconds it took, or None."""
+    started = time.time()
+    while time.time() - started < seconds:
+        if all(request(r.base, "GET", path)[0] == 404 for r in replicas):
+            return time.time() - started
+        time.sleep(0.02)
+    return None
+
+
+def one_truth(redis, survivors):
+    """A delete on any replica is seen by every replica within a second: a scenario (with
+    the maps built from it) deleted through a replica that never loaded it, and a map deleted
+    through a third; neither stays in Redis."""
+    owner, reader = survivors
+    third = Replica(redis.port, "third")  # has loaded nothing: it must find both in Redis
+    wait_until("the third replica ready", third.ready, 15)
+    everyone = [owner, reader, third]
+    doc = scenario("small-test", lambda d: d.__setitem__("name", "one-truth"))
+    status, created, _ = request(owner.base, "POST", "/v1/scenarios", doc)
+    sid = created["id"]
+    status, built, _ = request(owner.base, "POST", "/v1/maps", {"scenario_id": sid, "kind": "gain"})
+    map_id = built["map_id"]
+    query = {"map_id": map_id, "start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": -200}
+    check(request(reader.base, "POST", "/v1/paths", query)[0] == 200
+          and request(reader.base, "GET", f"/v1/scenarios/{sid}")[0] == 200,
+          "another replica serves the scenario and its map (both held there now)")
+    status, _, _ = request(third.base, "DELETE", f"/v1/scenarios/{sid}")
+    check(status == 204, f"DELETE through a replica that never loaded the scenario: {status} (was 404)")
+    took = gone_everywhere(everyone, f"/v1/scenarios/{sid}")
+    check(took is not None, f"the scenario is gone from every replica within a second ({took and round(took, 3)} s)")
+    took_map = gone_everywhere(everyone, f"/v1/maps/{map_id}")
+    check(took_map is not None and redis.command("EXISTS", f"irs:map:{map_id}") == 0
+          and redis.command("EXISTS", f"irs:scenario:{sid}") == 0,
+          f"its map too, everywhere and in Redis ({took_map and round(took_map, 3)} s)")
+
+    status, created, _ = request(owner.base, "POST", "/v1/scenarios", doc)
+    status, built, _ = request(owner.base, "POST", "/v1/maps", {"scenario_id": created["id"], "kind": "gain"})
+    check(request(reader.base, "POST", "/v1/paths", {**query, "map_id": built["map_id"]})[0] == 200,
+          "registered and built again, held by another replica")
+    status, _, _ = request(third.base, "DELETE", f"/v1/maps/{built['map_id']}")
+    took = gone_everywhere(everyone, f"/v1/maps/{built['map_id']}")
+    check(status == 204 and took is not None,
+          f"a map deleted through a third replica: {status}, gone from every replica in {took and round(took, 3)} s")
+    print(f"deletes seen by every replica in {max(took, took_map):.3f} s at most", flush=True)
+    third.stop()
 
 
 def tenants(redis):

@@ -104,6 +104,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
     };
     let publisher = cluster.clone();
     let map_id = build.map_id.clone();
+    let scenario_id = ScenarioId::of_key(&build.key);
     // A map whose share failed (Redis down as the build ended) is kept here and shared below
     // once Redis answers again: its stream entry stays pending meanwhile, and a replica that
     // claimed it would otherwise build the map a second time under the same job.
@@ -113,7 +114,7 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
         let encoded = crate::tasks::spawn_blocking(move || irs_answers::encoding::encode(&map))
             .await
             .map_err(|e| e.to_string())?;
-        let shared = publisher.put_map(&map_id, &encoded).await;
+        let shared = publisher.put_map(&map_id, &scenario_id, &encoded).await;
         shared.map_err(|e| {
             *keep.lock().expect("unshared map") = Some(encoded);
             format!(
@@ -167,7 +168,10 @@ async fn share_when_redis_answers(cluster: &Cluster, build: &BuildEntry, encoded
     let mut attempt = 0u32;
     loop {
         cluster.heartbeat(build).await;
-        match cluster.put_map(&build.map_id, encoded).await {
+        match cluster
+            .put_map(&build.map_id, &ScenarioId::of_key(&build.key), encoded)
+            .await
+        {
             Ok(()) => {
                 tracing::info!(map_id = %build.map_id, attempts = attempt + 1, "kept map shared");
                 metrics::counter!("irs_maps_shared_late_total").increment(1);

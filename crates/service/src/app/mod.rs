@@ -8,6 +8,7 @@
 pub(crate) mod answers;
 pub(crate) mod builder;
 pub(crate) mod cache;
+pub(crate) mod deletions;
 pub(crate) mod error;
 pub(crate) mod identity;
 pub(crate) mod jobs;

@@ -425,17 +425,35 @@ impl ScenarioRegistry {
             }
         };
         if gone {
-            by_id.remove(id);
-            self.unpersist(id);
-            metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
-            let held: usize = by_id.values().map(|s| s.bytes).sum();
-            metrics::gauge!("irs_scenario_bytes").set(held as f64);
+            self.remove(&mut by_id, id);
         } else {
             let stored = stored.clone();
             drop(by_id);
             self.persist(&stored);
         }
         Ok(gone)
+    }
+
+    /// Forgets an API scenario whoever registered it (another replica deleted it with its last
+    /// registration); true if it was here. The server's own scenarios stay.
+    pub fn forget(&self, id: &ScenarioId) -> bool {
+        let mut by_id = self.by_id.write().expect("registry lock");
+        if by_id
+            .get(id)
+            .is_none_or(|s| s.source != ScenarioSource::Api)
+        {
+            return false;
+        }
+        self.remove(&mut by_id, id);
+        true
+    }
+
+    fn remove(&self, by_id: &mut HashMap<ScenarioId, Arc<StoredScenario>>, id: &ScenarioId) {
+        by_id.remove(id);
+        self.unpersist(id);
+        metrics::gauge!("irs_scenarios").set(by_id.len() as f64);
+        let held: usize = by_id.values().map(|s| s.bytes).sum();
+        metrics::gauge!("irs_scenario_bytes").set(held as f64);
     }
 
     /// The scenarios `caller` may see, by id.

@@ -178,8 +178,10 @@ impl App {
     }
 
     /// Deletes the caller's registration of an API scenario; with the last registration the
-    /// scenario goes (here and in the shared store), and the cached maps built from it. A
-    /// scenario that a queued or running job needs is kept (in use, with the job).
+    /// scenario goes, with the maps built from it, here, in the shared store and (told through
+    /// it) on every other replica. Any replica can delete it: one that has not loaded it yet
+    /// reads it from the store first. A scenario that a queued or running job needs is kept
+    /// (in use, with the job).
     pub(crate) async fn delete_scenario(
         &self,
         id: &ScenarioId,
@@ -196,6 +198,8 @@ impl App {
                 job_id: job.id.clone(),
             });
         }
+        // Loaded here if another replica registered it, so the caller's registration is seen.
+        self.scenario(id).await?;
         if self.registry().delete(id, caller)? {
             self.cache().remove_scenario_maps(id).await;
             self.store().delete(Entry::Scenario(id)).await?;

@@ -205,6 +205,10 @@ async fn serve_app(
             state.clone(),
             cluster.clone(),
         )));
+        background.push(tasks::spawn(app::deletions::follow(
+            state.clone(),
+            cluster.clone(),
+        )));
         tracing::info!(replica = %cluster.replica, "sharing scenarios, maps and jobs through Redis");
     }
     let stopping = state.clone();

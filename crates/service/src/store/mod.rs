@@ -295,7 +295,7 @@ mod tests {
         // A map shared by one replica is found by the others, digest checked; the last claim
         // withdrawn deletes it.
         let m = map(0x78);
-        cluster.put_map(&m, b"encoded map").await.unwrap();
+        cluster.put_map(&m, &id, b"encoded map").await.unwrap();
         assert_eq!(
             store.get(Entry::Map(&m)).await.unwrap().as_deref(),
             Some(&b"encoded map"[..])
@@ -308,10 +308,46 @@ mod tests {
         );
         assert_eq!(store.withdraw_map(&m, "aaaa").await.unwrap(), Some(0));
         assert!(store.get(Entry::Map(&m)).await.unwrap().is_none());
-        cluster.put_map(&m, b"again").await.unwrap();
+        cluster.put_map(&m, &id, b"again").await.unwrap();
         assert!(store.delete(Entry::Map(&m)).await.unwrap());
         assert!(!store.delete(Entry::Map(&m)).await.unwrap());
         assert!(store.building(&m).await.unwrap().is_none());
+
+        // A scenario goes with the maps built from it and their claims, a map with its last
+        // claim, and every replica is told of each.
+        use futures_util::StreamExt as _;
+        let mut announced = std::pin::pin!(cluster.deletions().await.unwrap());
+        let sid = ScenarioId::given("ef".repeat(16));
+        store
+            .put_scenario(&sid, &|| b"{}".to_vec(), true)
+            .await
+            .unwrap();
+        let (one, two) = (map(0x9a), map(0x9b));
+        cluster.put_map(&one, &sid, b"one").await.unwrap();
+        cluster.put_map(&two, &sid, b"two").await.unwrap();
+        store.claim_map(&two, "aaaa").await.unwrap();
+        assert!(store.delete(Entry::Scenario(&sid)).await.unwrap());
+        for m in [&one, &two] {
+            assert!(store.get(Entry::Map(m)).await.unwrap().is_none(), "{m}");
+        }
+        assert!(!store.map_claimed(&two, "aaaa").await.unwrap());
+        assert!(!store.delete(Entry::Scenario(&sid)).await.unwrap());
+        cluster.put_map(&one, &sid, b"one").await.unwrap();
+        store.claim_map(&one, "bbbb").await.unwrap();
+        assert_eq!(store.withdraw_map(&one, "bbbb").await.unwrap(), Some(0));
+        let mut heard = Vec::new();
+        while heard.len() < 3 {
+            let next = tokio::time::timeout(std::time::Duration::from_secs(5), announced.next());
+            heard.push(next.await.expect("announced").expect("subscribed"));
+        }
+        assert_eq!(
+            heard,
+            [
+                redis::Deleted::Scenario(sid.clone()),
+                redis::Deleted::Scenario(sid.clone()),
+                redis::Deleted::Map(one.clone())
+            ]
+        );
 
         watch.abort();
         let _ = server.kill();

@@ -15,6 +15,10 @@
 //!   script that deletes the map with the last claim;
 //! * `irs:job-owners:<job id>`: the set of owner digests that share a build; a cancel withdraws
 //!   one with a script that asks the builder to stop only when the last one withdraws;
+//! * `irs:scenario-maps:<scenario id>`: the ids of the maps stored from that scenario, deleted
+//!   with it (atomically, in a script);
+//! * the channel `irs:deleted`: `scenario <id>` or `map <id>`, published by the replica that
+//!   deleted it, so every replica drops its copy (`app::deletions`);
 //! * `irs:building:<map id>`: the single-flight lock, the id of the job building the map, set
 //!   with NX and an expiry that the builder renews every heartbeat;
 //! * the stream `irs:builds` with the consumer group `builders`: one entry per build. Every
@@ -94,6 +98,49 @@ fn map_owners_key(id: &MapId) -> String {
 fn job_owners_key(id: &JobId) -> String {
     format!("irs:job-owners:{id}")
 }
+fn scenario_maps_key(id: &ScenarioId) -> String {
+    format!("irs:scenario-maps:{id}")
+}
+
+/// The channel on which a replica that deletes a scenario or a map tells the others, which
+/// drop their copies (`app::deletions`): `scenario <id>` or `map <id>`.
+const DELETIONS: &str = "irs:deleted";
+
+/// Something deleted on one replica, which every other must forget.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Deleted {
+    Scenario(ScenarioId),
+    Map(MapId),
+}
+
+impl Deleted {
+    fn message(&self) -> String {
+        match self {
+            Deleted::Scenario(id) => format!("scenario {id}"),
+            Deleted::Map(id) => format!("map {id}"),
+        }
+    }
+
+    fn parse(message: &str) -> Option<Deleted> {
+        match message.split_once(' ')? {
+            ("scenario", id) => Some(Deleted::Scenario(ScenarioId::given(id))),
+            ("map", id) => Some(Deleted::Map(MapId::given(id))),
+            _ => None,
+        }
+    }
+}
+
+/// Deletes a scenario's record (KEYS[1]) with every map built from it: the set KEYS[2] names
+/// them, and ARGV[1], ARGV[2] prefix a map's key and its claims' key. Atomic, so a map stored
+/// meanwhile is either deleted or stored after (and then deleted with the scenario's next
+/// deletion). Returns 1 if the record was there. Standalone Redis only (keys built in the script).
+const DELETE_SCENARIO: &str = r"
+for _, m in ipairs(redis.call('SMEMBERS', KEYS[2])) do
+  redis.call('DEL', ARGV[1] .. m, ARGV[2] .. m)
+end
+redis.call('DEL', KEYS[2])
+return redis.call('DEL', KEYS[1])
+";
 
 /// Withdraws one owner (ARGV[1]) from the set KEYS[1], atomically with what follows when it
 /// is the last: with ARGV[2] = "del" KEYS[2] is deleted with the set (a map nobody claims any
@@ -308,12 +355,50 @@ impl Cluster {
         }
     }
 
-    /// Stores a map's encoded bytes, framed with their digest.
-    pub async fn put_map(&self, id: &MapId, encoded: &[u8]) -> Result<(), Error> {
+    /// Stores a map's encoded bytes, framed with their digest, listed under the scenario it
+    /// was built from (deleted with it).
+    pub async fn put_map(
+        &self,
+        id: &MapId,
+        scenario: &ScenarioId,
+        encoded: &[u8],
+    ) -> Result<(), Error> {
         let mut conn = self.conn()?;
-        conn.set::<_, _, ()>(map_key(id), store::frame(encoded))
+        redis::pipe()
+            .atomic()
+            .set(map_key(id), store::frame(encoded))
+            .ignore()
+            .sadd(scenario_maps_key(scenario), id.as_str())
+            .ignore()
+            .query_async::<()>(&mut conn)
             .await
             .map_err(|e| self.error(&e))
+    }
+
+    /// Tells every replica (this one included) that something was deleted. Best effort: a
+    /// replica that misses it (not connected to Redis at the time) keeps its copy until its
+    /// cache lets go of it.
+    async fn announce(&self, conn: &mut ConnectionManager, deleted: Deleted) {
+        let sent: redis::RedisResult<usize> = conn.publish(DELETIONS, deleted.message()).await;
+        if let Err(e) = sent {
+            tracing::warn!(deleted = ?deleted, error = %e, "a deletion not announced to the other replicas");
+        }
+    }
+
+    /// The deletions announced by any replica, from now on; the stream ends when the
+    /// subscription's connection does (subscribe again).
+    pub async fn deletions(
+        &self,
+    ) -> redis::RedisResult<impl futures_util::Stream<Item = Deleted> + use<>> {
+        let mut pubsub = self.client.get_async_pubsub().await?;
+        pubsub.subscribe(DELETIONS).await?;
+        Ok(futures_util::StreamExt::filter_map(
+            pubsub.into_on_message(),
+            |message| async move {
+                let text: String = message.get_payload().ok()?;
+                Deleted::parse(&text)
+            },
+        ))
     }
 
     /// Records that `owner` shares the build `id` (kept as long as job records are).
@@ -591,6 +676,9 @@ impl Store for Cluster {
             .invoke_async(&mut conn)
             .await
             .map_err(|e| self.error(&e))?;
+        if left == 0 {
+            self.announce(&mut conn, Deleted::Map(id.clone())).await;
+        }
         Ok(usize::try_from(left).ok())
     }
 
@@ -638,14 +726,38 @@ impl Store for Cluster {
             .map_err(|e| self.error(&e))
     }
 
+    /// A scenario goes with the maps built from it, and a map with its claims; every replica
+    /// is told, so none keeps serving its copy.
     async fn delete(&self, entry: Entry<'_>) -> Result<bool, Error> {
         let mut conn = self.conn()?;
-        let mut keys = vec![entry_key(entry)];
-        if let Entry::Map(id) = entry {
-            keys.push(map_owners_key(id));
+        let (removed, deleted) = match entry {
+            Entry::Scenario(id) => {
+                let removed: i64 = redis::Script::new(DELETE_SCENARIO)
+                    .key(scenario_key(id))
+                    .key(scenario_maps_key(id))
+                    .arg("irs:map:")
+                    .arg("irs:map-owners:")
+                    .invoke_async(&mut conn)
+                    .await
+                    .map_err(|e| self.error(&e))?;
+                (removed > 0, Some(Deleted::Scenario(id.clone())))
+            }
+            Entry::Map(id) => {
+                let removed: usize = conn
+                    .del(&[map_key(id), map_owners_key(id)])
+                    .await
+                    .map_err(|e| self.error(&e))?;
+                (removed > 0, Some(Deleted::Map(id.clone())))
+            }
+            Entry::Job(id) => {
+                let removed: usize = conn.del(job_key(id)).await.map_err(|e| self.error(&e))?;
+                (removed > 0, None)
+            }
+        };
+        if let Some(deleted) = deleted {
+            self.announce(&mut conn, deleted).await;
         }
-        let removed: usize = conn.del(&keys).await.map_err(|e| self.error(&e))?;
-        Ok(removed > 0)
+        Ok(removed)
     }
 
     async fn discard(&self, entry: Entry<'_>, why: &str) {
