@@ -20,9 +20,20 @@ RUN cargo build --release --locked --features "$FEATURES" --bin irs-planner
 
 FROM debian:bookworm-slim
 ARG FEATURES=""
+# The package's version (Cargo.toml; the container test checks they agree) and the commit
+# built (`--build-arg REVISION=$(git rev-parse HEAD)`).
+ARG VERSION=0.1.0
+ARG REVISION=unknown
+LABEL org.opencontainers.image.title="irs-planner" \
+      org.opencontainers.image.description="Radio maps and communication-aware robot paths with intelligent reflecting surfaces: an HTTP planning service" \
+      org.opencontainers.image.version="$VERSION" \
+      org.opencontainers.image.revision="$REVISION" \
+      org.opencontainers.image.licenses="MIT"
+# Any uid may run it (`docker run --user 12345:0`, as OpenShift does): the data directory
+# belongs to group 0 with the owner's rights, and every uid runs with group 0 there.
 RUN if [ -n "$FEATURES" ]; then apt-get update && apt-get install -y --no-install-recommends libopenblas0 libgfortran5 && rm -rf /var/lib/apt/lists/*; fi \
- && useradd --system --uid 10001 --no-create-home irs \
- && mkdir -p /var/lib/irs-planner && chown irs /var/lib/irs-planner
+ && useradd --system --uid 10001 --gid 0 --no-create-home irs \
+ && mkdir -p /var/lib/irs-planner && chown irs:0 /var/lib/irs-planner && chmod 0770 /var/lib/irs-planner
 COPY --from=build /src/target/release/irs-planner /usr/local/bin/irs-planner
 COPY scenarios /srv/scenarios
 USER irs

@@ -2,7 +2,10 @@
 """The container, run from the host: health endpoints, a scenario registered, a path answer
 identical to the CLI's, a non-root process, a HEALTHCHECK that reports healthy, persistence in
 the image's volume across a restart, and `docker stop` ending the server gracefully (SIGTERM
-reaches it as PID 1) within 10 s. Prints the image size and fails above 120 MB.
+reaches it as PID 1) within 10 s; then the same image run as an arbitrary uid (`--user
+12345:0`, as OpenShift runs images) keeping a map in its volume across a restart; and the OCI
+labels (version as the server reports it, licence, revision). Prints the image size and fails
+above 120 MB.
 
     tests/container/container_test.py IMAGE CLI_BINARY
 """
@@ -37,11 +40,12 @@ def request(base, method, path, body=None):
     return status, text
 
 
-def wait_ready(base, seconds=30):
+def wait_ready(base, seconds=30, container=NAME):
+    """Until /readyz says ready (nothing degraded: the data directory is writable)."""
     try:
-        kit.wait_until(f"{base}/readyz 200", lambda: kit.ready(base, timeout=60), seconds, interval=0.2)
+        kit.wait_until(f"{base}/readyz ready", lambda: kit.ready(base, timeout=60), seconds, interval=0.2)
     except kit.Timeout as e:
-        raise kit.Timeout(f"{e}:\n{docker('logs', NAME, check=False)}") from None
+        raise kit.Timeout(f"{e}:\n{docker('logs', container, check=False)}") from None
 
 
 def main():
@@ -109,9 +113,42 @@ def main():
         status, again = request(base, "POST", "/v1/paths", path_request)
         check(untimed(again) == untimed(api_body), "and the same path is answered")
         check(kit.metric(base, "irs_map_builds_total") == 0, "without building it again")
+
+        labels = json.loads(docker("image", "inspect", "--format", "{{json .Config.Labels}}", IMAGE)) or {}
+        version = json.loads(request(base, "GET", "/version")[1])["version"]
+        oci = {k.removeprefix("org.opencontainers.image."): v for k, v in labels.items()}
+        check(oci.get("version") == version and oci.get("licenses") == "MIT" and oci.get("revision")
+              and oci.get("title") == "irs-planner",
+              f"OCI labels: version {oci.get('version')} (the server says {version}), "
+              f"licence {oci.get('licenses')}, revision {oci.get('revision')}")
     finally:
         docker("rm", "-f", NAME, check=False)
         docker("volume", "rm", "-f", VOLUME, check=False)
+    any_uid()
+
+
+def any_uid():
+    """An arbitrary uid in group 0 (OpenShift's way) writes the image's data directory: ready,
+    not degraded, and a map it built is served after a restart without a build."""
+    name, volume = f"{NAME}-uid", f"{NAME}-uid-data"
+    docker("run", "-d", "--name", name, "--user", "12345:0", "-p", "127.0.0.1::8080",
+           "-v", f"{volume}:/var/lib/irs-planner", IMAGE)
+    try:
+        base = lambda: "http://127.0.0.1:" + docker("port", name, "8080/tcp").splitlines()[0].rsplit(":", 1)[1]
+        wait_ready(base(), container=name)
+        check(docker("exec", name, "id", "-u") == "12345", "the server runs as uid 12345")
+        small = kit.scenario_id(base(), "small-test")
+        status, body = request(base(), "POST", "/v1/maps", {"scenario_id": small, "kind": "gain"})
+        check(status == 200, f"a map built as uid 12345 ({status})")
+        map_id = json.loads(body)["map_id"]
+        docker("restart", "--time", "10", name)
+        wait_ready(base(), container=name)
+        status, _ = request(base(), "GET", f"/v1/maps/{map_id}")
+        check(status == 200 and kit.metric(base(), "irs_map_builds_total") == 0,
+              f"as uid 12345 the volume keeps the map across a restart ({status}, no build)")
+    finally:
+        docker("rm", "-f", name, check=False)
+        docker("volume", "rm", "-f", volume, check=False)
 
 
 if __name__ == "__main__":

@@ -156,7 +156,7 @@ impl DataDir {
         };
         // A write test now, so an operator sees at start-up that writes will fail.
         if let Err(reason) = store.probe() {
-            tracing::warn!(dir = %root.display(), reason, "data directory not writable: serving what it holds, not ready until it can be written");
+            tracing::warn!(dir = %root.display(), reason, "data directory not writable: serving what it holds, degraded until it can be written");
         }
         let mut maps = HashMap::new();
         // Only each file's head (the key) is read now; the digest is checked when a map is
