@@ -102,6 +102,12 @@ def main():
         check(code == "0", f"docker stop: exit code {code} (137 would mean SIGKILL)")
         check(took < 10, f"docker stop took {took:.2f} s (< 10 s)")
         check("shutdown complete" in logs, "the server logged its graceful shutdown")
+        access = [json.loads(line) for line in logs.splitlines()
+                  if line.startswith("{") and '"finished processing request"' in line]
+        planned = [a for a in access if a.get("span", {}).get("route") == "/v1/paths"
+                   and a.get("status") == 200 and a["span"].get("request_id") and a.get("latency")]
+        check(planned, f"a JSON access-log line per answer (route template, status, latency, request "
+                       f"id): {len(access)} lines, the last {access[-1] if access else None}")
 
         # The volume keeps the map: after a restart it answers without a build.
         docker("start", NAME)

@@ -34,10 +34,11 @@ use problem::{ApiError, parse_json};
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 use tower::ServiceBuilder;
+use tower_http::LatencyUnit;
 use tower_http::compression::CompressionLayer;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
-use tower_http::trace::TraceLayer;
+use tower_http::trace::{DefaultOnResponse, TraceLayer};
 
 /// Every route: path, methods, handler. The router is built from this table and a test checks
 /// it against `openapi.yaml`.
@@ -319,10 +320,22 @@ pub(crate) fn app(
             ServiceBuilder::new()
                 .layer(middleware::from_fn(clean_request_id))
                 .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
-                .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
-                    let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
-                    tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %request_id)
-                }))
+                // The access log: one line at info per answer ("finished processing request",
+                // with the status and the latency) in the request's span, which names the
+                // method, the URI, the route template (set by `track_metrics` once routed) and
+                // the request id.
+                .layer(
+                    TraceLayer::new_for_http()
+                        .make_span_with(|req: &Request| {
+                            let request_id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
+                            tracing::info_span!("request", method = %req.method(), uri = %req.uri(), route = tracing::field::Empty, request_id = %request_id)
+                        })
+                        .on_response(
+                            DefaultOnResponse::new()
+                                .level(tracing::Level::INFO)
+                                .latency_unit(LatencyUnit::Micros),
+                        ),
+                )
                 .layer(PropagateRequestIdLayer::x_request_id())
                 .layer(middleware::from_fn(refuse_long_uri)),
         );
@@ -394,6 +407,7 @@ async fn track_metrics(req: Request, next: Next) -> Response {
         .extensions()
         .get::<MatchedPath>()
         .map_or("unmatched".to_string(), |m| m.as_str().to_string());
+    tracing::Span::current().record("route", route.as_str());
     let method = req.method().to_string();
     let response = next.run(req).await;
     let status = response.status().as_u16().to_string();
