@@ -1298,6 +1298,23 @@ async fn operations_endpoints() {
             .await
             >= 1.0
     );
+    // Every series rendered says what it is (HELP and TYPE).
+    let text = server.metrics_text().await;
+    for name in text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.is_empty())
+        .map(|l| l.split(['{', ' ']).next().unwrap())
+        .map(|n| {
+            n.trim_end_matches("_bucket")
+                .trim_end_matches("_sum")
+                .trim_end_matches("_count")
+        })
+    {
+        assert!(
+            text.contains(&format!("# HELP {name} ")) && text.contains(&format!("# TYPE {name} ")),
+            "{name} has no HELP or TYPE line:\n{text}"
+        );
+    }
     assert_eq!(server.metric("irs_scenarios").await, 3.0);
 }
 

@@ -31,6 +31,7 @@ impl Metrics {
             .set_buckets(BUCKETS)
             .map_err(|e| format!("metrics recorder: {e}"))?
             .build_recorder();
+        metrics::with_local_recorder(&recorder, crate::runtime::series::describe);
         Ok(Metrics {
             recorder: Arc::new(recorder),
         })
