@@ -23,6 +23,8 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * one truth: a scenario deleted through a replica that never loaded it is gone, with its
     map, from every replica and from Redis within a second, and so is a map deleted through a
     third replica;
+  * graceful stop: a replica with --shutdown-delay-s stopped (SIGTERM) under load behind
+    HAProxy: 0 failed requests;
   * tenants: two more replicas with tokens on the same Redis; a map's claims and a shared
     build's owners made on one replica are seen on the other (404 to a tenant without a
     claim, a DELETE withdraws only the caller's claim, a cancel only the caller's interest).
@@ -140,6 +142,8 @@ defaults
     timeout server 60s
     option http-keep-alive
     http-reuse always
+    retries 2
+    option redispatch
 frontend api
     bind 127.0.0.1:{self.port}
     default_backend replicas
@@ -369,6 +373,7 @@ def main():
     tenants(redis)
     repairs(redis, survivors)
     one_truth(redis, survivors)
+    graceful_stop(redis)
 
 
 def gone_everywhere(replicas, path, seconds=1.0):
@@ -387,7 +392,8 @@ def one_truth(redis, survivors):
     through a third; neither stays in Redis."""
     owner, reader = survivors
     third = Replica(redis.port, "third")  # has loaded nothing: it must find both in Redis
-    wait_until("the third replica ready", third.ready, 15)
+    # Redis was just restarted (repairs): every replica connected again, not degraded.
+    wait_until("the replicas ready", lambda: all(r.ready() for r in (owner, reader, third)), 15)
     everyone = [owner, reader, third]
     doc = scenario("small-test", lambda d: d.__setitem__("name", "one-truth"))
     status, created, _ = request(owner.base, "POST", "/v1/scenarios", doc)
@@ -417,6 +423,39 @@ def one_truth(redis, survivors):
           f"a map deleted through a third replica: {status}, gone from every replica in {took and round(took, 3)} s")
     print(f"deletes seen by every replica in {max(took, took_map):.3f} s at most", flush=True)
     third.stop()
+
+
+def graceful_stop(redis):
+    """A replica stopped (SIGTERM) under load behind HAProxy loses no request: with
+    --shutdown-delay-s it answers /readyz 503 and keeps serving until HAProxy's checks (every
+    0.5 s, out after two failures) take it out, then drains."""
+    staying = Replica(redis.port, "staying")
+    leaving = Replica(redis.port, "leaving", "--shutdown-delay-s", "2")
+    proxy = HAProxy([staying, leaving])
+    wait_until("both replicas ready", lambda: staying.ready() and leaving.ready(), 15)
+    wait_until("HAProxy forwarding", lambda: kit.ready(proxy.base), 15)
+    paper = kit.scenario_id(proxy.base, "paper-single-user")
+    status, built, _ = request(proxy.base, "POST", "/v1/maps", {"scenario_id": paper, "kind": "gain"})
+    query = {"map_id": built["map_id"], "start": [-10, 0], "goal": [10, 0], "threshold": -62}
+    for r in (staying, leaving):
+        request(r.base, "POST", "/v1/paths", query)
+    time.sleep(1.5)  # both in rotation (rise 2 at 500 ms)
+    load = Load(proxy.base, query)
+    time.sleep(1)
+    served_before = load.done
+    leaving.proc.send_signal(signal.SIGTERM)
+    stopped = time.time()
+    leaving.proc.wait(15)
+    exit_s = time.time() - stopped
+    time.sleep(1)
+    done, failures = load.stop()
+    print(f"graceful stop under load: {done} path queries through HAProxy ({served_before} before the "
+          f"SIGTERM), {len(failures)} failed; the replica exited {exit_s:.1f} s after SIGTERM", flush=True)
+    check(leaving.proc.returncode == 0 and not failures,
+          f"a replica stopped under load: exit {leaving.proc.returncode}, {len(failures)} of {done} "
+          f"queries failed {failures[:3]}")
+    kit.stop_process(proxy.proc)
+    staying.stop()
 
 
 def tenants(redis):

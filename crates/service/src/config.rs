@@ -154,6 +154,12 @@ pub struct ServeArgs {
     /// two seconds later.
     #[arg(long, env = "IRS_SHUTDOWN_GRACE_S", default_value_t = 5)]
     pub shutdown_grace_s: u64,
+    /// Seconds SIGTERM keeps serving, with `/readyz` answering 503, before it stops accepting:
+    /// behind a load balancer, long enough for its health check to take the replica out (two
+    /// failed checks), so no request is sent to a replica that has closed. 0 (the default)
+    /// stops accepting at once, as a lone server should.
+    #[arg(long, env = "IRS_SHUTDOWN_DELAY_S", default_value_t = 0)]
+    pub shutdown_delay_s: u64,
 }
 
 impl ServeArgs {

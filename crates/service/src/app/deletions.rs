@@ -10,25 +10,44 @@
 
 use super::App;
 use crate::ids::ScenarioId;
-use crate::store::Store as _;
 use crate::store::redis::{Cluster, Deleted, HEALTH_PERIOD};
 use futures_util::StreamExt;
 use std::sync::Arc;
+use std::time::Duration;
 
-/// Follows the deletions announced in the cluster, subscribing again whenever the connection
-/// drops.
+/// How long subscribing may take before it is tried again.
+const SUBSCRIBE_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Follows the deletions announced in the cluster, subscribing again whenever the subscription
+/// ends or Redis was away since it was made (the health loop saw it go: the subscription's
+/// connection may be dead without the stream noticing).
 pub(crate) async fn follow(state: App, cluster: Arc<Cluster>) {
     loop {
-        if cluster.unavailable().is_none() {
-            match cluster.deletions().await {
-                Ok(announced) => {
+        let since = cluster.up_since();
+        if since.is_some() {
+            match tokio::time::timeout(SUBSCRIBE_TIMEOUT, cluster.deletions()).await {
+                Ok(Ok(announced)) => {
                     tracing::debug!("following the cluster's deletions");
                     let mut announced = std::pin::pin!(announced);
-                    while let Some(deleted) = announced.next().await {
-                        state.forget_deleted(deleted).await;
+                    loop {
+                        tokio::select! {
+                            next = announced.next() => match next {
+                                Some(deleted) => state.forget_deleted(deleted).await,
+                                None => break,
+                            },
+                            _ = tokio::time::sleep(HEALTH_PERIOD) => {
+                                if cluster.up_since() != since {
+                                    break;
+                                }
+                            }
+                        }
                     }
+                    cluster.stopped_following();
                 }
-                Err(e) => tracing::debug!(error = %e, "cannot follow the cluster's deletions yet"),
+                Ok(Err(e)) => {
+                    tracing::debug!(error = %e, "cannot follow the cluster's deletions yet")
+                }
+                Err(_) => tracing::debug!("subscribing to the cluster's deletions timed out"),
             }
         }
         tokio::time::sleep(HEALTH_PERIOD).await;

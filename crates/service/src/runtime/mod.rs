@@ -5,6 +5,7 @@
 //! (`irs-planner serve`): it installs the tracing subscriber and the build pool, binds, and
 //! runs until SIGINT/SIGTERM. [`server`] is the accept loop and its timeouts.
 
+pub(crate) mod series;
 pub(crate) mod server;
 
 use crate::app::{self, App};
@@ -119,9 +120,9 @@ impl Drop for CancelJobsOnDrop {
     }
 }
 
-/// Serves the service configured by `args` on `listener` until `shutdown` resolves, then stops
-/// accepting, waits up to `--shutdown-grace-s` for running jobs and requests, cancels the
-/// rest and returns. Prints `listening on http://ADDR` on stdout once it serves. Dropping the
+/// Serves the service configured by `args` on `listener` until `shutdown` resolves, then (not
+/// ready, still serving) waits `--shutdown-delay-s`, stops accepting, waits up to
+/// `--shutdown-grace-s` for running jobs and requests, cancels the rest and returns. Prints `listening on http://ADDR` on stdout once it serves. Dropping the
 /// future before then cancels the server's jobs.
 pub async fn run(
     listener: TcpListener,
@@ -147,6 +148,7 @@ async fn serve_app(
 ) -> Result<(), ServeError> {
     let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
     let grace = Duration::from_secs(args.shutdown_grace_s);
+    let delay = Duration::from_secs(args.shutdown_delay_s);
     // First, as before the split: an operator sees the same error first.
     let cors_origins = http::cors_origins(&args.cors_origin).map_err(ServeError::Config)?;
     let state = App::new(&args, metrics.handle()).map_err(ServeError::Config)?;
@@ -223,6 +225,13 @@ async fn serve_app(
         async move {
             shutdown.await;
             stopping.set_ready(false);
+            if !delay.is_zero() {
+                tracing::info!(
+                    delay_s = delay.as_secs(),
+                    "shutdown: not ready; serving until the load balancer lets go"
+                );
+                tokio::time::sleep(delay).await;
+            }
         },
     )
     .await;

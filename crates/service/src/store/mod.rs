@@ -260,10 +260,17 @@ mod tests {
         let health = cluster.clone();
         let watch = tokio::spawn(async move { health.watch_health().await });
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        while cluster.unavailable().is_some() {
+        while cluster.up_since().is_none() {
             assert!(std::time::Instant::now() < deadline, "Redis never answered");
             tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         }
+        assert!(
+            cluster.unavailable().is_some(),
+            "unavailable until the replica follows the deletions"
+        );
+        use futures_util::StreamExt as _;
+        let mut announced = std::pin::pin!(cluster.deletions().await.unwrap());
+        assert_eq!(cluster.unavailable(), None);
         let store: Arc<dyn Store> = cluster.clone();
         claims_are_withdrawn_one_owner_at_a_time(&*store).await;
         concurrent_claims_all_land(store.clone()).await;
@@ -315,8 +322,17 @@ mod tests {
 
         // A scenario goes with the maps built from it and their claims, a map with its last
         // claim, and every replica is told of each.
-        use futures_util::StreamExt as _;
-        let mut announced = std::pin::pin!(cluster.deletions().await.unwrap());
+        // What the claims and map deletions above announced, heard and set aside.
+        let mut earlier = 0;
+        while let Ok(Some(_)) =
+            tokio::time::timeout(std::time::Duration::from_millis(300), announced.next()).await
+        {
+            earlier += 1;
+        }
+        assert!(
+            earlier >= 3,
+            "the map deletions above were announced ({earlier})"
+        );
         let sid = ScenarioId::given("ef".repeat(16));
         store
             .put_scenario(&sid, &|| b"{}".to_vec(), true)

@@ -195,6 +195,10 @@ pub(crate) struct Cluster {
     down: Mutex<Option<String>>,
     /// When Redis last became available to this replica (see [`Cluster::next_build`]).
     up_since: Mutex<Option<Instant>>,
+    /// Whether this replica follows the deletions channel now. Until it does it could serve
+    /// what another replica deleted, so the store counts as unavailable (at start-up, and
+    /// after Redis was away, until the subscription is made again).
+    following: std::sync::atomic::AtomicBool,
 }
 
 fn config() -> ConnectionManagerConfig {
@@ -219,6 +223,7 @@ impl Cluster {
             commands: RwLock::new(None),
             down: Mutex::new(Some("not connected to Redis yet".into())),
             up_since: Mutex::new(None),
+            following: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -238,6 +243,10 @@ impl Cluster {
             }
             metrics::gauge!("irs_redis_up").set(if down.is_none() { 1.0 } else { 0.0 });
             *self.up_since.lock().expect("cluster lock") = down.is_none().then(Instant::now);
+            if down.is_some() {
+                // The subscription's connection went with the others (or may have).
+                self.stopped_following();
+            }
         }
         *state = down;
     }
@@ -385,6 +394,18 @@ impl Cluster {
         }
     }
 
+    /// The subscription of [`Cluster::deletions`] ended: unavailable until the next one.
+    pub fn stopped_following(&self) {
+        self.following
+            .store(false, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// When Redis last became available to this replica (`None` while it is not): a change
+    /// means the connections of before may be gone, subscriptions included.
+    pub fn up_since(&self) -> Option<Instant> {
+        *self.up_since.lock().expect("cluster lock")
+    }
+
     /// The deletions announced by any replica, from now on; the stream ends when the
     /// subscription's connection does (subscribe again).
     pub async fn deletions(
@@ -392,6 +413,8 @@ impl Cluster {
     ) -> redis::RedisResult<impl futures_util::Stream<Item = Deleted> + use<>> {
         let mut pubsub = self.client.get_async_pubsub().await?;
         pubsub.subscribe(DELETIONS).await?;
+        self.following
+            .store(true, std::sync::atomic::Ordering::SeqCst);
         Ok(futures_util::StreamExt::filter_map(
             pubsub.into_on_message(),
             |message| async move {
@@ -648,7 +671,12 @@ fn entry_key(entry: Entry<'_>) -> String {
 #[async_trait::async_trait]
 impl Store for Cluster {
     fn unavailable(&self) -> Option<String> {
-        self.down.lock().expect("cluster lock").clone()
+        let down = self.down.lock().expect("cluster lock").clone();
+        down.or_else(|| {
+            (!self.following.load(std::sync::atomic::Ordering::SeqCst)).then(|| {
+                "Redis answers, but the other replicas' deletions are not followed yet".into()
+            })
+        })
     }
 
     async fn claim_map(&self, id: &MapId, owner: &str) -> Result<(), Error> {
