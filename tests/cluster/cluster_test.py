@@ -27,7 +27,9 @@ replicas and HAProxy health-checking their /readyz, then checks:
     HAProxy: 0 failed requests;
   * tenants: two more replicas with tokens on the same Redis; a map's claims and a shared
     build's owners made on one replica are seen on the other (404 to a tenant without a
-    claim, a DELETE withdraws only the caller's claim, a cancel only the caller's interest).
+    claim, a DELETE withdraws only the caller's claim, a cancel only the caller's interest);
+  * bounded Redis: with --redis-maps-mb 1 the least recently used maps are evicted and the
+    rest stay within the budget; an evicted map is built again on request.
 Everything binds 127.0.0.1 and stops by itself (about a minute on two cores).
 """
 
@@ -77,13 +79,18 @@ class Redis:
         self.proc.terminate()
         self.proc.wait(10)
 
-    def command(self, *args):
-        """One Redis command (RESP over a socket; arguments as str or bytes): its reply, a
-        bulk string as str when it is UTF-8 (bytes otherwise)."""
+    def command(self, *args, db=0):
+        """One Redis command (RESP over a socket; arguments as str or bytes) in database `db`:
+        its reply, a bulk string as str when it is UTF-8 (bytes otherwise)."""
         with socket.create_connection(("127.0.0.1", self.port), timeout=5) as s:
-            parts = [a if isinstance(a, bytes) else str(a).encode() for a in args]
-            s.sendall(b"*%d\r\n" % len(parts) + b"".join(b"$%d\r\n%s\r\n" % (len(p), p) for p in parts))
+            def send(*words):
+                parts = [a if isinstance(a, bytes) else str(a).encode() for a in words]
+                s.sendall(b"*%d\r\n" % len(parts) + b"".join(b"$%d\r\n%s\r\n" % (len(p), p) for p in parts))
             reader = s.makefile("rb")
+            if db:
+                send("SELECT", db)
+                reader.readline()
+            send(*args)
             line = reader.readline().rstrip(b"\r\n")
             kind, rest = line[:1], line[1:]
             if kind == b"+":
@@ -104,11 +111,11 @@ class Redis:
 
 
 class Replica(kit.Server):
-    def __init__(self, redis_port, name, *flags):
+    def __init__(self, redis_port, name, *flags, db=0):
         self.name = name
         empty = os.path.join(WORK, "no-scenarios")
         os.makedirs(empty, exist_ok=True)
-        super().__init__(BINARY, "--scenarios", empty, "--redis-url", f"redis://127.0.0.1:{redis_port}/",
+        super().__init__(BINARY, "--scenarios", empty, "--redis-url", f"redis://127.0.0.1:{redis_port}/{db}",
                          "--workers", "1", *flags, log_path=os.path.join(WORK, f"{name}.log"),
                          env={**os.environ, "RUST_LOG": "info"})
 
@@ -374,6 +381,7 @@ def main():
     repairs(redis, survivors)
     one_truth(redis, survivors)
     graceful_stop(redis)
+    bounded(redis)
 
 
 def gone_everywhere(replicas, path, seconds=1.0):
@@ -513,6 +521,58 @@ def tenants(redis):
         job = wait_job(one.base, first["job_id"], 60, token=bob)
         check(job["state"] == "cancelled", f"the build stopped with the last owner ({job['state']})")
     for replica in (one, two):  # the checks after these count builds over the other replicas
+        replica.stop()
+
+
+def bounded(redis):
+    """Two replicas whose maps may take 1 MiB of Redis (--redis-maps-mb 1): storing past it evicts the least recently used maps, the maps stay
+    within it, an evicted map is built again on request (and still answered by a replica that
+    holds it), and a map bigger than the budget is refused before its build."""
+    # A database of their own: the replicas of the other checks (default budget) would build
+    # and store maps in theirs too.
+    one, two = (Replica(redis.port, f"bounded{i}", "--redis-maps-mb", "1", db=1) for i in range(2))
+    wait_until("the bounded replicas ready", lambda: one.ready() and two.ready(), 15)
+    budget = 1 << 20
+    # 201 x 201 cells, about 0.35 MB each in Redis: the fourth needs room.
+    maps = []
+    for i in range(5):
+        floor = scenario("paper-single-user", lambda d: (d.update(name=f"bounded-{i}"), d["grid"].update(resolution_m=0.1)))
+        status, built, _ = request(one.base, "POST", "/v1/maps", {"scenario": floor, "kind": "gain"})
+        check(status == 200, f"map {i} built ({status})")
+        maps.append(built["map_id"])
+    stored = [m for m in maps if redis.command("EXISTS", f"irs:map:{m}", db=1) == 1]
+    total = sum(int(redis.command("HGET", "irs:map-sizes", m, db=1) or 0) for m in stored)
+    check(redis.command("HLEN", "irs:map-sizes", db=1) == len(stored),
+          "the budget counts the stored maps, and only them")
+    # Whichever replica had a free worker built each map and stored it.
+    evicted = sum(r.metric("irs_redis_maps_evicted_total") for r in (one, two))
+    print(f"5 maps of about {total / max(len(stored), 1) / 1e6:.2f} MB stored with a 1 MiB budget: "
+          f"{len(stored)} kept ({total} bytes), {evicted:.0f} evicted", flush=True)
+    check(maps[0] not in stored and maps[-1] in stored and evicted >= 1,
+          f"the least recently used evicted ({len(stored)} of 5 kept, {evicted:.0f} evictions)")
+    check(total <= budget, f"the maps within the budget ({total} <= {budget} bytes)")
+    check(total in [r.metric("irs_redis_map_bytes") for r in (one, two)],
+          "irs_redis_map_bytes says so (on the replica that stored last)")
+    status, _, _ = request(one.base, "GET", f"/v1/maps/{maps[0]}")
+    check(status == 200, f"the replica holding the evicted map still answers it ({status})")
+    # A replica started now holds nothing: it must read Redis.
+    fresh = Replica(redis.port, "bounded2", "--redis-maps-mb", "1", db=1)
+    wait_until("the fresh bounded replica ready", fresh.ready, 15)
+    status, _, _ = request(fresh.base, "GET", f"/v1/maps/{maps[0]}")
+    check(status == 404, f"a replica without it: not found, as any map let go of ({status})")
+    status, _, _ = request(fresh.base, "GET", f"/v1/maps/{maps[-1]}")
+    check(status == 200, f"one still in Redis: read from there ({status})")
+    floor = scenario("paper-single-user", lambda d: (d.update(name="bounded-0"), d["grid"].update(resolution_m=0.1)))
+    status, again, _ = request(fresh.base, "POST", "/v1/maps", {"scenario": floor, "kind": "gain"})
+    check(status == 200 and again["map_id"] == maps[0], f"requested again: built again ({status})")
+    path = {"map_id": maps[0], "start": [-10, 0], "goal": [10, 0], "threshold": -70}
+    status, _, _ = request(fresh.base, "POST", "/v1/paths", path)
+    check(status == 200, f"and its paths answer ({status})")
+    fine = scenario("paper-single-user", lambda d: (d.update(name="bounded-fine"), d["grid"].update(resolution_m=0.02)))
+    status, problem, _ = request(one.base, "POST", "/v1/maps", {"scenario": fine, "kind": "gain"})
+    check(status == 422 and problem.get("field") == "kind" and "--redis-maps-mb" in problem.get("detail", ""),
+          f"a map bigger than the budget refused before its build: {status} {problem.get('detail', '')[:120]}")
+    for replica in (one, two, fresh):
         replica.stop()
 
 

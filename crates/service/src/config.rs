@@ -38,6 +38,11 @@ pub struct ServeArgs {
     /// once in the cluster. Without it the replica is on its own.
     #[arg(long, env = "IRS_REDIS_URL")]
     pub redis_url: Option<String>,
+    /// With `--redis-url`: the budget in MiB of the maps stored in Redis, shared by every
+    /// replica; storing one past it evicts the least recently used (built again on request).
+    /// Keep Redis's `maxmemory` above it, with `maxmemory-policy noeviction`.
+    #[arg(long, env = "IRS_REDIS_MAPS_MB", default_value_t = 1024)]
+    pub redis_maps_mb: u64,
     /// Disk budget of the data directory's maps in MiB; past it the least recently written
     /// maps are deleted (they are built again on request).
     #[arg(long, env = "IRS_DATA_MAPS_MB", default_value_t = 4096)]

@@ -6,7 +6,7 @@ use super::App;
 use crate::app::jobs::{JobRecord, JobState};
 use crate::ids::ScenarioId;
 use crate::store::redis::{BuildEntry, Cluster, HEALTH_PERIOD, HEARTBEAT};
-use crate::store::{Entry, Store as _};
+use crate::store::{Entry, Error as StoreError, Store as _};
 use redis::aio::ConnectionManager;
 use std::sync::{Arc, Mutex};
 
@@ -115,12 +115,21 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             .await
             .map_err(|e| e.to_string())?;
         let shared = publisher.put_map(&map_id, &scenario_id, &encoded).await;
-        shared.map_err(|e| {
-            *keep.lock().expect("unshared map") = Some(encoded);
-            format!(
-                "{}; kept to share when Redis answers",
-                super::Error::from(e)
-            )
+        shared.map_err(|e| match e {
+            // Retrying cannot make room: the map stays this replica's only (the others build
+            // it again when asked), and the operator is told.
+            StoreError::NoRoom { .. } => {
+                metrics::counter!("irs_maps_not_shared_total", "reason" => "store_full")
+                    .increment(1);
+                format!("{}; not shared", super::Error::from(e))
+            }
+            e => {
+                *keep.lock().expect("unshared map") = Some(encoded);
+                format!(
+                    "{}; kept to share when Redis answers",
+                    super::Error::from(e)
+                )
+            }
         })
     };
     let job = state.jobs().build_shared(
@@ -175,6 +184,12 @@ async fn share_when_redis_answers(cluster: &Cluster, build: &BuildEntry, encoded
             Ok(()) => {
                 tracing::info!(map_id = %build.map_id, attempts = attempt + 1, "kept map shared");
                 metrics::counter!("irs_maps_shared_late_total").increment(1);
+                return;
+            }
+            Err(e @ StoreError::NoRoom { .. }) => {
+                metrics::counter!("irs_maps_not_shared_total", "reason" => "store_full")
+                    .increment(1);
+                tracing::error!(map_id = %build.map_id, error = %super::Error::from(e), "kept map not shared");
                 return;
             }
             Err(e) if attempt.is_multiple_of(20) => {

@@ -52,6 +52,12 @@ pub(crate) enum Error {
         "{reason}; maps this replica holds still answer, everything else needs the shared store: retry shortly"
     )]
     Unavailable { reason: String },
+    /// The shared store is full (Redis at its `maxmemory`): an operator must make room, so
+    /// retrying does not help.
+    #[error(
+        "{reason}; the shared store has no room: its operator must raise Redis's maxmemory or lower --redis-maps-mb"
+    )]
+    StoreFull { reason: String },
     /// The scenario registry cannot take this scenario. `retry`: room comes back by itself
     /// (live jobs end), so the client is told when to try again; false for a scenario larger
     /// than the whole registry, which no wait admits.
@@ -143,6 +149,7 @@ impl From<crate::store::Error> for Error {
         match error {
             crate::store::Error::Unavailable { reason } => Error::Unavailable { reason },
             crate::store::Error::Full { limit } => Error::QueueFull { limit },
+            crate::store::Error::NoRoom { reason } => Error::StoreFull { reason },
         }
     }
 }

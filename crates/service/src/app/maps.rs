@@ -260,6 +260,20 @@ impl App {
                 ),
             ));
         }
+        if let Some(shared) = self.limits().shared_maps_bytes
+            && bytes > shared as f64
+        {
+            return Err(Error::limit_exceeded(
+                format!("{prefix}kind"),
+                shared,
+                format!(
+                    "this map would take about {:.0} MiB, more than the shared store's whole budget \
+                     for maps of {} MiB (--redis-maps-mb): use a coarser grid or fewer elements",
+                    bytes / 1048576.0,
+                    shared / 1048576
+                ),
+            ));
+        }
         if inline {
             let (stored, _) = self.register_api_scenario(scenario, caller).await?;
             return Ok((stored.scenario.clone(), key));

@@ -51,6 +51,9 @@ pub(crate) struct Limits {
     pub max_check_cpu_s: f64,
     /// The map cache's budget: a map estimated bigger is refused before its build.
     pub cache_bytes: u64,
+    /// In a cluster: the budget of the maps in Redis (`--redis-maps-mb`), which a map estimated
+    /// bigger would empty on its own.
+    pub shared_maps_bytes: Option<u64>,
     pub body_timeout: Duration,
     pub request_timeout: Duration,
     /// In a cluster: builds queued or running in the whole stream before a request gets 503
@@ -111,7 +114,10 @@ impl App {
             disk.clone(),
         ));
         let stream = match &args.redis_url {
-            Some(url) => Some(Arc::new(Cluster::new(url)?)),
+            Some(url) => Some(Arc::new(Cluster::new(
+                url,
+                args.redis_maps_mb.saturating_mul(1024 * 1024),
+            )?)),
             None => None,
         };
         let store: Arc<dyn Store> = match (&stream, &disk) {
@@ -138,6 +144,10 @@ impl App {
                     max_build_cpu_s: positive("--max-build-cpu-s", args.max_build_cpu_s)?,
                     max_check_cpu_s: positive("--max-check-cpu-s", args.max_check_cpu_s)?,
                     cache_bytes: args.cache_mb.saturating_mul(1024 * 1024),
+                    shared_maps_bytes: args
+                        .redis_url
+                        .is_some()
+                        .then(|| args.redis_maps_mb.saturating_mul(1024 * 1024)),
                     body_timeout: Duration::from_secs(args.body_timeout_s.max(1)),
                     request_timeout: Duration::from_secs(args.request_timeout_s.max(1)),
                     cluster_queue: args.queue + args.workers(),

@@ -259,6 +259,13 @@ impl From<app::Error> for ApiError {
                 e.retry_after_s = Some(1);
                 e
             }
+            // No Retry-After: waiting does not make room in Redis.
+            E::StoreFull { .. } => Self::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "store_full",
+                "Shared store full",
+                detail,
+            ),
             E::RegistryFull { retry, .. } => {
                 let mut e = Self::new(
                     StatusCode::INSUFFICIENT_STORAGE,

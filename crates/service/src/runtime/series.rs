@@ -177,10 +177,27 @@ pub(crate) const SERIES: &[(&str, Kind, &str)] = &[
         Counter,
         "Maps built while Redis was away, stored in Redis once it answered",
     ),
+    (
+        "irs_maps_not_shared_total",
+        Counter,
+        "Maps built here that Redis had no room for (at its maxmemory), kept here only [reason]",
+    ),
+    (
+        "irs_redis_map_bytes",
+        Gauge,
+        "Bytes of the maps stored in Redis, as of this replica's last store (bounded by --redis-maps-mb)",
+    ),
+    (
+        "irs_redis_maps_evicted_total",
+        Counter,
+        "Maps this replica evicted from Redis to store another within --redis-maps-mb",
+    ),
 ];
 
-/// Registers every series' HELP text in the current (the server's own) recorder.
+/// Registers every series' HELP text in the current (the server's own) recorder, the
+/// process's series (`process_*`, as Prometheus's own clients name them) included.
 pub(crate) fn describe() {
+    metrics_process::Collector::default().describe();
     for &(name, kind, help) in SERIES {
         match kind {
             Counter => metrics::describe_counter!(name, help),

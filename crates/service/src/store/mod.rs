@@ -39,6 +39,9 @@ pub(crate) enum Error {
     /// `limit` builds are already queued or running in the whole cluster.
     #[error("{limit} builds are already queued or running")]
     Full { limit: usize },
+    /// The store has no room left (Redis at its `maxmemory`), which waiting does not change.
+    #[error("{reason}")]
+    NoRoom { reason: String },
 }
 
 impl Error {
@@ -241,6 +244,81 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
+    /// A replica of the Redis at `port` whose maps may take `budget` bytes, once it follows
+    /// the deletions (the subscription lives as long as the returned task).
+    async fn replica(port: u16, budget: u64) -> (Arc<redis::Cluster>, tokio::task::JoinHandle<()>) {
+        let cluster =
+            Arc::new(redis::Cluster::new(&format!("redis://127.0.0.1:{port}"), budget).unwrap());
+        let health = cluster.clone();
+        let following = cluster.clone();
+        let task = tokio::spawn(async move {
+            let watch = tokio::spawn(async move { health.watch_health().await });
+            while following.up_since().is_none() {
+                tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+            }
+            let stream = following.deletions().await.unwrap();
+            use futures_util::StreamExt as _;
+            stream.for_each(|_| async {}).await;
+            watch.abort();
+        });
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while cluster.unavailable().is_some() {
+            assert!(std::time::Instant::now() < deadline, "Redis never answered");
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        }
+        (cluster, task)
+    }
+
+    /// Storing a map past the budget evicts the least recently used ones (a read counts as a
+    /// use), deleted maps stop counting, and a map bigger than the budget is stored alone.
+    async fn maps_stay_within_their_budget(port: u16) {
+        let payload = |byte: u8| vec![byte; 100];
+        let framed = disk::frame(&payload(0)).len() as u64;
+        let (cluster, task) = replica(port, 3 * framed).await;
+        let store: &dyn Store = &*cluster;
+        let sid = ScenarioId::given("0b".repeat(16));
+        let [a, b, c, d, e] = [0xa1, 0xa2, 0xa3, 0xa4, 0xa5].map(map);
+        for m in [&a, &b, &c] {
+            cluster.put_map(m, &sid, &payload(1)).await.unwrap();
+        }
+        let present = |ms: Vec<MapId>| async move {
+            let mut found = Vec::new();
+            for m in ms {
+                found.push(store.get(Entry::Map(&m)).await.unwrap().is_some());
+            }
+            found
+        };
+        // `a` read now: `b` is the least recently used when `d` needs room.
+        assert!(store.get(Entry::Map(&a)).await.unwrap().is_some());
+        cluster.put_map(&d, &sid, &payload(2)).await.unwrap();
+        assert_eq!(
+            present(vec![b.clone(), a.clone(), c.clone(), d.clone()]).await,
+            [false, true, true, true],
+            "the least recently used map evicted, the others kept"
+        );
+        // A deleted map frees its room: `e` fits beside `a` and `d`.
+        assert!(store.delete(Entry::Map(&c)).await.unwrap());
+        cluster.put_map(&e, &sid, &payload(3)).await.unwrap();
+        assert_eq!(
+            present(vec![a.clone(), d.clone(), e.clone()]).await,
+            [true, true, true]
+        );
+        // Storing a map again replaces its size rather than adding to it.
+        cluster.put_map(&e, &sid, &payload(4)).await.unwrap();
+        assert_eq!(
+            present(vec![a.clone(), d.clone(), e.clone()]).await,
+            [true, true, true]
+        );
+        // Bigger than the whole budget: stored, alone.
+        let big = map(0xa6);
+        cluster.put_map(&big, &sid, &vec![5; 400]).await.unwrap();
+        assert_eq!(
+            present(vec![a, d, e, big]).await,
+            [false, false, false, true]
+        );
+        task.abort();
+    }
+
     /// Needs `redis-server` on the PATH: `cargo test -p irs-service --lib -- --ignored`.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     #[ignore = "starts redis-server; run by .ci/run"]
@@ -256,7 +334,8 @@ mod tests {
             .stdout(std::process::Stdio::null())
             .spawn()
             .expect("redis-server on the PATH");
-        let cluster = Arc::new(redis::Cluster::new(&format!("redis://127.0.0.1:{port}")).unwrap());
+        let cluster =
+            Arc::new(redis::Cluster::new(&format!("redis://127.0.0.1:{port}"), 1 << 20).unwrap());
         let health = cluster.clone();
         let watch = tokio::spawn(async move { health.watch_health().await });
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
@@ -364,6 +443,8 @@ mod tests {
                 redis::Deleted::Map(one.clone())
             ]
         );
+
+        maps_stay_within_their_budget(port).await;
 
         watch.abort();
         let _ = server.kill();

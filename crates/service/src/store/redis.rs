@@ -8,6 +8,13 @@
 //!   the record `--data-dir` writes too);
 //! * `irs:map:<id>`: a built map in its compact binary form (`radiomap::encoding`), framed with
 //!   its SHA-256 like a data-directory file; each replica keeps its moka cache in front;
+//! * `irs:map-sizes` (hash: map id → bytes) and `irs:map-lru` (sorted set: map id → the time of
+//!   its last store or read from Redis, in µs): the maps' budget (`--redis-maps-mb`). Storing a
+//!   map first evicts the least recently used ones until it fits ([`STORE_MAP`]), so Redis runs
+//!   on `noeviction` and never loses a lock, a stream entry or a job record to its own eviction.
+//!   An evicted map is built again by the next request for it (`POST /v1/maps`), as one the
+//!   replicas' caches let go of; reads are the replicas' cache misses, so "recently used" is
+//!   recent in Redis, not in the replicas' caches;
 //! * `irs:job:<id>`: a map job's record (state, progress, times, error), rewritten by the
 //!   replica building it once per heartbeat; `irs:cancel:<id>` asks that replica to cancel;
 //! * `irs:map-owners:<map id>`: with tokens on, the set of owner digests that asked for the map
@@ -81,7 +88,7 @@ fn scenario_key(id: &ScenarioId) -> String {
     format!("irs:scenario:{id}")
 }
 fn map_key(id: &MapId) -> String {
-    format!("irs:map:{id}")
+    format!("{MAP_PREFIX}{id}")
 }
 fn job_key(id: &JobId) -> String {
     format!("irs:job:{id}")
@@ -101,6 +108,56 @@ fn job_owners_key(id: &JobId) -> String {
 fn scenario_maps_key(id: &ScenarioId) -> String {
     format!("irs:scenario-maps:{id}")
 }
+const MAP_PREFIX: &str = "irs:map:";
+const MAP_SIZES: &str = "irs:map-sizes";
+const MAP_LRU: &str = "irs:map-lru";
+
+/// Stores a map within the maps' budget, atomically. KEYS: the map's key, its scenario's set
+/// of maps, [`MAP_LRU`], [`MAP_SIZES`]; ARGV: the map id, its framed bytes, the budget in
+/// bytes, [`MAP_PREFIX`]. The total is summed afresh from the sizes of the maps that still
+/// exist (a map deleted with its scenario, its last claim or a repair leaves its size behind,
+/// dropped here), so no counter can drift; a size without a place in the order counts as the
+/// oldest. Then the least recently used maps are deleted until the new one fits; a map larger
+/// than the whole budget is stored alone (requests for such maps are refused beforehand, see
+/// `app::maps`). Returns {maps evicted, bytes stored now}. Standalone Redis only (keys built
+/// in the script).
+const STORE_MAP: &str = r"
+local id, size, budget, prefix = ARGV[1], string.len(ARGV[2]), tonumber(ARGV[3]), ARGV[4]
+redis.call('HDEL', KEYS[4], id)
+redis.call('ZREM', KEYS[3], id)
+local total, evicted = 0, 0
+local sizes = redis.call('HGETALL', KEYS[4])
+for i = 1, #sizes, 2 do
+  if redis.call('EXISTS', prefix .. sizes[i]) == 1 then
+    total = total + tonumber(sizes[i + 1])
+    redis.call('ZADD', KEYS[3], 'NX', 0, sizes[i])
+  else
+    redis.call('HDEL', KEYS[4], sizes[i])
+    redis.call('ZREM', KEYS[3], sizes[i])
+  end
+end
+while total + size > budget do
+  local oldest = redis.call('ZRANGE', KEYS[3], 0, 0)[1]
+  if not oldest then break end
+  total = total - tonumber(redis.call('HGET', KEYS[4], oldest) or '0')
+  redis.call('DEL', prefix .. oldest)
+  redis.call('ZREM', KEYS[3], oldest)
+  redis.call('HDEL', KEYS[4], oldest)
+  evicted = evicted + 1
+end
+local now = redis.call('TIME')
+redis.call('SET', KEYS[1], ARGV[2])
+redis.call('SADD', KEYS[2], id)
+redis.call('HSET', KEYS[4], id, size)
+redis.call('ZADD', KEYS[3], now[1] * 1000000 + now[2], id)
+return {evicted, total + size}
+";
+
+/// Marks a map (ARGV[1]) used now in [`MAP_LRU`] (KEYS[1]), if it is still there.
+const TOUCH_MAP: &str = r"
+local now = redis.call('TIME')
+return redis.call('ZADD', KEYS[1], 'XX', now[1] * 1000000 + now[2], ARGV[1])
+";
 
 /// The channel on which a replica that deletes a scenario or a map tells the others, which
 /// drop their copies (`app::deletions`): `scenario <id>` or `map <id>`.
@@ -199,6 +256,8 @@ pub(crate) struct Cluster {
     /// what another replica deleted, so the store counts as unavailable (at start-up, and
     /// after Redis was away, until the subscription is made again).
     following: std::sync::atomic::AtomicBool,
+    /// The bytes the maps stored in Redis may take together (`--redis-maps-mb`).
+    maps_budget: u64,
 }
 
 fn config() -> ConnectionManagerConfig {
@@ -209,8 +268,9 @@ fn config() -> ConnectionManagerConfig {
 }
 
 impl Cluster {
-    /// Checks the URL (no connection yet: a replica starts even while Redis is down).
-    pub fn new(url: &str) -> Result<Cluster, String> {
+    /// Checks the URL (no connection yet: a replica starts even while Redis is down); the maps
+    /// it stores in Redis take at most `maps_budget` bytes together.
+    pub fn new(url: &str, maps_budget: u64) -> Result<Cluster, String> {
         let client = redis::Client::open(url).map_err(|e| format!("--redis-url: {e}"))?;
         let replica = format!(
             "{}-{}",
@@ -224,6 +284,7 @@ impl Cluster {
             down: Mutex::new(Some("not connected to Redis yet".into())),
             up_since: Mutex::new(None),
             following: std::sync::atomic::AtomicBool::new(false),
+            maps_budget,
         })
     }
 
@@ -259,6 +320,10 @@ impl Cluster {
     /// `HEALTH_PERIOD`, which marks it down then.
     fn error(&self, e: &redis::RedisError) -> Error {
         let reason = format!("Redis: {e}");
+        if e.code() == Some("OOM") {
+            // Waiting does not make room: an operator must (see `--redis-maps-mb`).
+            return Error::NoRoom { reason };
+        }
         if e.is_io_error() && !e.is_timeout()
             || e.is_connection_dropped()
             || e.is_connection_refusal()
@@ -325,7 +390,8 @@ impl Cluster {
             let conn = match existing {
                 Some(conn) => Ok(conn),
                 None => match self.connect().await {
-                    Ok(conn) => {
+                    Ok(mut conn) => {
+                        self.check_memory_settings(&mut conn).await;
                         *self.commands.write().expect("cluster lock") = Some(conn.clone());
                         Ok(conn)
                     }
@@ -341,6 +407,45 @@ impl Cluster {
             };
             self.mark(outcome.err().map(|e| format!("Redis: {e}")));
             tokio::time::sleep(HEALTH_PERIOD).await;
+        }
+    }
+
+    /// Warns when Redis's memory settings break what the maps' budget relies on: an eviction
+    /// policy other than `noeviction` may evict locks, build entries and job records, and a
+    /// `maxmemory` below the budget fills Redis before the budget evicts (then stores fail
+    /// with 507 `store_full`). Read once per connection; `INFO` may be renamed away, which
+    /// only skips the check.
+    async fn check_memory_settings(&self, conn: &mut ConnectionManager) {
+        let Ok(info) = redis::cmd("INFO")
+            .arg("memory")
+            .query_async::<String>(conn)
+            .await
+        else {
+            return;
+        };
+        let field = |name: &str| {
+            info.lines()
+                .find_map(|line| line.strip_prefix(name)?.strip_prefix(':'))
+                .map(str::trim)
+        };
+        if let Some(policy) = field("maxmemory_policy")
+            && policy != "noeviction"
+        {
+            tracing::warn!(
+                policy,
+                "Redis evicts keys on its own (maxmemory-policy): locks, build entries and job records may go with them; set it to noeviction, the maps have their own budget (--redis-maps-mb)"
+            );
+        }
+        let maxmemory = field("maxmemory").and_then(|v| v.parse::<u64>().ok());
+        if let Some(max) = maxmemory
+            && max > 0
+            && max <= self.maps_budget
+        {
+            tracing::warn!(
+                maxmemory = max,
+                maps_budget = self.maps_budget,
+                "Redis's maxmemory is not above the maps' budget (--redis-maps-mb): Redis fills before the budget evicts a map"
+            );
         }
     }
 
@@ -365,7 +470,8 @@ impl Cluster {
     }
 
     /// Stores a map's encoded bytes, framed with their digest, listed under the scenario it
-    /// was built from (deleted with it).
+    /// was built from (deleted with it), within the maps' budget: the least recently used maps
+    /// are evicted to make room ([`STORE_MAP`]).
     pub async fn put_map(
         &self,
         id: &MapId,
@@ -373,15 +479,42 @@ impl Cluster {
         encoded: &[u8],
     ) -> Result<(), Error> {
         let mut conn = self.conn()?;
-        redis::pipe()
-            .atomic()
-            .set(map_key(id), store::frame(encoded))
-            .ignore()
-            .sadd(scenario_maps_key(scenario), id.as_str())
-            .ignore()
-            .query_async::<()>(&mut conn)
-            .await
-            .map_err(|e| self.error(&e))
+        let script = redis::Script::new(STORE_MAP);
+        let mut invocation = script.prepare_invoke();
+        invocation
+            .key(map_key(id))
+            .key(scenario_maps_key(scenario))
+            .key(MAP_LRU)
+            .key(MAP_SIZES)
+            .arg(id.as_str())
+            .arg(store::frame(encoded))
+            .arg(self.maps_budget)
+            .arg(MAP_PREFIX);
+        let mut stored = invocation.invoke_async::<(u64, u64)>(&mut conn).await;
+        if matches!(&stored, Err(e) if e.code() == Some("WRONGTYPE")) {
+            // A key of the budget's (or the scenario's list) that is not what this build writes:
+            // deleted, and the map stored again.
+            for (key, kind) in [
+                (MAP_LRU.to_string(), "zset"),
+                (MAP_SIZES.to_string(), "hash"),
+                (scenario_maps_key(scenario), "set"),
+            ] {
+                let found: redis::RedisResult<String> =
+                    redis::cmd("TYPE").arg(&key).query_async(&mut conn).await;
+                if matches!(&found, Ok(t) if t != kind && t != "none") {
+                    self.discard_key(&mut conn, &key, "map budget", "wrong Redis type")
+                        .await;
+                }
+            }
+            stored = invocation.invoke_async(&mut conn).await;
+        }
+        let (evicted, bytes) = stored.map_err(|e| self.error(&e))?;
+        metrics::gauge!("irs_redis_map_bytes").set(bytes as f64);
+        if evicted > 0 {
+            metrics::counter!("irs_redis_maps_evicted_total").increment(evicted);
+            tracing::info!(map_id = %id, evicted, bytes, budget = self.maps_budget, "maps evicted from Redis to make room");
+        }
+        Ok(())
     }
 
     /// Tells every replica (this one included) that something was deleted. Best effort: a
@@ -721,11 +854,24 @@ impl Store for Cluster {
         else {
             return Ok(None);
         };
-        if !matches!(entry, Entry::Map(_)) {
+        let Entry::Map(id) = entry else {
             return Ok(Some(bytes));
-        }
+        };
         match store::unframe(&bytes) {
-            Ok(payload) => Ok(Some(payload.to_vec())),
+            Ok(payload) => {
+                // Used now, so the budget evicts it last. Best effort: a failure here costs
+                // only the order of a later eviction.
+                let touched: redis::RedisResult<u32> = redis::Script::new(TOUCH_MAP)
+                    .key(MAP_LRU)
+                    .arg(id.as_str())
+                    .invoke_async(&mut conn)
+                    .await;
+                if matches!(&touched, Err(e) if e.code() == Some("WRONGTYPE")) {
+                    self.discard_key(&mut conn, MAP_LRU, "map budget", "wrong Redis type")
+                        .await;
+                }
+                Ok(Some(payload.to_vec()))
+            }
             Err(reason) => {
                 self.discard_key(&mut conn, &key, "map", reason).await;
                 Ok(None)
@@ -763,7 +909,7 @@ impl Store for Cluster {
                 let removed: i64 = redis::Script::new(DELETE_SCENARIO)
                     .key(scenario_key(id))
                     .key(scenario_maps_key(id))
-                    .arg("irs:map:")
+                    .arg(MAP_PREFIX)
                     .arg("irs:map-owners:")
                     .invoke_async(&mut conn)
                     .await
