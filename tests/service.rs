@@ -1316,6 +1316,12 @@ async fn operations_endpoints() {
         );
     }
     assert_eq!(server.metric("irs_scenarios").await, 3.0);
+    // Read at the scrape: the process's own series and the jobs' depth.
+    assert!(server.metric("process_resident_memory_bytes").await > 1e6);
+    assert!(server.metric("process_start_time_seconds").await > 1.7e9);
+    assert!(server.metric("process_open_fds").await >= 3.0);
+    assert_eq!(server.metric("irs_jobs_waiting").await, 0.0);
+    assert_eq!(server.metric("irs_jobs_running").await, 0.0);
 }
 
 #[tokio::test]

@@ -85,6 +85,8 @@ struct Inner {
     disk: Option<Arc<store::DataDir>>,
     ready: AtomicBool,
     metrics: PrometheusHandle,
+    /// The process's own series (CPU, memory, file descriptors, threads), read at each scrape.
+    process: metrics_process::Collector,
 }
 
 impl App {
@@ -170,6 +172,7 @@ impl App {
                 disk,
                 ready: AtomicBool::new(false),
                 metrics,
+                process: metrics_process::Collector::default(),
             }),
         })
     }
@@ -265,7 +268,13 @@ impl App {
     pub(crate) fn set_ready(&self, ready: bool) {
         self.inner.ready.store(ready, Ordering::Relaxed)
     }
+    /// `/metrics`: what was recorded, with the gauges read now (the process's series, the
+    /// jobs waiting and running) set first.
     pub(crate) fn render_metrics(&self) -> String {
+        self.inner.process.collect();
+        let (waiting, running) = self.jobs().depth();
+        metrics::gauge!("irs_jobs_waiting").set(waiting as f64);
+        metrics::gauge!("irs_jobs_running").set(running as f64);
         self.inner.metrics.render()
     }
 }

@@ -123,6 +123,16 @@ pub(crate) const SERIES: &[(&str, Kind, &str)] = &[
         "Run time of the jobs that ended [kind: map, placement or check]",
     ),
     (
+        "irs_jobs_waiting",
+        Gauge,
+        "Jobs (map builds, placements, checks) waiting for a worker on this replica (bounded by --queue)",
+    ),
+    (
+        "irs_jobs_running",
+        Gauge,
+        "Jobs running on this replica's workers (at most --workers)",
+    ),
+    (
         "irs_job_history_bytes",
         Gauge,
         "Bytes the finished jobs kept for their results hold (bounded by --job-history-mb)",

@@ -33,6 +33,8 @@ use tokio::sync::{Notify, Semaphore, watch};
 pub struct Jobs {
     next_seq: AtomicU64,
     workers: Arc<Semaphore>,
+    /// How many workers there are (`workers` counts the free ones).
+    worker_count: usize,
     queue_limit: usize,
     queued: Arc<AtomicUsize>,
     history: Mutex<History>,
@@ -58,6 +60,7 @@ impl Jobs {
         Jobs {
             next_seq: AtomicU64::new(0),
             workers: Arc::new(Semaphore::new(workers)),
+            worker_count: workers,
             queue_limit,
             queued: Arc::new(AtomicUsize::new(0)),
             history: Mutex::new(History {
@@ -153,6 +156,16 @@ impl Jobs {
     /// Workers free now (the cluster's builder reads the stream only when one is).
     pub(crate) fn free_workers(&self) -> usize {
         self.workers.available_permits()
+    }
+
+    /// Jobs waiting for a worker and jobs running now, for the gauges `/metrics` sets as it
+    /// renders.
+    pub(crate) fn depth(&self) -> (usize, usize) {
+        (
+            self.queued.load(Ordering::SeqCst),
+            self.worker_count
+                .saturating_sub(self.workers.available_permits()),
+        )
     }
 
     /// Refuses a new job while `queue` jobs already wait beyond the free workers.
