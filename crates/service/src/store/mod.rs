@@ -316,6 +316,45 @@ mod tests {
             present(vec![a, d, e, big]).await,
             [false, false, false, true]
         );
+
+        // Redis itself full (a maxmemory below the budget): an error that says so, which
+        // retrying does not change, rather than "unavailable, retry".
+        let mut conn = cluster.connect().await.unwrap();
+        let used: String = ::redis::cmd("INFO")
+            .arg("memory")
+            .query_async(&mut conn)
+            .await
+            .unwrap();
+        let used: u64 = used
+            .lines()
+            .find_map(|l| l.strip_prefix("used_memory:"))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        let (roomy, task_roomy) = replica(port, 1 << 30).await;
+        let set_max = |bytes: u64| {
+            let mut conn = conn.clone();
+            async move {
+                ::redis::cmd("CONFIG")
+                    .arg("SET")
+                    .arg("maxmemory")
+                    .arg(bytes)
+                    .query_async::<()>(&mut conn)
+                    .await
+                    .unwrap()
+            }
+        };
+        // Past maxmemory already, as after a write that took Redis over it.
+        set_max(used / 2).await;
+        let refused = roomy.put_map(&map(0xa7), &sid, &payload(6)).await;
+        set_max(0).await;
+        assert!(
+            matches!(refused, Err(Error::NoRoom { ref reason }) if reason.contains("OOM")),
+            "{refused:?}"
+        );
+        assert_eq!(roomy.unavailable(), None, "full is not down");
+        task_roomy.abort();
         task.abort();
     }
 
@@ -328,12 +367,22 @@ mod tests {
             .local_addr()
             .unwrap()
             .port();
-        let mut server = std::process::Command::new("redis-server")
-            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
-            .args(["--save", "", "--appendonly", "no"])
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .expect("redis-server on the PATH");
+        /// The test's redis-server, stopped however the test ends (a failed assertion too).
+        struct Server(std::process::Child);
+        impl Drop for Server {
+            fn drop(&mut self) {
+                let _ = self.0.kill();
+                let _ = self.0.wait();
+            }
+        }
+        let _server = Server(
+            std::process::Command::new("redis-server")
+                .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+                .args(["--save", "", "--appendonly", "no"])
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .expect("redis-server on the PATH"),
+        );
         let cluster =
             Arc::new(redis::Cluster::new(&format!("redis://127.0.0.1:{port}"), 1 << 20).unwrap());
         let health = cluster.clone();
@@ -447,7 +496,5 @@ mod tests {
         maps_stay_within_their_budget(port).await;
 
         watch.abort();
-        let _ = server.kill();
-        let _ = server.wait();
     }
 }

@@ -120,8 +120,10 @@ const MAP_LRU: &str = "irs:map-lru";
 /// oldest. Then the least recently used maps are deleted until the new one fits; a map larger
 /// than the whole budget is stored alone (requests for such maps are refused beforehand, see
 /// `app::maps`). Returns {maps evicted, bytes stored now}. Standalone Redis only (keys built
-/// in the script).
-const STORE_MAP: &str = r"
+/// in the script). The `#!lua` line (Redis 7) makes Redis refuse the whole script while it is
+/// past its `maxmemory`: a script without it is refused only at its first write, and its
+/// first writes here delete, after which Redis lets every later write of the script through.
+const STORE_MAP: &str = r"#!lua
 local id, size, budget, prefix = ARGV[1], string.len(ARGV[2]), tonumber(ARGV[3]), ARGV[4]
 redis.call('HDEL', KEYS[4], id)
 redis.call('ZREM', KEYS[3], id)
