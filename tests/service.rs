@@ -2108,6 +2108,73 @@ async fn cors_only_for_configured_origins() {
     assert_eq!(preflight(&open, "https://elsewhere.example").await, None);
 }
 
+/// `--data-dir`: a map build that a SIGTERM's grace period cuts short is recorded, and the
+/// next start resumes it under the same id, for the same owner, until its map is built.
+#[tokio::test]
+async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
+    let dir = std::env::temp_dir().join(format!("irs-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (alice, bob) = ("alice-token-0123456789", "bob-token-0123456789ab");
+    let tokens = format!("{alice},{bob}");
+    let dir_flag = dir.to_str().unwrap();
+    let flags = [
+        "--data-dir",
+        dir_flag,
+        "--api-tokens",
+        &tokens,
+        "--shutdown-grace-s",
+        "0",
+    ];
+    let mut server = start_binary(&flags);
+    let floor = scenario("paper-multi-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.25.into();
+        v["name"] = "resumed".into();
+    });
+    let (s, job) = server
+        .send_as(
+            Some(alice),
+            "POST",
+            "/v1/maps",
+            Some(long_rate_request(floor, "noma")),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    let job_id = job["job_id"].as_str().unwrap().to_string();
+    let pid = server.child().id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let status = server.child().wait().unwrap();
+    assert!(status.success(), "exit status {status}");
+    drop(server);
+
+    let server = start_binary(&flags);
+    let job_path = format!("/v1/jobs/{job_id}");
+    let (s, resumed) = server.send_as(Some(alice), "GET", &job_path, None).await;
+    assert_eq!(s, StatusCode::OK, "{resumed}");
+    assert_ne!(resumed["state"], "cancelled", "{resumed}");
+    let (s, _) = server.send_as(Some(bob), "GET", &job_path, None).await;
+    assert_eq!(s, StatusCode::NOT_FOUND, "still alice's alone");
+    let done = server.wait_job_as(Some(alice), &job_id).await;
+    assert_eq!(done["state"], "done", "{done}");
+    let map_path = format!("/v1/maps/{}", done["map_id"].as_str().unwrap());
+    let (s, map) = server.send_as(Some(alice), "GET", &map_path, None).await;
+    assert_eq!(s, StatusCode::OK, "{map}");
+    assert_eq!(server.metric_total("irs_map_builds_total").await, 1.0);
+    drop(server);
+    // Done now: a third start resumes nothing.
+    let server = start_binary(&flags);
+    let (_, again) = server.send_as(Some(alice), "GET", &job_path, None).await;
+    assert_eq!(again["state"], "done", "{again}");
+    assert_eq!(server.metric_total("irs_map_builds_total").await, 0.0);
+    drop(server);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `--data-dir`: API scenarios (with their owners), built maps and finished jobs survive a
 /// SIGKILL and a restart; nothing is built again, and a damaged map file is never served.
 #[tokio::test]

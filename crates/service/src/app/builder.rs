@@ -153,6 +153,13 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             }
         }
     }
+    if job.interrupted() && job.state() == JobState::Cancelled {
+        // This replica stops: the entry stays pending (no final record, no XACK), so the next
+        // replica with a free worker takes the build over once it has been idle for
+        // CLAIM_IDLE, and the job's waiters see it go on under the same id.
+        tracing::info!(job_id = %build.job_id, map_id = %build.map_id, "build interrupted by the shutdown; left to another replica");
+        return;
+    }
     let kept = unshared.lock().expect("unshared map").take();
     if let Some(encoded) = kept {
         share_when_redis_answers(&cluster, &build, &encoded).await;

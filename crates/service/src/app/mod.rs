@@ -338,11 +338,12 @@ pub fn preload(state: &App, dir: &std::path::Path) -> Result<(), String> {
     Ok(())
 }
 
-/// With `--data-dir`: registers the API scenarios recorded there (with their owners) and takes
-/// back the finished job records. A record that is damaged, or no longer a valid scenario for
-/// this build, is skipped with a warning. The maps are read from disk on demand, and into
-/// memory by [`warm_from_disk`].
-pub fn restore(state: &App) {
+/// With `--data-dir`: registers the API scenarios recorded there (with their owners), takes
+/// back the finished job records and resumes, under their ids, the map builds the last
+/// shutdown interrupted. A record that is damaged, or no longer a valid scenario for this
+/// build, is skipped with a warning. The maps are read from disk on demand, and into memory by
+/// [`warm_from_disk`].
+pub async fn restore(state: &App) {
     let Some(disk) = &state.inner.disk else {
         return;
     };
@@ -367,8 +368,41 @@ pub fn restore(state: &App) {
         }
         scenarios += 1;
     }
-    let jobs = state.jobs().restore();
-    tracing::info!(scenarios, jobs, "restored from the data directory");
+    let (jobs, interrupted) = state.jobs().restore();
+    let mut resumed = 0;
+    for mut record in interrupted {
+        let scenario = record
+            .view
+            .key
+            .as_ref()
+            .and_then(|key| state.registry().get(&ScenarioId::of_key(key)));
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        match scenario {
+            Some(stored) => {
+                let job = state
+                    .jobs()
+                    .resume(state.cache(), stored.scenario.clone(), &record)
+                    .await;
+                if job.is_some() {
+                    resumed += 1;
+                    tracing::info!(job_id = %record.view.job_id, "resumed a map build the last shutdown interrupted");
+                    continue;
+                }
+                // Built meanwhile (its map was written before the record): done.
+                record.view.state = jobs::JobState::Done;
+            }
+            None => {
+                record.view.state = jobs::JobState::Failed;
+                record.view.error =
+                    Some("interrupted by a shutdown; its scenario is no longer registered".into());
+            }
+        }
+        record.view.finished_at = Some(now);
+        disk.save_json(store::Kind::Job, record.view.job_id.as_str(), &record);
+    }
+    tracing::info!(scenarios, jobs, resumed, "restored from the data directory");
 }
 
 /// Loads the data directory's maps into memory, newest first, up to the cache's budget.

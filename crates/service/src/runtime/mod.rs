@@ -81,7 +81,13 @@ async fn drain(state: &App, connections: &server::OpenConnections, grace: Durati
         );
     }
     // Jobs check their flag once per grid row, so they end within a fraction of a second;
-    // requests waiting on them are then answered and their connections close.
+    // requests waiting on them are then answered and their connections close. Each records
+    // how it ended (with a data directory, an interrupted map build as queued, to resume)
+    // before it leaves the live set: wait for that, so no record is lost with the process.
+    let recorded = Instant::now() + Duration::from_secs(2);
+    while !state.jobs().live().is_empty() && Instant::now() < recorded {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
     let open = connections
         .drain(Instant::now().max(deadline) + Duration::from_secs(2))
         .await;
@@ -154,7 +160,7 @@ async fn serve_app(
     let state = App::new(&args, metrics.handle()).map_err(ServeError::Config)?;
     let _cancel = CancelJobsOnDrop(state.clone());
     app::preload(&state, &args.scenarios).map_err(ServeError::Config)?;
-    app::restore(&state);
+    app::restore(&state).await;
     let addr = listener.local_addr().map_err(|e| runtime_error(&e))?;
     state.set_ready(true);
     tracing::info!(

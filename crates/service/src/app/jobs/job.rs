@@ -121,6 +121,9 @@ pub enum Work {
         map_id: MapId,
         key: MapKey,
         delivery: Mutex<MapDelivery>,
+        /// A build of this node's own, which a restart resumes if the server's shutdown
+        /// interrupts it; a cluster's shared build is not (another replica takes it over).
+        resumable: bool,
     },
     /// Ranks placement candidates; the answer is kept here once the job is done.
     Placement {
@@ -173,6 +176,8 @@ pub struct Job {
     pub(super) cancel: Notify,
     pub(super) times: Mutex<JobTimes>,
     pub(super) error: Mutex<Option<String>>,
+    /// Cancelled by the server's shutdown, not by a caller.
+    pub(super) interrupted: std::sync::atomic::AtomicBool,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -255,6 +260,24 @@ impl Job {
             Work::Map { map_id, .. } => Some(map_id),
             Work::Placement { .. } | Work::Check { .. } => None,
         }
+    }
+
+    /// Whether the server's shutdown interrupted it (it did not end of itself or by a
+    /// caller's cancel).
+    pub fn interrupted(&self) -> bool {
+        self.interrupted.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// A map build a restart resumes: one of this node's own, interrupted by the shutdown.
+    pub(super) fn resumes(&self) -> bool {
+        self.interrupted()
+            && matches!(
+                self.work,
+                Work::Map {
+                    resumable: true,
+                    ..
+                }
+            )
     }
 
     /// Waits for a map job and takes its map: `None` if the build failed or was cancelled.

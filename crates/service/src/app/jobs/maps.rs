@@ -49,7 +49,41 @@ impl Jobs {
             return Ok(MapRequestOutcome::Building(job.clone()));
         }
         self.check_room()?;
-        let job = self.admit_map(JobId::random(), &key, Owners::of(owner));
+        let job = self.admit_map(JobId::random(), &key, Owners::of(owner), true);
+        self.start_map(&mut in_flight, job.clone(), cache, scenario, key);
+        Ok(MapRequestOutcome::Building(job))
+    }
+
+    /// Builds again, under its own id and for its owners, a map build the last shutdown
+    /// interrupted (its record, from the data directory); nothing if the map is cached by now
+    /// or being built.
+    pub async fn resume(
+        self: &Arc<Self>,
+        cache: &MapCache,
+        scenario: Arc<Scenario>,
+        record: &super::record::JobRecord,
+    ) -> Option<Arc<Job>> {
+        let key = record.view.key.clone()?;
+        let map_id = MapId::of(&key);
+        let mut in_flight = self.in_flight.lock().await;
+        if in_flight.contains_key(&map_id) || cache.get(&map_id).await.is_some() {
+            return None;
+        }
+        let job = self.admit_map(record.view.job_id.clone(), &key, record.owners(), true);
+        self.start_map(&mut in_flight, job.clone(), cache, scenario, key);
+        Some(job)
+    }
+
+    /// Runs the build of a map job just admitted, in flight from now on.
+    fn start_map(
+        self: &Arc<Self>,
+        in_flight: &mut std::collections::HashMap<MapId, Arc<Job>>,
+        job: Arc<Job>,
+        cache: &MapCache,
+        scenario: Arc<Scenario>,
+        key: MapKey,
+    ) {
+        let map_id = MapId::of(&key);
         in_flight.insert(map_id.clone(), job.clone());
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
@@ -61,8 +95,7 @@ impl Jobs {
             job.deliver(&map);
             cache.insert(map_id, map).await;
         };
-        crate::tasks::spawn(self.clone().run(job.clone(), work, finish).instrument(span));
-        Ok(MapRequestOutcome::Building(job))
+        crate::tasks::spawn(self.clone().run(job, work, finish).instrument(span));
     }
 
     /// Builds a map another replica (or this one) queued in the cluster's stream, as the local
@@ -83,7 +116,7 @@ impl Jobs {
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
         let map_id = MapId::of(&key);
-        let job = self.admit_map(job_id, &key, owners);
+        let job = self.admit_map(job_id, &key, owners, false);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
@@ -110,8 +143,9 @@ impl Jobs {
         job
     }
 
-    /// A map build admitted as job `id`, counted in `irs_map_builds_total`.
-    fn admit_map(&self, id: JobId, key: &MapKey, owners: Owners) -> Arc<Job> {
+    /// A map build admitted as job `id`, counted in `irs_map_builds_total`; `resumable`: see
+    /// [`Work::Map`].
+    fn admit_map(&self, id: JobId, key: &MapKey, owners: Owners, resumable: bool) -> Arc<Job> {
         metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
         self.admit_as(
             id,
@@ -121,6 +155,7 @@ impl Jobs {
                 map_id: MapId::of(key),
                 key: key.clone(),
                 delivery: Mutex::new(MapDelivery::default()),
+                resumable,
             },
         )
     }

@@ -78,18 +78,23 @@ impl Jobs {
 
     /// Takes back the finished jobs the data directory recorded (oldest first, the newest
     /// within the history's count and bytes kept); new jobs are numbered after them. Returns
-    /// how many.
-    pub fn restore(&self) -> usize {
-        let Some(disk) = &self.disk else { return 0 };
-        let mut jobs: Vec<Job> = disk
+    /// how many, and the records of the map builds a shutdown interrupted, to resume
+    /// ([`Jobs::resume`]).
+    pub fn restore(&self) -> (usize, Vec<JobRecord>) {
+        let Some(disk) = &self.disk else {
+            return (0, Vec::new());
+        };
+        let (finished, interrupted): (Vec<JobRecord>, Vec<JobRecord>) = disk
             .load_json::<JobRecord>(Kind::Job)
             .into_iter()
-            .filter_map(|(file_id, record)| {
-                (record.view.job_id.as_str() == file_id)
-                    .then_some(record)
-                    .and_then(Job::restore)
-            })
+            .filter(|(file_id, record)| record.view.job_id.as_str() == file_id)
+            .map(|(_, record)| record)
+            .partition(|record| record.view.state.is_terminal());
+        let interrupted = interrupted
+            .into_iter()
+            .filter(|record| record.view.key.is_some())
             .collect();
+        let mut jobs: Vec<Job> = finished.into_iter().filter_map(Job::restore).collect();
         jobs.sort_by_key(|job| job.seq);
         let next = jobs.last().map_or(0, |job| job.seq + 1);
         self.next_seq.fetch_max(next, Ordering::Relaxed);
@@ -103,18 +108,21 @@ impl Jobs {
             by_id.remove(&old);
             disk.remove_json(Kind::Job, old.as_str());
         }
-        history.order.len()
+        (history.order.len(), interrupted)
     }
 
     pub fn get(&self, id: &JobId) -> Option<Arc<Job>> {
         self.by_id.lock().expect("jobs lock").get(id).cloned()
     }
 
-    /// Cancels every queued and running job (shutdown); returns their ids.
+    /// Cancels every queued and running job (shutdown); returns their ids. With a data
+    /// directory, the map builds among them are recorded as queued, and the next start resumes
+    /// them ([`Jobs::restore`]).
     pub fn cancel_all(&self) -> Vec<JobId> {
         self.live()
             .into_iter()
             .map(|job| {
+                job.interrupted.store(true, Ordering::SeqCst);
                 job.progress.cancel();
                 job.cancel.notify_one();
                 job.id.clone()
@@ -201,6 +209,7 @@ impl Jobs {
                 ..Default::default()
             }),
             error: Mutex::new(None),
+            interrupted: Default::default(),
         });
         metrics::gauge!("irs_jobs", "state" => JobState::Queued.as_str()).increment(1.0);
         self.by_id
@@ -281,7 +290,13 @@ impl Jobs {
     /// count or bytes are forgotten.
     async fn retire(&self, job: &Arc<Job>, ended: JobState) {
         if let Some(disk) = self.disk.clone() {
-            let (id, record) = (job.id.clone(), job.record_as(ended));
+            let record = if ended == JobState::Cancelled && job.resumes() {
+                tracing::info!(job_id = %job.id, "interrupted by the shutdown: recorded to resume at the next start");
+                job.record_interrupted()
+            } else {
+                job.record_as(ended)
+            };
+            let id = job.id.clone();
             // A small file, but flushed to disk: off the async threads.
             let _ = crate::tasks::spawn_blocking(move || {
                 disk.save_json(Kind::Job, id.as_str(), &record)
@@ -291,8 +306,9 @@ impl Jobs {
         job.set_state(ended);
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
-            if job.state() != JobState::Done {
-                // No map came of it: the claims made on it while it ran claim nothing.
+            if job.state() != JobState::Done && !(self.disk.is_some() && job.resumes()) {
+                // No map came of it: the claims made on it while it ran claim nothing (unless
+                // the next start resumes it, for the same owners).
                 self.store.forget_claims(map_id);
             }
         }

@@ -188,6 +188,17 @@ impl Job {
         }
     }
 
+    /// The record of a build the shutdown interrupted, as the next start resumes it: queued
+    /// again, with no start or end.
+    pub(super) fn record_interrupted(&self) -> JobRecord {
+        let mut record = self.record();
+        record.view.state = JobState::Queued;
+        record.view.started_at = None;
+        record.view.finished_at = None;
+        record.view.cells_done = 0;
+        record
+    }
+
     /// A finished job again, from its record; `None` for a record that is not of a finished
     /// job (the store only writes finished ones) or whose map key does not match its kind.
     pub(super) fn restore(record: JobRecord) -> Option<Job> {
@@ -207,6 +218,7 @@ impl Job {
                 map_id: MapId::of(&key),
                 key,
                 delivery: Mutex::new(MapDelivery::default()),
+                resumable: false,
             },
             (JobKind::Placement, None, placement, None) => {
                 let outcome = OnceLock::new();
@@ -243,6 +255,7 @@ impl Job {
                 finished: view.finished_at.and_then(from_unix),
             }),
             error: Mutex::new(view.error),
+            interrupted: Default::default(),
         })
     }
 }
