@@ -3,7 +3,10 @@
 single flight through HAProxy, a map served by every replica without a rebuild, `docker kill`
 of the replica running a build (another finishes it, bit-identical to the CLI's build), a
 `docker-compose restart` of everything (maps still served, from Redis's AOF, with no build),
-and path-query throughput through HAProxy against one replica directly.
+path-query throughput through HAProxy against one replica directly, and then under load (two
+clients of path queries through HAProxy), with the counts printed: a delete seen by every
+replica, Redis stopped for 10 s (0 failures), a replica stopped with `docker stop` (0
+failures) and one killed with `docker kill` (at most the two requests in flight fail).
 
     tests/cluster/compose_test.py IMAGE CLI_BINARY
 
@@ -24,7 +27,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import irs_testkit as kit  # noqa: E402
 from irs_testkit import ROOT, free_port, request, scenario, wait_job, wait_until  # noqa: E402
-from cluster_test import builds, throughputs  # noqa: E402
+from cluster_test import Load, builds, gone_everywhere, throughputs  # noqa: E402
 
 IMAGE, CLI = sys.argv[1], os.path.abspath(sys.argv[2])
 CHECKS = kit.Checks(stop_on_failure=True)
@@ -139,6 +142,64 @@ def main():
         request(r.base, "POST", "/v1/paths", small)
     ratios = throughputs(replicas[0].base, proxy, {"41² paper map": small, "1001² map": path}, "three")
     check(ratios["1001² map"] >= 0.8, "HAProxy keeps at least 80 % of one replica's throughput (1001² map)")
+    faults(proxy, replicas, small)
+
+
+def faults(proxy, replicas, query):
+    """Issue 34's items 1-3 through compose, under load, with the counts printed: a delete seen
+    by every replica, Redis stopped, a replica stopped (docker stop) and one killed."""
+    counts = {}
+    # One truth: a scenario deleted through one replica is gone from all three.
+    doomed = scenario("small-test", lambda d: d.update(name="compose-doomed"))
+    status, created, _ = request(proxy, "POST", "/v1/scenarios", doomed)
+    for r in replicas:
+        request(r.base, "GET", f"/v1/scenarios/{created['id']}")
+    status, _, _ = request(replicas[2].base, "DELETE", f"/v1/scenarios/{created['id']}")
+    took = gone_everywhere(replicas, f"/v1/scenarios/{created['id']}")
+    counts["delete seen everywhere"] = f"{took * 1000:.0f} ms" if took is not None else "not within 1 s"
+    check(status == 204 and took is not None,
+          f"a scenario deleted through {replicas[2].name}: {status}, gone from every replica ({counts['delete seen everywhere']})")
+
+    # Degraded, not down: Redis stopped under load; cached maps keep answering.
+    load = Load(proxy, query)
+    time.sleep(1)
+    compose("stop", "redis")
+    stopped = time.time()
+
+    def degraded(r):
+        status, ready, _ = request(r.base, "GET", "/readyz", timeout=5)
+        return status == 200 and ready.get("status") == "degraded"
+    wait_until("every replica degraded, still ready", lambda: all(degraded(r) for r in replicas), 15)
+    time.sleep(max(0.0, 10 - (time.time() - stopped)))
+    compose("start", "redis")
+    wait_until("every replica ready again by itself", lambda: all(r.ready() for r in replicas), 30)
+    done, failures = load.stop()
+    counts["Redis stopped"] = f"{len(failures)} of {done} failed"
+    check(done > 0 and not failures,
+          f"Redis stopped {time.time() - stopped:.0f} s under load: {counts['Redis stopped']} {failures[:3]}")
+
+    # A replica stopped under load (docker stop: SIGTERM, the shutdown delay, the drain).
+    time.sleep(2)  # every replica back in HAProxy's rotation
+    load = Load(proxy, query)
+    time.sleep(1)
+    compose("stop", replicas[1].name)
+    time.sleep(1)
+    done, failures = load.stop()
+    counts["replica stopped"] = f"{len(failures)} of {done} failed"
+    check(not failures, f"docker stop of {replicas[1].name} under load: {counts['replica stopped']} {failures[:3]}")
+
+    # A replica killed under load: only what it held at that instant may fail (the load has
+    # two clients, so at most two requests are in flight anywhere).
+    load = Load(proxy, query)
+    time.sleep(1)
+    subprocess.run(["docker", "kill", replicas[2].container()], check=True, capture_output=True)
+    time.sleep(3)
+    done, failures = load.stop()
+    counts["replica killed"] = f"{len(failures)} of {done} failed"
+    check(len(failures) <= len(load.threads),
+          f"docker kill of {replicas[2].name} under load: {counts['replica killed']} (at most the "
+          f"{len(load.threads)} in flight) {failures[:3]}")
+    print("compose under faults: " + "; ".join(f"{k}: {v}" for k, v in counts.items()), flush=True)
 
 
 if __name__ == "__main__":
