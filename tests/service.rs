@@ -2140,6 +2140,25 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
         .await;
     assert_eq!(s, StatusCode::ACCEPTED, "{job}");
     let job_id = job["job_id"].as_str().unwrap().to_string();
+    // A second build, whose scenario is gone by the next start: settled as failed.
+    let orphan = scenario("paper-multi-user.json", |v| {
+        v["grid"]["resolution_m"] = 0.25.into();
+        v["name"] = "orphaned".into();
+    });
+    let (s, orphaned) = server
+        .send_as(
+            Some(alice),
+            "POST",
+            "/v1/maps",
+            Some(long_rate_request(orphan, "oma")),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{orphaned}");
+    let orphaned_path = format!("/v1/jobs/{}", orphaned["job_id"].as_str().unwrap());
+    let (_, orphaned_job) = server
+        .send_as(Some(alice), "GET", &orphaned_path, None)
+        .await;
+    let orphaned_sid = orphaned_job["scenario_id"].as_str().unwrap().to_string();
     let pid = server.child().id().to_string();
     assert!(
         Command::new("kill")
@@ -2151,8 +2170,35 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
     let status = server.child().wait().unwrap();
     assert!(status.success(), "exit status {status}");
     drop(server);
+    for entry in std::fs::read_dir(dir.join("scenarios")).unwrap() {
+        let path = entry.unwrap().path();
+        if path
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with(&orphaned_sid)
+        {
+            std::fs::remove_file(path).unwrap();
+        }
+    }
 
     let server = start_binary(&flags);
+    let (s, failed) = server
+        .send_as(Some(alice), "GET", &orphaned_path, None)
+        .await;
+    assert_eq!(
+        s,
+        StatusCode::OK,
+        "settled at start-up, visible at once: {failed}"
+    );
+    assert_eq!(failed["state"], "failed", "{failed}");
+    assert!(
+        failed["error"]
+            .as_str()
+            .unwrap()
+            .contains("no longer registered"),
+        "{failed}"
+    );
     let job_path = format!("/v1/jobs/{job_id}");
     let (s, resumed) = server.send_as(Some(alice), "GET", &job_path, None).await;
     assert_eq!(s, StatusCode::OK, "{resumed}");

@@ -533,7 +533,7 @@ def bounded(redis):
     one, two = (Replica(redis.port, f"bounded{i}", "--redis-maps-mb", "1", db=1) for i in range(2))
     wait_until("the bounded replicas ready", lambda: one.ready() and two.ready(), 15)
     budget = 1 << 20
-    # 201 x 201 cells, about 0.35 MB each in Redis: the fourth needs room.
+    # 201 x 201 cells, about 0.36 MB each in Redis: two fit in 1 MiB, the third needs room.
     maps = []
     for i in range(5):
         floor = scenario("paper-single-user", lambda d: (d.update(name=f"bounded-{i}"), d["grid"].update(resolution_m=0.1)))

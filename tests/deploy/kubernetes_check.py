@@ -47,10 +47,23 @@ def matches(selector, labels):
 
 
 def megabytes(text):
-    """A Redis memory setting (`1536mb`, `2gb`, bytes) in MiB."""
-    number, unit = re.fullmatch(r"(\d+)\s*([a-z]*)", text.lower()).groups()
-    scale = {"": 1 / 2**20, "b": 1 / 2**20, "kb": 1 / 1024, "mb": 1, "gb": 1024}[unit]
-    return int(number) * scale
+    """A Redis memory setting in MiB, with Redis's units (`1536mb`, `2gb`: powers of 1024;
+    `1m`, `2g`: powers of 1000; plain bytes); None if it is not one."""
+    found = re.fullmatch(r"(\d+)\s*([a-z]*)", str(text).lower())
+    scale = {"": 1, "b": 1, "k": 1e3, "kb": 2**10, "m": 1e6, "mb": 2**20, "g": 1e9, "gb": 2**30}
+    if not found or found.group(2) not in scale:
+        return None
+    return int(found.group(1)) * scale[found.group(2)] / 2**20
+
+
+def mebibytes(quantity):
+    """A Kubernetes memory quantity (`2Gi`, `512Mi`, `2G`, bytes) in MiB; None if not one."""
+    found = re.fullmatch(r"(\d+)([KMGT]i?)?", str(quantity))
+    if not found:
+        return None
+    scale = {None: 1, "Ki": 2**10, "Mi": 2**20, "Gi": 2**30, "Ti": 2**40,
+             "K": 1e3, "M": 1e6, "G": 1e9, "T": 1e12}[found.group(2)]
+    return int(found.group(1)) * scale / 2**20
 
 
 def main():
@@ -130,15 +143,19 @@ def main():
     setting = lambda flag: args[args.index(flag) + 1] if flag in args else None
     budget = int(env.get("IRS_REDIS_MAPS_MB") or default("IRS_REDIS_MAPS_MB"))
     maxmemory = setting("--maxmemory")
-    check(maxmemory is not None and megabytes(maxmemory) > budget,
+    max_mib = megabytes(maxmemory) if maxmemory is not None else None
+    check(max_mib is not None and max_mib > budget,
           f"{name_of(redis)}: maxmemory {maxmemory} above the maps' budget of {budget} MiB")
     check(setting("--maxmemory-policy") == "noeviction",
           f"{name_of(redis)}: maxmemory-policy noeviction (Redis evicting a lock or a job record "
           f"breaks the cluster)")
     limit = containers(redis)[0].get("resources", {}).get("limits", {}).get("memory", "")
-    limit_mib = int(re.fullmatch(r"(\d+)Gi", limit).group(1)) * 1024 if limit.endswith("Gi") else None
-    check(limit_mib is not None and maxmemory is not None and megabytes(maxmemory) < limit_mib,
-          f"{name_of(redis)}: its memory limit ({limit}) above maxmemory (else it is killed, not full)")
+    limit_mib = mebibytes(limit)
+    # An append-only-file rewrite forks Redis: its copy-on-write pages need room beyond
+    # maxmemory, or the kernel kills it mid-rewrite. Half as much again is the usual margin.
+    check(limit_mib is not None and max_mib is not None and max_mib * 1.5 <= limit_mib,
+          f"{name_of(redis)}: its memory limit ({limit}) at least 1.5 x maxmemory (room for a "
+          f"rewrite's fork; else it is killed, not full)")
 
     if failures:
         print(f"{len(failures)} check(s) failed", file=sys.stderr)

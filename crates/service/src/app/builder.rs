@@ -15,7 +15,9 @@ use std::sync::{Arc, Mutex};
 pub(crate) async fn run(state: App, cluster: Arc<Cluster>) {
     let mut conn: Option<ConnectionManager> = None;
     loop {
-        if state.jobs().free_workers() == 0 || cluster.unavailable().is_some() {
+        // Not ready: starting, or stopping, when a build taken now would be cut short.
+        if !state.is_ready() || state.jobs().free_workers() == 0 || cluster.unavailable().is_some()
+        {
             tokio::time::sleep(HEARTBEAT).await;
             continue;
         }

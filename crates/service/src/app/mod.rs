@@ -376,10 +376,21 @@ pub async fn restore(state: &App) {
             .key
             .as_ref()
             .and_then(|key| state.registry().get(&ScenarioId::of_key(key)));
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0.0, |d| d.as_secs_f64());
+        record.view.finished_at = Some(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+        );
         match scenario {
+            // A replica resumes builds through the cluster's stream only (a record left by a
+            // run without Redis is not one of the cluster's).
+            Some(_) if state.build_stream().is_some() => {
+                record.view.state = jobs::JobState::Cancelled;
+                record.view.error = Some(
+                    "interrupted by a shutdown when this server ran without Redis; request the map again"
+                        .into(),
+                );
+            }
             Some(stored) => {
                 let job = state
                     .jobs()
@@ -399,8 +410,7 @@ pub async fn restore(state: &App) {
                     Some("interrupted by a shutdown; its scenario is no longer registered".into());
             }
         }
-        record.view.finished_at = Some(now);
-        disk.save_json(store::Kind::Job, record.view.job_id.as_str(), &record);
+        state.jobs().settle(record);
     }
     tracing::info!(scenarios, jobs, resumed, "restored from the data directory");
 }

@@ -84,13 +84,12 @@ async fn drain(state: &App, connections: &server::OpenConnections, grace: Durati
     // requests waiting on them are then answered and their connections close. Each records
     // how it ended (with a data directory, an interrupted map build as queued, to resume)
     // before it leaves the live set: wait for that, so no record is lost with the process.
-    let recorded = Instant::now() + Duration::from_secs(2);
-    while !state.jobs().live().is_empty() && Instant::now() < recorded {
+    // Both waits share the last two seconds, so the exit stays within the grace plus two.
+    let end = Instant::now().max(deadline) + Duration::from_secs(2);
+    while !state.jobs().live().is_empty() && Instant::now() < end {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
-    let open = connections
-        .drain(Instant::now().max(deadline) + Duration::from_secs(2))
-        .await;
+    let open = connections.drain(end).await;
     if open > 0 {
         tracing::warn!(
             connections = open,

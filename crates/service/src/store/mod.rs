@@ -332,7 +332,23 @@ mod tests {
             .trim()
             .parse()
             .unwrap();
+        // A map stored outside the budget (by a build before it) is brought into it when a
+        // replica connects.
+        let outside = map(0xa8);
+        ::redis::cmd("SET")
+            .arg(format!("irs:map:{outside}"))
+            .arg(disk::frame(&payload(7)))
+            .query_async::<()>(&mut conn)
+            .await
+            .unwrap();
         let (roomy, task_roomy) = replica(port, 1 << 30).await;
+        let adopted: bool = ::redis::cmd("HEXISTS")
+            .arg("irs:map-sizes")
+            .arg(outside.as_str())
+            .query_async(&mut conn)
+            .await
+            .unwrap();
+        assert!(adopted, "a map stored outside the budget is counted in it");
         let set_max = |bytes: u64| {
             let mut conn = conn.clone();
             async move {

@@ -393,7 +393,13 @@ impl Cluster {
                 Some(conn) => Ok(conn),
                 None => match self.connect().await {
                     Ok(mut conn) => {
-                        self.check_memory_settings(&mut conn).await;
+                        if let Some(reason) = self.check_settings(&mut conn).await {
+                            // Nothing this build writes would work there: degraded, with why.
+                            self.mark(Some(reason));
+                            tokio::time::sleep(HEALTH_PERIOD * 10).await;
+                            continue;
+                        }
+                        self.adopt_unbudgeted_maps(&mut conn).await;
                         *self.commands.write().expect("cluster lock") = Some(conn.clone());
                         Ok(conn)
                     }
@@ -412,19 +418,14 @@ impl Cluster {
         }
     }
 
-    /// Warns when Redis's memory settings break what the maps' budget relies on: an eviction
-    /// policy other than `noeviction` may evict locks, build entries and job records, and a
-    /// `maxmemory` below the budget fills Redis before the budget evicts (then stores fail
-    /// with 507 `store_full`). Read once per connection; `INFO` may be renamed away, which
-    /// only skips the check.
-    async fn check_memory_settings(&self, conn: &mut ConnectionManager) {
-        let Ok(info) = redis::cmd("INFO")
-            .arg("memory")
-            .query_async::<String>(conn)
-            .await
-        else {
-            return;
-        };
+    /// What this build needs of Redis, read once per connection: version 7 or later (the
+    /// map-storing script is a Redis 7 script), the reason it cannot be used otherwise. Warns
+    /// when the memory settings break what the maps' budget relies on: an eviction policy
+    /// other than `noeviction` may evict locks, build entries and job records, and a
+    /// `maxmemory` not above the budget fills Redis before the budget evicts (then stores fail
+    /// with 507 `store_full`). `INFO` may be renamed away, which only skips the checks.
+    async fn check_settings(&self, conn: &mut ConnectionManager) -> Option<String> {
+        let info = redis::cmd("INFO").query_async::<String>(conn).await.ok()?;
         let field = |name: &str| {
             info.lines()
                 .find_map(|line| line.strip_prefix(name)?.strip_prefix(':'))
@@ -448,6 +449,48 @@ impl Cluster {
                 maps_budget = self.maps_budget,
                 "Redis's maxmemory is not above the maps' budget (--redis-maps-mb): Redis fills before the budget evicts a map"
             );
+        }
+        let version = field("redis_version")?;
+        let major: u32 = version.split('.').next()?.parse().ok()?;
+        (major < 7)
+            .then(|| format!("Redis {version} is too old: irs-planner needs Redis 7 or later"))
+    }
+
+    /// Brings maps stored outside the budget (by a build before it, or by a replica of one
+    /// during a rolling update) into it, as the least recently used, so storing the next map
+    /// can evict them. Once per connection; a pass over the map keys (`SCAN`, so Redis serves
+    /// other commands meanwhile). Best effort.
+    async fn adopt_unbudgeted_maps(&self, conn: &mut ConnectionManager) {
+        let keys: Vec<redis::RedisResult<String>> =
+            match conn.scan_match::<_, String>(format!("{MAP_PREFIX}*")).await {
+                Ok(iter) => futures_util::StreamExt::collect(iter).await,
+                Err(_) => return,
+            };
+        let keys: Vec<String> = keys.into_iter().filter_map(Result::ok).collect();
+        let mut adopted = 0usize;
+        for key in keys {
+            let Some(id) = key.strip_prefix(MAP_PREFIX) else {
+                continue;
+            };
+            let known: redis::RedisResult<bool> = conn.hexists(MAP_SIZES, id).await;
+            if !matches!(known, Ok(false)) {
+                continue;
+            }
+            let Ok(bytes) = conn.strlen::<_, u64>(&key).await else {
+                continue;
+            };
+            let added: redis::RedisResult<()> = redis::pipe()
+                .atomic()
+                .hset_nx(MAP_SIZES, id, bytes)
+                .ignore()
+                .zadd(MAP_LRU, id, 0)
+                .ignore()
+                .query_async(conn)
+                .await;
+            adopted += usize::from(added.is_ok());
+        }
+        if adopted > 0 {
+            tracing::info!(adopted, "maps stored outside the budget brought into it");
         }
     }
 

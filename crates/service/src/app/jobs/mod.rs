@@ -111,6 +111,38 @@ impl Jobs {
         (history.order.len(), interrupted)
     }
 
+    /// Records a job that ended before it could start again (an interrupted build settled at
+    /// start-up): on disk, and in the history like any finished job.
+    pub fn settle(&self, record: JobRecord) {
+        if let Some(disk) = &self.disk {
+            disk.save_json(Kind::Job, record.view.job_id.as_str(), &record);
+        }
+        let Some(job) = Job::restore(record) else {
+            return;
+        };
+        if job.state() != JobState::Done
+            && let Some(map_id) = job.map_id()
+        {
+            self.store.forget_claims(map_id);
+        }
+        let job = Arc::new(job);
+        self.by_id
+            .lock()
+            .expect("jobs lock")
+            .insert(job.id.clone(), job.clone());
+        let forgotten = {
+            let mut history = self.history.lock().expect("jobs lock");
+            history.push(&job);
+            history.trim()
+        };
+        for old in forgotten {
+            self.by_id.lock().expect("jobs lock").remove(&old);
+            if let Some(disk) = &self.disk {
+                disk.remove_json(Kind::Job, old.as_str());
+            }
+        }
+    }
+
     pub fn get(&self, id: &JobId) -> Option<Arc<Job>> {
         self.by_id.lock().expect("jobs lock").get(id).cloned()
     }
@@ -122,7 +154,10 @@ impl Jobs {
         self.live()
             .into_iter()
             .map(|job| {
-                job.interrupted.store(true, Ordering::SeqCst);
+                // A job its owners cancelled already stays cancelled.
+                if !job.progress.is_cancelled() {
+                    job.interrupted.store(true, Ordering::SeqCst);
+                }
                 job.progress.cancel();
                 job.cancel.notify_one();
                 job.id.clone()
@@ -289,8 +324,19 @@ impl Jobs {
     /// then it leaves the in-flight table, and the oldest finished jobs beyond the history's
     /// count or bytes are forgotten.
     async fn retire(&self, job: &Arc<Job>, ended: JobState) {
-        if let Some(disk) = self.disk.clone() {
-            let record = if ended == JobState::Cancelled && job.resumes() {
+        let interrupted = ended == JobState::Cancelled && job.interrupted();
+        // A cluster's shared build cut short here goes on elsewhere under the same id: no
+        // record of it ending here, which would contradict the cluster's after a restart.
+        let shared = matches!(
+            job.work,
+            job::Work::Map {
+                resumable: false,
+                ..
+            }
+        );
+        let resumes = interrupted && job.resumes() && self.disk.is_some();
+        if let Some(disk) = self.disk.clone().filter(|_| !(interrupted && shared)) {
+            let record = if resumes {
                 tracing::info!(job_id = %job.id, "interrupted by the shutdown: recorded to resume at the next start");
                 job.record_interrupted()
             } else {
@@ -306,11 +352,15 @@ impl Jobs {
         job.set_state(ended);
         if let Some(map_id) = job.map_id() {
             self.in_flight.lock().await.remove(map_id);
-            if job.state() != JobState::Done && !(self.disk.is_some() && job.resumes()) {
+            if job.state() != JobState::Done && !resumes {
                 // No map came of it: the claims made on it while it ran claim nothing (unless
                 // the next start resumes it, for the same owners).
                 self.store.forget_claims(map_id);
             }
+        }
+        if resumes {
+            // Not finished: out of the history, whose trimming would delete its record.
+            return;
         }
         let forgotten = {
             let mut history = self.history.lock().expect("jobs lock");
