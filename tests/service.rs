@@ -2126,34 +2126,25 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
         "0",
     ];
     let mut server = start_binary(&flags);
-    let floor = scenario("paper-multi-user.json", |v| {
-        v["grid"]["resolution_m"] = 0.25.into();
-        v["name"] = "resumed".into();
-    });
-    let (s, job) = server
-        .send_as(
-            Some(alice),
-            "POST",
-            "/v1/maps",
-            Some(long_rate_request(floor, "noma")),
-        )
-        .await;
-    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
-    let job_id = job["job_id"].as_str().unwrap().to_string();
+    // Alice's rate-map build of an 81² floor named `name`: its job.
+    let rate_job = async |name: &str| {
+        let floor = scenario("paper-multi-user.json", |v| {
+            v["grid"]["resolution_m"] = 0.25.into();
+            v["name"] = name.into();
+        });
+        let request = long_rate_request(floor, "noma");
+        let (s, job) = server
+            .send_as(Some(alice), "POST", "/v1/maps", Some(request))
+            .await;
+        assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+        job
+    };
+    let job_id = rate_job("resumed").await["job_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
     // A second build, whose scenario is gone by the next start: settled as failed.
-    let orphan = scenario("paper-multi-user.json", |v| {
-        v["grid"]["resolution_m"] = 0.25.into();
-        v["name"] = "orphaned".into();
-    });
-    let (s, orphaned) = server
-        .send_as(
-            Some(alice),
-            "POST",
-            "/v1/maps",
-            Some(long_rate_request(orphan, "oma")),
-        )
-        .await;
-    assert_eq!(s, StatusCode::ACCEPTED, "{orphaned}");
+    let orphaned = rate_job("orphaned").await;
     let orphaned_path = format!("/v1/jobs/{}", orphaned["job_id"].as_str().unwrap());
     let (_, orphaned_job) = server
         .send_as(Some(alice), "GET", &orphaned_path, None)
