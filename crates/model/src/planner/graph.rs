@@ -113,67 +113,81 @@ impl<'a> CellGraph<'a> {
         threshold: f64,
     ) -> Result<Path, Infeasible> {
         self.check_ends(start, goal, threshold)?;
-        let heuristic = self.octile_to(goal);
         with_scratch(self.values.len(), |scratch| {
-            let Scratch { nodes, open, .. } = scratch;
-            nodes.set(start, Node::reached(0, 0, 0, nodes.generation));
-            let start_f = heuristic(self.grid.cell_of(start));
-            open.reset(start_f);
-            open.push(start_f, start as u32);
-            // The bucket in which the goal was first settled: the search ends once it is empty.
-            let mut goal_bucket = None;
-            while let Some(cell) = open.pop() {
-                if goal_bucket.is_some_and(|last| open.bucket() > last) {
-                    break;
-                }
-                let cell = cell as usize;
-                let here = nodes.get(cell);
-                if here.is_settled(nodes.generation) {
-                    continue; // stale: reached again by a shorter way, and expanded from there
-                }
-                nodes.set(cell, here.settled());
-                if cell == goal {
-                    goal_bucket.get_or_insert(open.bucket());
-                    continue;
-                }
-                let (orthogonal, diagonal) = here.steps();
-                self.for_each_neighbour(cell, |n, at, direction| {
-                    let (a, b) = if direction < 4 {
-                        (orthogonal + 1, diagonal)
-                    } else {
-                        (orthogonal, diagonal + 1)
-                    };
-                    let candidate = length_in_cells(a, b);
-                    let there = nodes.get(n);
-                    if there.is_reached(nodes.generation) && candidate >= there.length() {
-                        return;
-                    }
-                    if !self.is_feasible(n, threshold) {
-                        return;
-                    }
-                    // A shorter way to a cell already expanded opens it again.
-                    nodes.set(n, Node::reached(a, b, direction, nodes.generation));
-                    open.push(candidate + heuristic(at), n as u32);
-                });
-            }
-            let end = nodes.get(goal);
-            if !end.is_settled(nodes.generation) {
-                return Err(Infeasible::Disconnected);
-            }
-            let mut path = vec![goal];
-            let ny = self.grid.ny as isize;
-            let mut cell = goal;
-            while cell != start {
-                let (di, dj, _) = NEIGHBOURS[nodes.get(cell).direction()];
-                cell = cell.wrapping_add_signed(-(di * ny + dj));
-                path.push(cell);
-            }
-            path.reverse();
+            let (mut cells, length) = self.a_star(scratch, start, goal, threshold)?;
+            cells.reverse();
             Ok(Path {
-                cells: path,
-                distance_m: end.length() * self.grid.resolution_m,
+                cells,
+                distance_m: length * self.grid.resolution_m,
             })
         })
+    }
+
+    /// A* from `from` to `to` (ends checked by the caller) in `scratch`, whose nodes keep
+    /// every reached cell's shortest way from `from` found: the path's cells from `to` back
+    /// to `from`, and its length in cells.
+    pub(super) fn a_star(
+        &self,
+        scratch: &mut Scratch,
+        from: usize,
+        to: usize,
+        threshold: f64,
+    ) -> Result<(Vec<usize>, f64), Infeasible> {
+        let heuristic = self.octile_to(to);
+        let Scratch { nodes, open, .. } = scratch;
+        nodes.set(from, Node::reached(0, 0, 0, nodes.generation));
+        let from_f = heuristic(self.grid.cell_of(from));
+        open.reset(from_f);
+        open.push(from_f, from as u32);
+        // The bucket in which `to` was first settled: the search ends once it is empty.
+        let mut goal_bucket = None;
+        while let Some(cell) = open.pop() {
+            if goal_bucket.is_some_and(|last| open.bucket() > last) {
+                break;
+            }
+            let cell = cell as usize;
+            let here = nodes.get(cell);
+            if here.is_settled(nodes.generation) {
+                continue; // stale: reached again by a shorter way, and expanded from there
+            }
+            nodes.set(cell, here.settled());
+            if cell == to {
+                goal_bucket.get_or_insert(open.bucket());
+                continue;
+            }
+            let (orthogonal, diagonal) = here.steps();
+            self.for_each_neighbour(cell, |n, at, direction| {
+                let (a, b) = if direction < 4 {
+                    (orthogonal + 1, diagonal)
+                } else {
+                    (orthogonal, diagonal + 1)
+                };
+                let candidate = length_in_cells(a, b);
+                let there = nodes.get(n);
+                if there.is_reached(nodes.generation) && candidate >= there.length() {
+                    return;
+                }
+                if !self.is_feasible(n, threshold) {
+                    return;
+                }
+                // A shorter way to a cell already expanded opens it again.
+                nodes.set(n, Node::reached(a, b, direction, nodes.generation));
+                open.push(candidate + heuristic(at), n as u32);
+            });
+        }
+        let end = nodes.get(to);
+        if !end.is_settled(nodes.generation) {
+            return Err(Infeasible::Disconnected);
+        }
+        let mut path = vec![to];
+        let ny = self.grid.ny as isize;
+        let mut cell = to;
+        while cell != from {
+            let (di, dj, _) = NEIGHBOURS[nodes.get(cell).direction()];
+            cell = cell.wrapping_add_signed(-(di * ny + dj));
+            path.push(cell);
+        }
+        Ok((path, end.length()))
     }
 
     /// The largest threshold γ for which a feasible path from `start` to `goal` exists: the
@@ -256,7 +270,12 @@ impl<'a> CellGraph<'a> {
         }
     }
 
-    fn check_ends(&self, start: usize, goal: usize, threshold: f64) -> Result<(), Infeasible> {
+    pub(super) fn check_ends(
+        &self,
+        start: usize,
+        goal: usize,
+        threshold: f64,
+    ) -> Result<(), Infeasible> {
         if self.occupied[start] {
             return Err(Infeasible::StartOccupied);
         }
@@ -300,7 +319,7 @@ const _: () = assert!(crate::scenario::MAX_GRID_CELLS <= 1 << COUNT_BITS);
 /// - Both: which search wrote the node (bits 43–63): its generation when reached, one more
 ///   once settled; an older stamp reads as unset.
 #[derive(Debug, Clone, Copy)]
-struct Node(u64);
+pub(super) struct Node(u64);
 
 impl Node {
     #[inline]
@@ -324,7 +343,7 @@ impl Node {
     }
 
     #[inline]
-    fn is_reached(self, generation: u32) -> bool {
+    pub(super) fn is_reached(self, generation: u32) -> bool {
         self.stamp() >= generation
     }
 
@@ -344,7 +363,7 @@ impl Node {
     }
 
     #[inline]
-    fn length(self) -> f64 {
+    pub(super) fn length(self) -> f64 {
         let (orthogonal, diagonal) = self.steps();
         length_in_cells(orthogonal, diagonal)
     }
@@ -363,9 +382,9 @@ impl Node {
 /// Every cell's [`Node`], reset for a new search by bumping the generation instead of
 /// rewriting millions of entries.
 #[derive(Debug, Default)]
-struct Nodes {
+pub(super) struct Nodes {
     nodes: Vec<Node>,
-    generation: u32,
+    pub(super) generation: u32,
 }
 
 impl Nodes {
@@ -387,7 +406,7 @@ impl Nodes {
     }
 
     #[inline]
-    fn get(&self, cell: usize) -> Node {
+    pub(super) fn get(&self, cell: usize) -> Node {
         self.nodes[cell]
     }
 
@@ -402,8 +421,8 @@ impl Nodes {
 /// One search's working memory, kept between queries: on a 1001² map a fresh set was 12–21 MB
 /// of allocation and zeroing per query.
 #[derive(Debug, Default)]
-struct Scratch {
-    nodes: Nodes,
+pub(super) struct Scratch {
+    pub(super) nodes: Nodes,
     /// A*'s open list (see [`BucketQueue`]). On the 19-wall maze of `scripts/vs-python.sh`
     /// (every cell settled) the search took 150–180 ms with a binary heap of (f, −h, cell),
     /// 95–117 ms with a radix heap keyed by f's bits (a quarter of it redistributing entries),
@@ -411,16 +430,19 @@ struct Scratch {
     open: BucketQueue,
     /// The widest path's open list: (width, −distance to goal, cell), largest first.
     widest_heap: BinaryHeap<(OrdF64, Reverse<OrdF64>, usize)>,
+    /// Lazy Theta*'s state, allocated by the first any-angle query.
+    pub(super) theta: super::any_angle::ThetaScratch,
 }
 
 /// Scratch sets kept for reuse: as many as searches usually run at once (the query pool's
 /// workers); beyond that a search allocates its own and drops it. At most 4 × 8 B per cell of
-/// the largest map queried stay allocated: 32 MB at the grid limit of 1001² cells.
+/// the largest map queried stay allocated, 4 × 20.25 B once any-angle queries ran: 32 MB and
+/// 81 MB at the grid limit of 1001² cells.
 const POOLED_SCRATCH: usize = 4;
 static SCRATCH_POOL: Mutex<Vec<Scratch>> = Mutex::new(Vec::new());
 
 /// Runs `search` with a scratch set sized and reset for `cells` cells.
-fn with_scratch<R>(cells: usize, search: impl FnOnce(&mut Scratch) -> R) -> R {
+pub(super) fn with_scratch<R>(cells: usize, search: impl FnOnce(&mut Scratch) -> R) -> R {
     let pooled = SCRATCH_POOL
         .lock()
         .map(|mut pool| pool.pop())
