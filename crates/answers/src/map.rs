@@ -78,6 +78,17 @@ pub fn build(
     radiomap::build(scenario, key, map_id(key), progress)
 }
 
+/// [`build`], resuming a rate map from the rows `checkpoint` holds and recording there the
+/// rows it solves ([`radiomap::build_resuming`]).
+pub fn build_resuming(
+    scenario: &Scenario,
+    key: &MapKey,
+    progress: &Progress,
+    checkpoint: &radiomap::Checkpoint,
+) -> Result<RadioMap, Cancelled> {
+    radiomap::build_resuming(scenario, key, map_id(key), progress, checkpoint)
+}
+
 /// The ids every answer uses: scenario ids and map ids as content hashes of their documents.
 pub struct ContentIds;
 

@@ -22,7 +22,7 @@ pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
 pub use parts::StoredCells;
 pub use passages::{ClosedPassage, ClosedPassages};
-pub use rate_cells::RateCells;
+pub use rate_cells::{Checkpoint, RateCells, RateRow};
 pub use units::{LinkBudget, Unit};
 
 use crate::channel::ChannelModel;
@@ -297,6 +297,19 @@ pub fn build(
     id: String,
     progress: &Progress,
 ) -> Result<RadioMap, Cancelled> {
+    build_resuming(scenario, key, id, progress, &Checkpoint::default())
+}
+
+/// [`build`], for a rate map resuming from the rows `checkpoint` holds and recording there the
+/// rows it solves (when the checkpoint records). Gain maps ignore it: the slowest, a 1201 × 801
+/// floor plan at 5 cm, builds in about 3.5 s, less than a checkpoint's interval.
+pub fn build_resuming(
+    scenario: &Scenario,
+    key: &MapKey,
+    id: String,
+    progress: &Progress,
+    checkpoint: &Checkpoint,
+) -> Result<RadioMap, Cancelled> {
     let started = std::time::Instant::now();
     let grid = scenario.grid();
     let occupied = occupancy(scenario, &grid);
@@ -324,8 +337,9 @@ pub fn build(
         MapKind::Rate => {
             // Rate maps take one AP (MapKey::new rejects several).
             let model = ChannelModel::new(scenario);
-            let (values, rate) =
-                rate_cells::build_rate_cells(scenario, &model, &grid, &occupied, key, progress)?;
+            let (values, rate) = rate_cells::build_rate_cells(
+                scenario, &model, &grid, &occupied, key, progress, checkpoint,
+            )?;
             (values, CellSolutions::Rate(rate))
         }
     };

@@ -9,6 +9,9 @@ use crate::rate::{Access, RateModel};
 use crate::scenario::{Grid, Scenario};
 use crate::solver::{SolverKind, WarmStart, cell_problem, phases_of, solve_cell_warm, sru_part};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::Mutex;
 
 /// Per-cell configurations and certificates of a rate map (the values live in the map).
 #[derive(Debug, Clone)]
@@ -77,6 +80,58 @@ impl RateCells {
     }
 }
 
+/// One solved grid row of a rate map, as a checkpoint keeps it: everything the build writes
+/// for the row's cells, in the layout of [`RateCells`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RateRow {
+    /// The row's index i along x.
+    pub row: u32,
+    /// ny values (NaN where occupied or unserviceable).
+    pub values: Vec<f64>,
+    /// ny upper bounds.
+    pub upper_bound: Vec<f64>,
+    /// ny × max(N, 1) phase codes.
+    pub phases: Vec<u16>,
+    /// ny × users powers (W).
+    pub power_w: Vec<f64>,
+    /// ny decoding-order indices.
+    pub order: Vec<u8>,
+}
+
+/// The rows of one rate-map build solved so far, shared between the build and whoever keeps
+/// its checkpoints: the rows an interrupted build had solved (copied, not solved again) and,
+/// when recording, the rows this build solves, to be taken as they come
+/// ([`Checkpoint::take_solved`]). Rows only: a row is solved in order on one worker, so a row
+/// in progress when the build stops is solved again, never half-kept.
+#[derive(Debug, Default)]
+pub struct Checkpoint {
+    resumed: HashMap<u32, RateRow>,
+    recording: bool,
+    solved: Mutex<Vec<RateRow>>,
+}
+
+impl Checkpoint {
+    /// A checkpoint that records the rows solved, resuming from `rows` (rows of the same map
+    /// key; a row whose lengths do not fit the grid is solved again).
+    pub fn recording(rows: Vec<RateRow>) -> Checkpoint {
+        Checkpoint {
+            resumed: rows.into_iter().map(|r| (r.row, r)).collect(),
+            recording: true,
+            solved: Mutex::default(),
+        }
+    }
+
+    /// The rows given to resume from.
+    pub fn resumed_rows(&self) -> usize {
+        self.resumed.len()
+    }
+
+    /// The rows solved since the last call (none unless recording).
+    pub fn take_solved(&self) -> Vec<RateRow> {
+        std::mem::take(&mut *self.solved.lock().expect("checkpoint rows"))
+    }
+}
+
 /// Builds every free cell of a rate map in parallel (rows of the grid on rayon's pool); returns
 /// the map values and the per-cell solutions.
 pub(super) fn build_rate_cells(
@@ -86,6 +141,7 @@ pub(super) fn build_rate_cells(
     occupied: &[bool],
     key: &MapKey,
     progress: &Progress,
+    checkpoint: &Checkpoint,
 ) -> Result<(Vec<f64>, RateCells), Cancelled> {
     let model = RateModel::for_scenario(
         scenario,
@@ -114,6 +170,21 @@ pub(super) fn build_rate_cells(
         .zip(order.par_chunks_mut(ny))
         .enumerate()
         .try_for_each(|(i, ((((vals, ups), ph), pw), ord))| {
+            if let Some(row) = checkpoint.resumed.get(&(i as u32))
+                && row.values.len() == vals.len()
+                && row.upper_bound.len() == ups.len()
+                && row.phases.len() == ph.len()
+                && row.power_w.len() == pw.len()
+                && row.order.len() == ord.len()
+            {
+                vals.copy_from_slice(&row.values);
+                ups.copy_from_slice(&row.upper_bound);
+                ph.copy_from_slice(&row.phases);
+                pw.copy_from_slice(&row.power_w);
+                ord.copy_from_slice(&row.order);
+                progress.advance(ny);
+                return Ok(());
+            }
             // Each row is solved in order, every cell warm-started from the last one solved.
             let mut warm = WarmStart::default();
             for j in 0..ny {
@@ -146,6 +217,17 @@ pub(super) fn build_rate_cells(
             // Occupied cells count as done too, so progress reaches the total.
             let occupied_in_row = (0..ny).filter(|&j| occupied[grid.index(i, j)]).count();
             progress.advance(occupied_in_row);
+            if checkpoint.recording {
+                let row = RateRow {
+                    row: i as u32,
+                    values: vals.to_vec(),
+                    upper_bound: ups.to_vec(),
+                    phases: ph.to_vec(),
+                    power_w: pw.to_vec(),
+                    order: ord.to_vec(),
+                };
+                checkpoint.solved.lock().expect("checkpoint rows").push(row);
+            }
             Ok(())
         })?;
     phases.truncate(cells * n);
@@ -159,4 +241,79 @@ pub(super) fn build_rate_cells(
         model,
     };
     Ok((values, cells))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::radiomap::{CellSolutions, RadioMap, build, build_resuming};
+    use crate::rate::Access;
+
+    fn rate_cells(map: &RadioMap) -> &RateCells {
+        match &map.cells {
+            CellSolutions::Rate(r) => r,
+            CellSolutions::Gain { .. } => panic!("a rate map"),
+        }
+    }
+
+    fn bits(values: &[f64]) -> Vec<u64> {
+        values.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// A build resumed from some rows of an earlier one copies those rows (a marked value
+    /// comes through), solves the others (a row that does not fit the grid among them) to the
+    /// same bits as an uninterrupted build, counts every cell in its progress, and records
+    /// only the rows it solved.
+    #[test]
+    fn a_resumed_build_copies_its_rows_and_solves_the_rest_identically() {
+        let s = Scenario::builtin("small-test").unwrap();
+        let key = MapKey::rate("test", &s, PhaseMode::Continuous, Access::Noma).unwrap();
+        let recorder = Checkpoint::recording(Vec::new());
+        let whole = build_resuming(&s, &key, "m".into(), &Progress::default(), &recorder).unwrap();
+        let mut rows = recorder.take_solved();
+        assert_eq!(rows.len(), whole.grid.nx, "every row recorded once");
+        assert!(recorder.take_solved().is_empty(), "taken rows are gone");
+        rows.sort_by_key(|r| r.row);
+        let plain = build(&s, &key, "m".into(), &Progress::default()).unwrap();
+        assert_eq!(
+            bits(&plain.values),
+            bits(&whole.values),
+            "recording changes nothing"
+        );
+
+        // Even rows resume; row 2's value at a free cell is marked; row 4 is cut short.
+        let mut kept: Vec<RateRow> = rows.iter().filter(|r| r.row % 2 == 0).cloned().collect();
+        let free = kept[1].values.iter().position(|v| v.is_finite()).unwrap();
+        kept[1].values[free] = 123.0;
+        kept[2].values.pop();
+        let resumed_rows = kept.len();
+        let progress = Progress::default();
+        let resumer = Checkpoint::recording(kept);
+        let resumed = build_resuming(&s, &key, "m".into(), &progress, &resumer).unwrap();
+        assert_eq!(resumer.resumed_rows(), resumed_rows);
+        assert_eq!(progress.cells_done(), progress.cells_total());
+        let ny = whole.grid.ny;
+        let marked = 2 * ny + free;
+        assert_eq!(
+            resumed.values[marked], 123.0,
+            "row 2 was copied, not solved"
+        );
+        let mut expected = bits(&whole.values);
+        expected[marked] = 123f64.to_bits();
+        assert_eq!(bits(&resumed.values), expected);
+        let (a, b) = (rate_cells(&whole), rate_cells(&resumed));
+        assert_eq!(bits(&a.upper_bound), bits(&b.upper_bound));
+        assert_eq!(a.phases, b.phases);
+        assert_eq!(bits(&a.power_w), bits(&b.power_w));
+        assert_eq!(a.order, b.order);
+        let mut solved: Vec<u32> = resumer.take_solved().iter().map(|r| r.row).collect();
+        solved.sort_unstable();
+        let expected: Vec<u32> = (0..whole.grid.nx as u32)
+            .filter(|i| i % 2 == 1 || *i == 4)
+            .collect();
+        assert_eq!(
+            solved, expected,
+            "only the odd rows and the row that did not fit"
+        );
+    }
 }
