@@ -9,8 +9,10 @@ replicas and HAProxy health-checking their /readyz, then checks:
   * single flight: 100 concurrent identical map requests through HAProxy, one build in the
     sum of the replicas' /metrics; the map then answers on every replica without a build;
   * a job's progress and its cancellation work from a replica that does not run it;
-  * killing (SIGKILL) the replica that runs a build: another claims it, the job finishes,
-    and the map is bit-identical to the CLI's single-process build;
+  * killing (SIGKILL) the replica that runs a build: another claims it, copies the rows the
+    build's checkpoint holds, the job finishes, and the map is bit-identical to the CLI's
+    single-process build; stopping one (SIGTERM) mid-build: it stores the rows solved up to
+    the stop, and the other copies them;
   * Redis stopped for 20 s under load: every replica degraded, not down (/readyz 200
     "degraded" naming Redis, so HAProxy keeps routing), 0 failed path queries through HAProxy
     on a map the replicas hold, a request that needs Redis gets 503 with Retry-After, no
@@ -116,7 +118,7 @@ class Replica(kit.Server):
         empty = os.path.join(WORK, "no-scenarios")
         os.makedirs(empty, exist_ok=True)
         super().__init__(BINARY, "--scenarios", empty, "--redis-url", f"redis://127.0.0.1:{redis_port}/{db}",
-                         "--workers", "1", *flags, log_path=os.path.join(WORK, f"{name}.log"),
+                         "--workers", "1", "--max-rate-cells", "50000", *flags, log_path=os.path.join(WORK, f"{name}.log"),
                          env={**os.environ, "RUST_LOG": "info"})
 
     def builds(self):
@@ -278,9 +280,10 @@ def main():
     check(len(bodies) == 1, "every replica answers the same path")
 
     # A rate map long enough to watch, then cancelled from a replica that is not building it:
-    # 161 x 161 cells, 4.2 s on two cores on 2026-12-03 (at 0.25 m the build had become faster
-    # than the cancel: 1.0 s, and the job was done before the DELETE arrived).
-    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.125)))
+    # 201 x 201 cells (hence --max-rate-cells), about 6 s on two cores (at 0.25 m the build had
+    # become faster than the cancel: 1.0 s, and the job was done before the DELETE arrived; at
+    # 0.125 m, 4.2 s, barely longer than the checkpoint a kill below needs, every 2 s).
+    slow = scenario("paper-multi-user", lambda d: (d.__setitem__("name", "slow"), d["grid"].__setitem__("resolution_m", 0.1)))
     status, created, _ = request(proxy.base, "POST", "/v1/scenarios", slow)
     slow_id = created["id"]
     before = [r.builds() for r in replicas]
@@ -303,14 +306,16 @@ def main():
     job = wait_job(other.base, job_id, 20)
     check(job["state"] == "cancelled", f"the build stopped: {job['state']}")
 
-    # The same map again; its builder is killed mid-build and another replica finishes it.
+    # The same map again; its builder is killed mid-build, after its first checkpoint, and
+    # another replica finishes it from the rows checkpointed.
     before = [r.builds() for r in replicas]
     status, started, _ = request(replicas[0].base, "POST", "/v1/maps", {"scenario_id": slow_id, "kind": "rate", "access": "noma"})
     job_id = started["job_id"]
     wait_until("a replica started the build", builder_known, 15)
     builder = next(r for r, b in zip(replicas, before) if r.builds() > b)
     survivors = [r for r in replicas if r is not builder]
-    wait_until("the build under way", lambda: request(survivors[0].base, "GET", f"/v1/jobs/{job_id}")[1]["cells_done"] > 0, 15)
+    wait_until("the builder checkpointed rows", lambda: builder.metric("irs_map_rows_checkpointed_total") > 0, 15)
+    checkpointed = builder.metric("irs_map_rows_checkpointed_total")
     builder.proc.send_signal(signal.SIGKILL)
     builder.proc.wait()
     killed_at = time.time()
@@ -318,6 +323,10 @@ def main():
     check(job["state"] == "done", f"after SIGKILL of {builder.name} the job finished on another replica "
                                   f"in {time.time() - killed_at:.1f} s")
     check(sum(r.builds() for r in survivors) >= 1, "a survivor built it")
+    resumed = sum(r.metric("irs_map_rows_resumed_total") for r in survivors)
+    check(resumed >= checkpointed > 0, f"the survivor copied {resumed:.0f} of the 201 rows from the checkpoint "
+                                       f"({checkpointed:.0f} stored before the kill) instead of solving them")
+    check(redis.command("EXISTS", f"irs:checkpoint:{job['map_id']}") == 0, "the checkpoint went with the build")
     status, shared, _ = request(survivors[1].base, "GET", f"/v1/maps/{job['map_id']}")
     check(status == 200, "the map answers")
     slow_file = os.path.join(WORK, "slow.json")
@@ -381,6 +390,7 @@ def main():
     repairs(redis, survivors)
     one_truth(redis, survivors)
     graceful_stop(redis)
+    stopped_mid_build(redis, slow)
     bounded(redis)
 
 
@@ -464,6 +474,43 @@ def graceful_stop(redis):
           f"queries failed {failures[:3]}")
     kit.stop_process(proxy.proc)
     staying.stop()
+
+
+def stopped_mid_build(redis, slow):
+    """A replica stopped (SIGTERM, no grace) while it builds a rate map stores the rows it
+    solved in the build's checkpoint before it exits; the other replica takes the build over
+    under the same job and copies those rows instead of solving them again."""
+    # A database of their own: the replicas of the earlier checks, still running, read the
+    # build stream of database 0.
+    first, second = (Replica(redis.port, name, "--shutdown-grace-s", "0", db=2) for name in ("first", "second"))
+    wait_until("both replicas ready", lambda: first.ready() and second.ready(), 15)
+    status, created, _ = request(first.base, "POST", "/v1/scenarios", slow)
+    status, started, _ = request(first.base, "POST", "/v1/maps", {"scenario_id": created["id"], "kind": "rate", "access": "oma"})
+    check(status == 202, f"a rate-map job ({status})")
+    job_id = started["job_id"]
+    wait_until("a replica started the build", lambda: first.builds() + second.builds() > 0, 15)
+    builder, other = (first, second) if first.builds() > 0 else (second, first)
+    wait_until("the builder checkpointed rows", lambda: builder.metric("irs_map_rows_checkpointed_total") > 0, 15)
+    checkpointed = builder.metric("irs_map_rows_checkpointed_total")
+    # Half a checkpoint period more: rows that only the checkpoint stored at the stop holds.
+    time.sleep(1)
+    builder.proc.send_signal(signal.SIGTERM)
+    stopped = time.time()
+    builder.proc.wait(40)
+    exit_s = time.time() - stopped
+    job = wait_job(other.base, job_id, 120)
+    resumed = other.metric("irs_map_rows_resumed_total")
+    print(f"stopped mid-build: {builder.name} exited {builder.proc.returncode} {exit_s:.1f} s after SIGTERM; "
+          f"{other.name} finished the job {time.time() - stopped:.1f} s after it, {resumed:.0f} of 201 rows copied "
+          f"from the checkpoint ({checkpointed:.0f} stored before the SIGTERM)", flush=True)
+    check(builder.proc.returncode == 0 and job["state"] == "done",
+          f"the job finished on {other.name} after {builder.name}'s graceful stop: {job['state']}")
+    check(resumed > checkpointed > 0, f"the rows solved up to the stop were copied, not solved again "
+                                      f"({resumed:.0f} > {checkpointed:.0f})")
+    check(redis.command("EXISTS", f"irs:checkpoint:{job['map_id']}", db=2) == 0, "the checkpoint went with the build")
+    status, _, _ = request(other.base, "GET", f"/v1/maps/{job['map_id']}")
+    check(status == 200, "the map answers")
+    other.stop()
 
 
 def tenants(redis):

@@ -36,7 +36,7 @@ use metrics_exporter_prometheus::PrometheusHandle;
 use queries::QueryPool;
 use registry::{ScenarioRecord, ScenarioRegistry, ScenarioSource, StoredScenario};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
 /// Request limits, from the configuration.
@@ -84,9 +84,22 @@ struct Inner {
     /// `--data-dir`, if set (the registry, the cache and the jobs write to it).
     disk: Option<Arc<store::DataDir>>,
     ready: AtomicBool,
+    /// Cluster builds whose task is still running here (`builder`), which a shutdown waits
+    /// for as it waits for jobs: an interrupted one stores its last checkpoint after its job
+    /// has ended.
+    shared_builds: Arc<AtomicUsize>,
     metrics: PrometheusHandle,
     /// The process's own series (CPU, memory, file descriptors, threads), read at each scrape.
     process: metrics_process::Collector,
+}
+
+/// A cluster build's task, counted in [`App::shared_builds`] while it lives.
+pub(crate) struct SharedBuildRunning(Arc<AtomicUsize>);
+
+impl Drop for SharedBuildRunning {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
 }
 
 impl App {
@@ -171,6 +184,7 @@ impl App {
                 tokens: Tokens::load(&args.api_tokens, args.api_tokens_file.as_deref())?,
                 disk,
                 ready: AtomicBool::new(false),
+                shared_builds: Arc::default(),
                 metrics,
                 process: metrics_process::Collector::default(),
             }),
@@ -267,6 +281,15 @@ impl App {
     }
     pub(crate) fn set_ready(&self, ready: bool) {
         self.inner.ready.store(ready, Ordering::Relaxed)
+    }
+    /// Counts a cluster build's task as running here until the guard drops.
+    pub(crate) fn shared_build_running(&self) -> SharedBuildRunning {
+        self.inner.shared_builds.fetch_add(1, Ordering::Relaxed);
+        SharedBuildRunning(self.inner.shared_builds.clone())
+    }
+    /// Cluster builds whose task is still running here.
+    pub(crate) fn shared_builds(&self) -> usize {
+        self.inner.shared_builds.load(Ordering::Relaxed)
     }
     /// `/metrics`: what was recorded, with the gauges read now (the process's series, the
     /// jobs waiting and running) set first.

@@ -83,10 +83,11 @@ async fn drain(state: &App, connections: &server::OpenConnections, grace: Durati
     // Jobs check their flag once per grid row, so they end within a fraction of a second;
     // requests waiting on them are then answered and their connections close. Each records
     // how it ended (with a data directory, an interrupted map build as queued, to resume)
-    // before it leaves the live set: wait for that, so no record is lost with the process.
-    // Both waits share the last two seconds, so the exit stays within the grace plus two.
+    // before it leaves the live set, and a cluster build's task stores its checkpoint after:
+    // wait for both, so no record or checkpoint is lost with the process. Both waits share
+    // the last two seconds, so the exit stays within the grace plus two.
     let end = Instant::now().max(deadline) + Duration::from_secs(2);
-    while !state.jobs().live().is_empty() && Instant::now() < end {
+    while (!state.jobs().live().is_empty() || state.shared_builds() > 0) && Instant::now() < end {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     let open = connections.drain(end).await;

@@ -188,6 +188,16 @@ pub(crate) const SERIES: &[(&str, Kind, &str)] = &[
         "Maps built while Redis was away, stored in Redis once it answered",
     ),
     (
+        "irs_map_rows_checkpointed_total",
+        Counter,
+        "Rate-map grid rows this replica's builds stored in their checkpoints in Redis",
+    ),
+    (
+        "irs_map_rows_resumed_total",
+        Counter,
+        "Rate-map grid rows a build taken over here copied from its checkpoint instead of solving",
+    ),
+    (
         "irs_maps_not_shared_total",
         Counter,
         "Maps built here that Redis had no room for (at its maxmemory), kept here only [reason]",

@@ -509,6 +509,35 @@ mod tests {
             ]
         );
 
+        // A build's checkpoint: batches read back in the order appended, with an expiry; a
+        // key of another type is repaired and read as no checkpoint.
+        let building = map(0xbc);
+        assert!(cluster.checkpoint(&building).await.unwrap().is_empty());
+        cluster
+            .append_checkpoint(&building, b"rows 0-3")
+            .await
+            .unwrap();
+        cluster
+            .append_checkpoint(&building, b"rows 4-5")
+            .await
+            .unwrap();
+        assert_eq!(
+            cluster.checkpoint(&building).await.unwrap(),
+            [b"rows 0-3".to_vec(), b"rows 4-5".to_vec()]
+        );
+        let mut conn = cluster.connect().await.unwrap();
+        let key = format!("irs:checkpoint:{building}");
+        let ttl: i64 = ::redis::AsyncCommands::ttl(&mut conn, &key).await.unwrap();
+        assert!((3_590..=3_600).contains(&ttl), "expires: {ttl}");
+        let _: () = ::redis::AsyncCommands::set(&mut conn, &key, "a string")
+            .await
+            .unwrap();
+        assert!(cluster.checkpoint(&building).await.unwrap().is_empty());
+        let left: bool = ::redis::AsyncCommands::exists(&mut conn, &key)
+            .await
+            .unwrap();
+        assert!(!left, "repaired");
+
         maps_stay_within_their_budget(port).await;
 
         watch.abort();

@@ -28,6 +28,12 @@
 //!   deleted it, so every replica drops its copy (`app::deletions`);
 //! * `irs:building:<map id>`: the single-flight lock, the id of the job building the map, set
 //!   with NX and an expiry that the builder renews every heartbeat;
+//! * `irs:checkpoint:<map id>`: a rate-map build's progress, a list of batches of solved grid
+//!   rows (`encoding::encode_rows`) its builder appends every [`crate::app::builder`] checkpoint
+//!   period and once more when a graceful stop interrupts it; the replica that takes the build
+//!   over copies those rows instead of solving them again, and the key goes when the build
+//!   ends (or [`CHECKPOINT_TTL_S`] after its last append). Outside the maps' budget: at most one
+//!   map's worth per running build;
 //! * the stream `irs:builds` with the consumer group `builders`: one entry per build. Every
 //!   replica reads it (`XREADGROUP`) when it has a free worker; an entry stays pending until
 //!   its build ends (`XACK`, then `XDEL`). The builder's heartbeat re-claims its own entry to
@@ -108,6 +114,13 @@ fn job_owners_key(id: &JobId) -> String {
 fn scenario_maps_key(id: &ScenarioId) -> String {
     format!("irs:scenario-maps:{id}")
 }
+fn checkpoint_key(map_id: &MapId) -> String {
+    format!("irs:checkpoint:{map_id}")
+}
+/// How long a build's checkpoint outlives its last append: a build no replica takes over
+/// within it starts again from zero. Checkpoints lie outside the maps' budget; this bounds
+/// what an abandoned one holds.
+const CHECKPOINT_TTL_S: i64 = 3_600;
 const MAP_PREFIX: &str = "irs:map:";
 const MAP_SIZES: &str = "irs:map-sizes";
 const MAP_LRU: &str = "irs:map-lru";
@@ -825,12 +838,51 @@ impl Cluster {
             .await;
     }
 
-    /// A build ended (done, failed or cancelled): the entry is acknowledged and removed, the
-    /// lock released if it is still this job's.
+    /// Appends a batch of a build's solved rows to its checkpoint, renewing its expiry.
+    pub async fn append_checkpoint(&self, map_id: &MapId, batch: &[u8]) -> Result<(), Error> {
+        let mut conn = self.conn()?;
+        let key = checkpoint_key(map_id);
+        redis::pipe()
+            .atomic()
+            .rpush(&key, batch)
+            .ignore()
+            .expire(&key, CHECKPOINT_TTL_S)
+            .ignore()
+            .query_async::<()>(&mut conn)
+            .await
+            .map_err(|e| self.error(&e))
+    }
+
+    /// The batches of solved rows an earlier builder of the map left, oldest first; a key of
+    /// another Redis type is deleted and read as none.
+    pub async fn checkpoint(&self, map_id: &MapId) -> Result<Vec<Vec<u8>>, Error> {
+        let mut conn = self.conn()?;
+        let key = checkpoint_key(map_id);
+        match conn.lrange::<_, Vec<Vec<u8>>>(&key, 0, -1).await {
+            Ok(batches) => Ok(batches),
+            Err(e) if e.code() == Some("WRONGTYPE") => {
+                self.discard_key(&mut conn, &key, "checkpoint", "wrong Redis type")
+                    .await;
+                Ok(Vec::new())
+            }
+            Err(e) => Err(self.error(&e)),
+        }
+    }
+
+    /// Deletes a checkpoint whose batches do not decode (`why`), logged and counted.
+    pub async fn discard_checkpoint(&self, map_id: &MapId, why: &str) {
+        let Ok(mut conn) = self.conn() else { return };
+        self.discard_key(&mut conn, &checkpoint_key(map_id), "checkpoint", why)
+            .await;
+    }
+
+    /// A build ended (done, failed or cancelled): the entry is acknowledged and removed, its
+    /// checkpoint deleted, the lock released if it is still this job's.
     pub async fn finish(&self, build: &BuildEntry) {
         let Ok(mut conn) = self.conn() else { return };
         let _: redis::RedisResult<()> = conn.xack(STREAM, GROUP, &[&build.stream_id]).await;
         let _: redis::RedisResult<()> = conn.xdel(STREAM, &[&build.stream_id]).await;
+        let _: redis::RedisResult<()> = conn.del(checkpoint_key(&build.map_id)).await;
         let holder: Option<String> = conn.get(lock_key(&build.map_id)).await.unwrap_or(None);
         if holder.as_deref() == Some(build.job_id.as_str()) {
             let _: redis::RedisResult<()> = conn.del(lock_key(&build.map_id)).await;

@@ -12,10 +12,21 @@ use crate::app::Error;
 use crate::app::cache::MapCache;
 use crate::app::identity::{Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
-use irs_model::radiomap::{MapKey, RadioMap, WorkError};
+use irs_model::radiomap::{Checkpoint, MapKey, RadioMap, WorkError};
 use irs_model::scenario::Scenario;
 use std::sync::{Arc, Mutex};
 use tracing::Instrument;
+
+/// A build taken from the cluster's stream, as [`Jobs::build_shared`] runs it.
+pub(crate) struct SharedBuild {
+    /// The job's id, the same on every replica.
+    pub job_id: JobId,
+    pub scenario: Arc<Scenario>,
+    pub key: MapKey,
+    pub owners: Owners,
+    /// The rows an earlier builder left, where this build records its own.
+    pub checkpoint: Arc<Checkpoint>,
+}
 
 /// The outcome of asking for a map.
 pub enum MapRequestOutcome {
@@ -99,15 +110,13 @@ impl Jobs {
     }
 
     /// Builds a map another replica (or this one) queued in the cluster's stream, as the local
-    /// job `job_id` (so this replica shows its live progress). When it is done, `publish`
+    /// job `build.job_id` (so this replica shows its live progress), resuming from the rows
+    /// its checkpoint holds and recording there the rows it solves. When it is done, `publish`
     /// gets the map before the job says `done`, then the map enters `cache`. Counted in
     /// `irs_map_builds_total`, which in a cluster counts builds, not requests.
     pub(crate) fn build_shared<P, Fut>(
         self: &Arc<Self>,
-        job_id: JobId,
-        scenario: Arc<Scenario>,
-        key: MapKey,
-        owners: Owners,
+        build: SharedBuild,
         cache: &MapCache,
         publish: P,
     ) -> Arc<Job>
@@ -115,13 +124,22 @@ impl Jobs {
         P: FnOnce(Arc<RadioMap>) -> Fut + Send + 'static,
         Fut: std::future::Future<Output = Result<(), String>> + Send,
     {
+        let SharedBuild {
+            job_id,
+            scenario,
+            key,
+            owners,
+            checkpoint,
+        } = build;
         let map_id = MapId::of(&key);
         let job = self.admit_map(job_id, &key, owners, false);
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
-        let work =
-            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let work = move || {
+            irs_answers::map::build_resuming(&scenario, &key, &progress, &checkpoint)
+                .map_err(WorkError::from)
+        };
         let built_id = map_id.clone();
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);

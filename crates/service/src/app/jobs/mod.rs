@@ -15,6 +15,7 @@ pub use checks::SYNC_CHECK_S;
 use job::JobTimes;
 pub use job::{Job, JobState, Withdrawn, Work};
 pub use maps::MapRequestOutcome;
+pub(crate) use maps::SharedBuild;
 pub use placements::{PlacementOutcome, PlacementSearch};
 pub(crate) use record::{JobRecord, JobView};
 
