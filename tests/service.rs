@@ -127,6 +127,13 @@ impl Server {
             Running::InProcess(_) => panic!("an in-process server has no process"),
         }
     }
+
+    /// Sends the server's process SIGTERM, as `docker stop` and Kubernetes do.
+    fn sigterm(&mut self) {
+        let pid = self.child().id().to_string();
+        let sent = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+        assert!(sent.success(), "kill -TERM {pid}: {sent}");
+    }
     async fn send(&self, method: &str, path: &str, body: Option<Value>) -> (StatusCode, Value) {
         self.send_as(None, method, path, body).await
     }
@@ -1338,14 +1345,7 @@ async fn sigterm_shuts_down_gracefully() {
         .await;
     assert_eq!(s, StatusCode::ACCEPTED, "{job}");
     let signalled = Instant::now();
-    let pid = server.child().id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-TERM", &pid])
-            .status()
-            .unwrap()
-            .success()
-    );
+    server.sigterm();
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
         if let Some(status) = server.child().try_wait().unwrap() {
@@ -2150,14 +2150,7 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
         .send_as(Some(alice), "GET", &orphaned_path, None)
         .await;
     let orphaned_sid = orphaned_job["scenario_id"].as_str().unwrap().to_string();
-    let pid = server.child().id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-TERM", &pid])
-            .status()
-            .unwrap()
-            .success()
-    );
+    server.sigterm();
     let status = server.child().wait().unwrap();
     assert!(status.success(), "exit status {status}");
     drop(server);
