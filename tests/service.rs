@@ -2108,8 +2108,9 @@ async fn cors_only_for_configured_origins() {
     assert_eq!(preflight(&open, "https://elsewhere.example").await, None);
 }
 
-/// `--data-dir`: a map build that a SIGTERM's grace period cuts short is recorded, and the
-/// next start resumes it under the same id, for the same owner, until its map is built.
+/// `--data-dir`: a map build that a SIGTERM's grace period cuts short is recorded with the
+/// grid rows it had solved, and the next start resumes it under the same id, for the same
+/// owner, copying those rows, until its map is built: the same map as a build never stopped.
 #[tokio::test]
 async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
     let dir = std::env::temp_dir().join(format!("irs-resume-{}", std::process::id()));
@@ -2126,15 +2127,18 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
         "0",
     ];
     let mut server = start_binary(&flags);
-    // Alice's rate-map build of an 81² floor named `name`: its job.
-    let rate_job = async |name: &str| {
+    // The rate-map build of an 81² floor named `name`.
+    let rate_request = |name: &str| {
         let floor = scenario("paper-multi-user.json", |v| {
             v["grid"]["resolution_m"] = 0.25.into();
             v["name"] = name.into();
         });
-        let request = long_rate_request(floor, "noma");
+        long_rate_request(floor, "noma")
+    };
+    // Alice's job building it.
+    let rate_job = async |name: &str| {
         let (s, job) = server
-            .send_as(Some(alice), "POST", "/v1/maps", Some(request))
+            .send_as(Some(alice), "POST", "/v1/maps", Some(rate_request(name)))
             .await;
         assert_eq!(s, StatusCode::ACCEPTED, "{job}");
         job
@@ -2143,6 +2147,17 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
         .as_str()
         .unwrap()
         .to_string();
+    let job_path = format!("/v1/jobs/{job_id}");
+    // Ten rows solved before the stop, which the next start copies.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let (_, job) = server.send_as(Some(alice), "GET", &job_path, None).await;
+        if job["cells_done"].as_u64().unwrap() >= 10 * 81 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no progress: {job}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
     // A second build, whose scenario is gone by the next start: settled as failed.
     let orphaned = rate_job("orphaned").await;
     let orphaned_path = format!("/v1/jobs/{}", orphaned["job_id"].as_str().unwrap());
@@ -2183,7 +2198,6 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
             .contains("no longer registered"),
         "{failed}"
     );
-    let job_path = format!("/v1/jobs/{job_id}");
     let (s, resumed) = server.send_as(Some(alice), "GET", &job_path, None).await;
     assert_eq!(s, StatusCode::OK, "{resumed}");
     assert_ne!(resumed["state"], "cancelled", "{resumed}");
@@ -2195,7 +2209,30 @@ async fn a_build_interrupted_by_sigterm_resumes_after_the_restart() {
     let (s, map) = server.send_as(Some(alice), "GET", &map_path, None).await;
     assert_eq!(s, StatusCode::OK, "{map}");
     assert_eq!(server.metric_total("irs_map_builds_total").await, 1.0);
+    let resumed_rows = server.metric_total("irs_map_rows_resumed_total").await;
+    assert!(resumed_rows >= 10.0, "{resumed_rows} rows copied");
+    let left: Vec<_> = std::fs::read_dir(dir.join("checkpoints"))
+        .unwrap()
+        .collect();
+    assert!(
+        left.is_empty(),
+        "the checkpoint went with the build: {left:?}"
+    );
     drop(server);
+    let fresh = start(&[]);
+    let (s, job) = fresh.post("/v1/maps", rate_request("resumed")).await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    let built = fresh.wait_job(job["job_id"].as_str().unwrap()).await;
+    let (_, whole) = fresh
+        .get(&format!("/v1/maps/{}", built["map_id"].as_str().unwrap()))
+        .await;
+    assert!(
+        map["values"].is_array() && map["upper_bound"].is_array(),
+        "{map}"
+    );
+    assert_eq!(map["values"], whole["values"], "resumed = never stopped");
+    assert_eq!(map["upper_bound"], whole["upper_bound"]);
+    drop(fresh);
     // Done now: a third start resumes nothing.
     let server = start_binary(&flags);
     let (_, again) = server.send_as(Some(alice), "GET", &job_path, None).await;

@@ -130,6 +130,16 @@ impl Checkpoint {
     pub fn take_solved(&self) -> Vec<RateRow> {
         std::mem::take(&mut *self.solved.lock().expect("checkpoint rows"))
     }
+
+    /// Every row it holds, by row: those it resumed from and those solved since the last
+    /// [`Checkpoint::take_solved`] (a checkpoint saved whole, not appended to).
+    pub fn all_rows(&self) -> Vec<RateRow> {
+        let mut rows: Vec<RateRow> = self.resumed.values().cloned().collect();
+        rows.extend(self.take_solved());
+        rows.sort_by_key(|r| r.row);
+        rows.dedup_by_key(|r| r.row);
+        rows
+    }
 }
 
 /// Builds every free cell of a rate map in parallel (rows of the grid on rayon's pool); returns

@@ -60,6 +60,9 @@ pub(crate) enum Kind {
     Job,
     /// Who asked for a map (`store::on_disk`).
     MapOwners,
+    /// The rows an interrupted rate-map build had solved, by map id
+    /// (`irs_answers::encoding::encode_rows`), which its resumption copies.
+    Checkpoint,
 }
 
 impl Kind {
@@ -69,6 +72,7 @@ impl Kind {
             Kind::Map => "maps",
             Kind::Job => "jobs",
             Kind::MapOwners => "map-owners",
+            Kind::Checkpoint => "checkpoints",
         }
     }
 }
@@ -132,7 +136,13 @@ impl DataDir {
     /// with a warning, and reported by [`DataDir::unwritable`].
     pub fn open(root: &Path, maps_budget_bytes: u64, cache_bytes: u64) -> Result<DataDir, String> {
         fs::create_dir_all(root).map_err(|e| format!("--data-dir {}: {e}", root.display()))?;
-        for kind in [Kind::Scenario, Kind::Map, Kind::Job, Kind::MapOwners] {
+        for kind in [
+            Kind::Scenario,
+            Kind::Map,
+            Kind::Job,
+            Kind::MapOwners,
+            Kind::Checkpoint,
+        ] {
             let dir = root.join(kind.dir());
             if let Err(e) = fs::create_dir_all(&dir) {
                 // The probe below reports it; what can be read is still served.
@@ -315,7 +325,8 @@ impl DataDir {
     fn read(&self, kind: Kind, id: &str) -> Option<Vec<u8>> {
         let path = self.path(kind, id);
         let max_bytes = match kind {
-            Kind::Map => self.max_map_file_bytes,
+            // A checkpoint holds at most the rows of one map.
+            Kind::Map | Kind::Checkpoint => self.max_map_file_bytes,
             Kind::Scenario | Kind::Job | Kind::MapOwners => MAX_JSON_RECORD_BYTES,
         };
         let bytes = match irs_answers::files::read_regular(&path, max_bytes) {
@@ -383,6 +394,31 @@ impl DataDir {
                 }
             })
             .collect()
+    }
+
+    /// Saves the rows an interrupted build solved (encoded), replacing any earlier ones; a
+    /// failure is logged (the resumed build solves those rows again).
+    pub fn save_checkpoint(&self, map_id: &str, rows: &[u8]) {
+        if !valid_id(map_id) {
+            return;
+        }
+        if let Err(e) = self.write(Kind::Checkpoint, map_id, rows) {
+            metrics::counter!("irs_store_write_errors_total", "kind" => Kind::Checkpoint.dir())
+                .increment(1);
+            tracing::warn!(map_id, error = %e, "could not persist a build's checkpoint");
+            self.write_failed(&e);
+        }
+    }
+
+    /// The rows [`DataDir::save_checkpoint`] kept for a map, if readable.
+    pub fn load_checkpoint(&self, map_id: &str) -> Option<Vec<u8>> {
+        valid_id(map_id)
+            .then(|| self.read(Kind::Checkpoint, map_id))
+            .flatten()
+    }
+
+    pub fn remove_checkpoint(&self, map_id: &str) {
+        self.remove(Kind::Checkpoint, map_id);
     }
 
     /// Saves a built map, then drops the least recently written maps past the budget.

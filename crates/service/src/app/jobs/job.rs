@@ -5,7 +5,7 @@ use super::checks::CheckOutcome;
 use super::placements::PlacementOutcome;
 use crate::app::identity::{Caller, Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
-use irs_model::radiomap::{MapKey, Progress, RadioMap};
+use irs_model::radiomap::{Checkpoint, MapKey, Progress, RadioMap};
 use serde::{Deserialize, Serialize};
 use std::sync::OnceLock;
 use std::sync::{Arc, Mutex};
@@ -124,6 +124,9 @@ pub enum Work {
         /// A build of this node's own, which a restart resumes if the server's shutdown
         /// interrupts it; a cluster's shared build is not (another replica takes it over).
         resumable: bool,
+        /// The grid rows of a rate map it resumed from and those it solved, kept where a
+        /// restart or another replica finds them (`--data-dir`, Redis).
+        checkpoint: Arc<Checkpoint>,
     },
     /// Ranks placement candidates; the answer is kept here once the job is done.
     Placement {
@@ -251,6 +254,14 @@ impl Job {
             Work::Map { .. } => JobKind::Map,
             Work::Placement { .. } => JobKind::Placement,
             Work::Check { .. } => JobKind::Check,
+        }
+    }
+
+    /// A map job's checkpoint.
+    pub(super) fn checkpoint(&self) -> Option<&Arc<Checkpoint>> {
+        match &self.work {
+            Work::Map { checkpoint, .. } => Some(checkpoint),
+            Work::Placement { .. } | Work::Check { .. } => None,
         }
     }
 

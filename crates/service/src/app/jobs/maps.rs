@@ -12,7 +12,7 @@ use crate::app::Error;
 use crate::app::cache::MapCache;
 use crate::app::identity::{Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
-use irs_model::radiomap::{Checkpoint, MapKey, RadioMap, WorkError};
+use irs_model::radiomap::{Checkpoint, MapKey, MapKind, RadioMap, RateRow, WorkError};
 use irs_model::scenario::Scenario;
 use std::sync::{Arc, Mutex};
 use tracing::Instrument;
@@ -60,7 +60,18 @@ impl Jobs {
             return Ok(MapRequestOutcome::Building(job.clone()));
         }
         self.check_room()?;
-        let job = self.admit_map(JobId::random(), &key, Owners::of(owner), true);
+        // Rows are recorded only where a shutdown can keep them for the next start.
+        let checkpoint = if self.disk.is_some() && key.kind == MapKind::Rate {
+            Checkpoint::recording(Vec::new())
+        } else {
+            Checkpoint::default()
+        };
+        let job = self.admit_map(
+            JobId::random(),
+            &key,
+            Owners::of(owner),
+            Some(Arc::new(checkpoint)),
+        );
         self.start_map(&mut in_flight, job.clone(), cache, scenario, key);
         Ok(MapRequestOutcome::Building(job))
     }
@@ -80,7 +91,18 @@ impl Jobs {
         if in_flight.contains_key(&map_id) || cache.get(&map_id).await.is_some() {
             return None;
         }
-        let job = self.admit_map(record.view.job_id.clone(), &key, record.owners(), true);
+        let rows = self.checkpointed_rows(&map_id);
+        if !rows.is_empty() {
+            tracing::info!(job_id = %record.view.job_id, rows = rows.len(), "resuming from the rows the interrupted build had solved");
+            metrics::counter!("irs_map_rows_resumed_total").increment(rows.len() as u64);
+        }
+        let checkpoint = Arc::new(Checkpoint::recording(rows));
+        let job = self.admit_map(
+            record.view.job_id.clone(),
+            &key,
+            record.owners(),
+            Some(checkpoint),
+        );
         self.start_map(&mut in_flight, job.clone(), cache, scenario, key);
         Some(job)
     }
@@ -99,8 +121,11 @@ impl Jobs {
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id);
         let progress = job.progress.clone();
         let cache = cache.clone();
-        let work =
-            move || irs_answers::map::build(&scenario, &key, &progress).map_err(WorkError::from);
+        let checkpoint = job.checkpoint().cloned().unwrap_or_default();
+        let work = move || {
+            irs_answers::map::build_resuming(&scenario, &key, &progress, &checkpoint)
+                .map_err(WorkError::from)
+        };
         let finish = move |job: Arc<Job>, map: RadioMap| async move {
             let map = Arc::new(map);
             job.deliver(&map);
@@ -132,7 +157,8 @@ impl Jobs {
             checkpoint,
         } = build;
         let map_id = MapId::of(&key);
-        let job = self.admit_map(job_id, &key, owners, false);
+        let job = self.admit_map(job_id, &key, owners, None);
+        // The builder keeps this one in Redis; the job holds none of its own.
         let span = tracing::info_span!("job", job_id = %job.id, map_id = %map_id, scenario_id = %key.scenario_id, shared = true);
         let progress = job.progress.clone();
         let cache = cache.clone();
@@ -161,9 +187,16 @@ impl Jobs {
         job
     }
 
-    /// A map build admitted as job `id`, counted in `irs_map_builds_total`; `resumable`: see
-    /// [`Work::Map`].
-    fn admit_map(&self, id: JobId, key: &MapKey, owners: Owners, resumable: bool) -> Arc<Job> {
+    /// A map build admitted as job `id`, counted in `irs_map_builds_total`: one of this
+    /// node's own, which a restart resumes, with its checkpoint, or (`None`) a cluster's
+    /// shared build ([`Work::Map`]).
+    fn admit_map(
+        &self,
+        id: JobId,
+        key: &MapKey,
+        owners: Owners,
+        own: Option<Arc<Checkpoint>>,
+    ) -> Arc<Job> {
         metrics::counter!("irs_map_builds_total", "kind" => key.kind.to_string()).increment(1);
         self.admit_as(
             id,
@@ -173,8 +206,24 @@ impl Jobs {
                 map_id: MapId::of(key),
                 key: key.clone(),
                 delivery: Mutex::new(MapDelivery::default()),
-                resumable,
+                resumable: own.is_some(),
+                checkpoint: own.unwrap_or_default(),
             },
         )
+    }
+
+    /// The rows an interrupted build of `map_id` left in the data directory (none without
+    /// one, or if they do not decode).
+    fn checkpointed_rows(&self, map_id: &MapId) -> Vec<RateRow> {
+        let Some(bytes) = self
+            .disk
+            .as_ref()
+            .and_then(|d| d.load_checkpoint(map_id.as_str()))
+        else {
+            return Vec::new();
+        };
+        irs_answers::encoding::decode_rows(&bytes)
+            .inspect_err(|e| tracing::warn!(map_id = %map_id, error = %e, "checkpoint ignored"))
+            .unwrap_or_default()
     }
 }

@@ -344,8 +344,29 @@ impl Jobs {
                 job.record_as(ended)
             };
             let id = job.id.clone();
-            // A small file, but flushed to disk: off the async threads.
+            // The rows a rate-map build solved go with its record (to resume from) or, once
+            // it ends, go.
+            let checkpoint = job
+                .map_id()
+                .cloned()
+                .zip(job.checkpoint().cloned())
+                .filter(|_| !shared);
+            // Small files (a checkpoint: at most a map's rows), but flushed to disk: off the
+            // async threads.
             let _ = crate::tasks::spawn_blocking(move || {
+                if let Some((map_id, checkpoint)) = checkpoint {
+                    let rows = if resumes {
+                        checkpoint.all_rows()
+                    } else {
+                        Vec::new()
+                    };
+                    if rows.is_empty() {
+                        disk.remove_checkpoint(map_id.as_str());
+                    } else {
+                        let bytes = irs_answers::encoding::encode_rows(&rows);
+                        disk.save_checkpoint(map_id.as_str(), &bytes);
+                    }
+                }
                 disk.save_json(Kind::Job, id.as_str(), &record)
             })
             .await;

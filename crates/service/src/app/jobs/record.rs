@@ -219,6 +219,7 @@ impl Job {
                 key,
                 delivery: Mutex::new(MapDelivery::default()),
                 resumable: false,
+                checkpoint: Arc::default(),
             },
             (JobKind::Placement, None, placement, None) => {
                 let outcome = OnceLock::new();
