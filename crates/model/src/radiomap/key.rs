@@ -41,7 +41,9 @@ impl fmt::Display for MapKind {
 /// served for it: the map id hashes the key, and the key carries this version.
 /// 2: a cell is occupied when an obstacle overlaps its square, not only its centre.
 /// 3: with several APs, the one received strongest serves a cell, not the one of best gain.
-pub const MODEL_VERSION: u32 = 3;
+/// 4: a rate map's value, power split and decoding order are those of its phases as stored
+///    (16-bit codes), not of the unrounded ones.
+pub const MODEL_VERSION: u32 = 4;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]

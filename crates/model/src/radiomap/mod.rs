@@ -22,7 +22,7 @@ pub use body::{CertificateSummary, MapStats};
 pub use key::{MapKey, MapKind};
 pub use parts::StoredCells;
 pub use passages::{ClosedPassage, ClosedPassages};
-pub use rate_cells::{Checkpoint, RateCells, RateRow};
+pub use rate_cells::{Checkpoint, RateCells, RateEvaluator, RateRow};
 pub use units::{LinkBudget, Unit};
 
 use crate::channel::ChannelModel;
@@ -230,6 +230,17 @@ impl RadioMap {
                 }
             }
             CellSolutions::Rate(rate) => rate.config(index),
+        }
+    }
+
+    /// A rate map's cells at other phases than its own ([`RateEvaluator`]); `None` for a gain
+    /// map. `scenario` is the map's.
+    pub fn rate_evaluator(&self, scenario: &Scenario) -> Option<RateEvaluator<'_>> {
+        match &self.cells {
+            CellSolutions::Rate(cells) => {
+                Some(RateEvaluator::new(scenario, &self.key, &self.grid, cells))
+            }
+            CellSolutions::Gain { .. } => None,
         }
     }
 

@@ -3,11 +3,14 @@
 //! decoding order) is kept because a path answer returns it at each waypoint.
 
 use super::{Cancelled, CellConfig, MapKey, Progress};
+use crate::channel::C64;
 use crate::channel::ChannelModel;
 use crate::phases::{PhaseMode, decode_phase, encode_phase};
-use crate::rate::{Access, RateModel};
+use crate::rate::{Access, PowerSplit, RateModel};
 use crate::scenario::{Grid, Scenario};
-use crate::solver::{SolverKind, WarmStart, cell_problem, phases_of, solve_cell_warm, sru_part};
+use crate::solver::{
+    CellProblem, SolverKind, WarmStart, cell_problem, phases_of, solve_cell_warm, sru_part,
+};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -77,6 +80,77 @@ impl RateCells {
             .filter(|(v, u)| v.is_finite() && u.is_finite())
             .map(|(v, u)| u - v)
             .collect()
+    }
+}
+
+/// `v` of the coded phases: e^{jθ_n} of each decoded code, then v_{N+1} = 1.
+fn decoded(codes: &[u16], v: &mut Vec<C64>) {
+    v.clear();
+    v.extend(codes.iter().map(|&c| C64::from_polar(1.0, decode_phase(c))));
+    v.push(C64::new(1.0, 0.0));
+}
+
+/// What a rate map's cells give at phases other than the stored ones (a path answer's phases as
+/// written, rounded to fewer decimals): the channel and the SRUs' part of the cell problems,
+/// worked out once per map ([`super::RadioMap::rate_evaluator`]).
+pub struct RateEvaluator<'a> {
+    channel: ChannelModel,
+    srus: CellProblem,
+    with_irs: bool,
+    height: f64,
+    grid: &'a Grid,
+    cells: &'a RateCells,
+}
+
+impl RateEvaluator<'_> {
+    pub(super) fn new<'a>(
+        scenario: &Scenario,
+        key: &MapKey,
+        grid: &'a Grid,
+        cells: &'a RateCells,
+    ) -> RateEvaluator<'a> {
+        let channel = ChannelModel::new(scenario);
+        let with_irs = key.phases != PhaseMode::None;
+        let srus = sru_part(&channel, scenario, with_irs);
+        RateEvaluator {
+            channel,
+            srus,
+            with_irs,
+            height: scenario.mru.antenna_height_m,
+            grid,
+            cells,
+        }
+    }
+
+    /// Every user's expected gain λ_l (linear, MRU first) at the centre of cell `index` with
+    /// the phases `theta` (all surfaces' in scenario order, radians).
+    pub fn gains(&self, index: usize, theta: &[f64]) -> Vec<f64> {
+        let (i, j) = self.grid.cell_of(index);
+        let [x, y] = self.grid.centre(i, j);
+        let problem = cell_problem(
+            &self.channel,
+            [x, y, self.height],
+            &self.srus,
+            self.with_irs,
+        );
+        let mut v: Vec<C64> = theta.iter().map(|&t| C64::from_polar(1.0, t)).collect();
+        v.push(C64::new(1.0, 0.0));
+        let mut lambdas = vec![0.0; self.cells.model.users()];
+        problem.lambdas(&v, &mut lambdas);
+        lambdas
+    }
+
+    /// The power split of the cell's own decoding order (OMA: the one split) at cell `index`
+    /// with the phases `theta`, and the MRU's rate with it; `None` when it serves not every
+    /// SRU there (or, NOMA, the gains break that order's channel ordering).
+    pub fn split(&self, index: usize, theta: &[f64]) -> Option<PowerSplit> {
+        let order = self.cells.order(index);
+        self.cells.model.split(&self.gains(index, theta), order)
+    }
+
+    /// The users' fixed data: the rates and orders the splits are of.
+    pub fn rate_model(&self) -> &RateModel {
+        &self.cells.model
     }
 }
 
@@ -197,6 +271,7 @@ pub(super) fn build_rate_cells(
             }
             // Each row is solved in order, every cell warm-started from the last one solved.
             let mut warm = WarmStart::default();
+            let (mut lambdas, mut coded) = (vec![0.0; users], Vec::with_capacity(n + 1));
             for j in 0..ny {
                 if progress.is_cancelled() {
                     return Err(Cancelled);
@@ -212,14 +287,23 @@ pub(super) fn build_rate_cells(
                     ups[j] = sol.upper_bound;
                 }
                 if sol.rate.is_finite() {
-                    vals[j] = sol.rate;
-                    let mut lambdas = vec![0.0; users];
-                    problem.lambdas(&sol.v, &mut lambdas);
-                    let split = model.best(&lambdas).expect("a finite rate has a split");
-                    pw[j * users..(j + 1) * users].copy_from_slice(&split.power_w);
-                    ord[j] = split.order;
-                    for (dst, p) in ph[j * n..(j + 1) * n].iter_mut().zip(phases_of(&sol.v)) {
+                    // The phases are kept, and sent, as 16-bit codes: the split, the order and
+                    // the value are those of the coded phases, so that a waypoint's numbers
+                    // reproduce each other (docs/model.md §5). A cell the coded phases cannot
+                    // serve (an SRU within about 10⁻⁶ bit/s/Hz of its target) stays unserved.
+                    let codes = &mut ph[j * n..(j + 1) * n];
+                    for (dst, p) in codes.iter_mut().zip(phases_of(&sol.v)) {
                         *dst = encode_phase(p);
+                    }
+                    decoded(codes, &mut coded);
+                    problem.lambdas(&coded, &mut lambdas);
+                    match model.best(&lambdas) {
+                        Some(split) => {
+                            vals[j] = split.mru_rate;
+                            pw[j * users..(j + 1) * users].copy_from_slice(&split.power_w);
+                            ord[j] = split.order;
+                        }
+                        None => codes.fill(0),
                     }
                 }
                 progress.advance(1);
@@ -268,6 +352,55 @@ mod tests {
 
     fn bits(values: &[f64]) -> Vec<u64> {
         values.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// Every served cell's value, power split and decoding order are those of its phases as
+    /// stored: re-evaluated from the decoded codes, each SRU gets its r̄ and the MRU the
+    /// cell's value, to 1e-9 (paper multi-user floor at 1 m with a second SRU, OMA and NOMA).
+    #[test]
+    fn a_cell_reproduces_its_value_from_its_stored_phases_powers_and_order() {
+        let s = Scenario::builtin_with("paper-multi-user", |v| {
+            v["grid"]["resolution_m"] = 1.0.into();
+            v["srus"]
+                .as_array_mut()
+                .unwrap()
+                .push(serde_json::json!({"position": [-6.0, 7.0, 1.3], "min_rate_bps_hz": 0.5}));
+        })
+        .unwrap()
+        .unwrap();
+        for access in [Access::Oma, Access::Noma] {
+            let key = MapKey::rate("test", &s, PhaseMode::Continuous, access).unwrap();
+            let map = build(&s, &key, "m".into(), &Progress::default()).unwrap();
+            let cells = rate_cells(&map);
+            let evaluator = map.rate_evaluator(&s).unwrap();
+            let model = evaluator.rate_model();
+            let mut served = 0;
+            for index in 0..map.values.len() {
+                if !map.values[index].is_finite() {
+                    continue;
+                }
+                served += 1;
+                let config = map.cell_config(index);
+                let theta = config.concatenated_phases();
+                let power = config.power_w.unwrap();
+                let rates =
+                    model.rates(&evaluator.gains(index, &theta), &power, cells.order(index));
+                assert!(
+                    (rates[0] - map.values[index]).abs() < 1e-9,
+                    "{access:?} cell {index}: {} vs {}",
+                    rates[0],
+                    map.values[index]
+                );
+                for (l, (&r, &target)) in rates.iter().zip(model.targets()).enumerate().skip(1) {
+                    assert!(
+                        r >= target - 1e-9,
+                        "{access:?} cell {index}: SRU {l} gets {r} < {target}"
+                    );
+                }
+                assert!(cells.upper_bound[index] >= map.values[index] - 1e-9);
+            }
+            assert!(served > 300, "{served} cells served");
+        }
     }
 
     /// A build resumed from some rows of an earlier one copies those rows (a marked value
