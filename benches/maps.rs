@@ -412,7 +412,7 @@ fn path_answer(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter_batched(
                 || path.clone(),
-                |path| write_phases(path, format, precision),
+                |path| write_phases(&s, &map, path, format, precision),
                 criterion::BatchSize::SmallInput,
             )
         });
@@ -423,7 +423,7 @@ fn path_answer(c: &mut Criterion) {
     ] {
         group.bench_function(name, |b| {
             b.iter(|| {
-                let path = write_phases(plan(), PhaseFormat::Radians, precision);
+                let path = write_phases(&s, &map, plan(), PhaseFormat::Radians, precision);
                 serde_json::to_vec(&path).unwrap()
             })
         });

@@ -555,7 +555,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
         scenario.mru.v_max_mps,
     )
     .map_err(|e| Failure::input(flag(&e)))?;
-    let mut path = path::write_phases(path, format, precision);
+    let mut path = path::write_phases(&scenario, &map, path, format, precision);
     path.frame_id = args.frame_id.as_str().to_string();
     write_png(
         &args.map,

@@ -8,7 +8,7 @@ use crate::phase_text::{PhaseFormat, PhasePrecision, SurfacePhases};
 use irs_model::input::FieldError;
 use irs_model::montecarlo::{self, MonteCarloReport};
 use irs_model::planner::PathAnswer;
-use irs_model::radiomap::{Cancelled, Progress, RadioMap};
+use irs_model::radiomap::{Cancelled, Progress, RadioMap, Unit};
 use irs_model::scenario::Scenario;
 use serde::Serialize;
 
@@ -91,8 +91,54 @@ impl<'de> serde::Deserialize<'de> for FrameId {
     }
 }
 
-/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
+/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`, each
+/// waypoint reproducible from what is written (docs/model.md §6). A rate map's codes, and its
+/// phases in full, are those its split and value were worked out at; phases rounded to fewer
+/// decimals are not, so there the waypoint's power split (for the cell's decoding order) and
+/// value are worked out again at the phases as written. Where those serve not every SRU, or
+/// give a value below the path's threshold, the waypoint's phases are written in full instead.
 pub fn write_phases(
+    scenario: &Scenario,
+    map: &RadioMap,
+    path: PathAnswer,
+    format: PhaseFormat,
+    precision: PhasePrecision,
+) -> PathAnswer<SurfacePhases> {
+    let rounded = format == PhaseFormat::Radians && precision.decimals().is_some();
+    let Some(evaluator) = map.rate_evaluator(scenario).filter(|_| rounded) else {
+        return format_phases(path, format, precision);
+    };
+    let full: Vec<Vec<Vec<f64>>> = path
+        .waypoints
+        .iter()
+        .map(|w| w.config.phases.clone())
+        .collect();
+    let mut written = format_phases(path, format, precision);
+    // Waypoint values are in the query's unit: a rate map's are rates, or throughputs.
+    let scale = match written.unit {
+        Unit::Mbps => map.links[0].bandwidth_mhz.unwrap_or(f64::NAN),
+        _ => 1.0,
+    };
+    let threshold = written.threshold;
+    for (waypoint, full) in written.waypoints.iter_mut().zip(full) {
+        let cell = map.grid.index(waypoint.i, waypoint.j);
+        let theta = waypoint.config.phases.radians().concat();
+        match evaluator
+            .split(cell, &theta)
+            .filter(|split| threshold.is_none_or(|t| split.mru_rate * scale >= t))
+        {
+            Some(split) => {
+                waypoint.value = split.mru_rate * scale;
+                waypoint.config.power_w = Some(split.power_w);
+            }
+            None => waypoint.config.phases = SurfacePhases::Radians(full),
+        }
+    }
+    written
+}
+
+/// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
+pub(crate) fn format_phases(
     path: PathAnswer,
     format: PhaseFormat,
     precision: PhasePrecision,
@@ -119,4 +165,104 @@ pub fn check(
 ) -> Result<MonteCarloReport, Cancelled> {
     let sent = path.clone().map_phases(|phases| phases.radians());
     montecarlo::check_path(scenario, map, &sent, draws, seed, progress)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::ScenarioDocument;
+    use irs_model::planner::{self, PathOptions, Threshold};
+    use irs_model::radiomap::{CellSolutions, MapKey};
+    use irs_model::rate::Access;
+
+    /// The paper's multi-user floor at 1 m with a second SRU.
+    fn two_srus() -> Scenario {
+        let mut doc: serde_json::Value =
+            serde_json::from_str(include_str!("../../../scenarios/paper-multi-user.json")).unwrap();
+        doc["grid"]["resolution_m"] = 1.0.into();
+        doc["srus"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({"position": [-6.0, 7.0, 1.3], "min_rate_bps_hz": 0.5}));
+        Scenario::from_value(doc).unwrap()
+    }
+
+    /// At every precision and in codes, each waypoint of a rate-map path re-evaluated from its
+    /// own phases as written, powers and the cell's decoding order gives every SRU its r̄ and
+    /// the MRU the waypoint's value (to 1e-9), at or above the path's threshold: at the largest
+    /// feasible threshold, where coarse rounding must fall back to full phases, and below it,
+    /// where the split is worked out again at the rounded phases.
+    #[test]
+    fn rate_waypoints_reproduce_themselves_at_every_precision() {
+        let s = two_srus();
+        let (mut recomputed, mut kept_full) = (0, 0);
+        for access in [Access::Oma, Access::Noma] {
+            let key =
+                MapKey::rate("test", &s, irs_model::phases::PhaseMode::Continuous, access).unwrap();
+            let map = crate::map::build(&s, &key, &Progress::default()).unwrap();
+            let CellSolutions::Rate(cells) = &map.cells else {
+                panic!("a rate map")
+            };
+            let evaluator = map.rate_evaluator(&s).unwrap();
+            let model = evaluator.rate_model();
+            let plan = |threshold| {
+                let path = planner::plan(
+                    &map,
+                    Unit::BpsHz,
+                    PathOptions::default(),
+                    [-8.0, -8.0],
+                    [8.0, 8.0],
+                    threshold,
+                    1.0,
+                )
+                .unwrap();
+                assert!(path.feasible, "{:?}", path.reason);
+                path
+            };
+            let widest = plan(Threshold::Max).threshold.unwrap();
+            for threshold in [Threshold::Max, Threshold::Value(widest - 0.3)] {
+                let path = plan(threshold);
+                let gamma = path.threshold.unwrap();
+                let written = [
+                    (PhaseFormat::Codes, PhasePrecision::default()),
+                    (PhaseFormat::Radians, "full".parse().unwrap()),
+                    (PhaseFormat::Radians, "1e-6".parse().unwrap()),
+                    (PhaseFormat::Radians, "1e-4".parse().unwrap()),
+                    (PhaseFormat::Radians, "1e-3".parse().unwrap()),
+                    (PhaseFormat::Radians, "1e-2".parse().unwrap()),
+                ];
+                for (format, precision) in written {
+                    let answer = write_phases(&s, &map, path.clone(), format, precision);
+                    for (w, before) in answer.waypoints.iter().zip(&path.waypoints) {
+                        let cell = map.grid.index(w.i, w.j);
+                        let theta = w.config.phases.radians().concat();
+                        let power = w.config.power_w.as_ref().unwrap();
+                        let gains = evaluator.gains(cell, &theta);
+                        let rates = model.rates(&gains, power, cells.order(cell));
+                        let at =
+                            format!("{access:?} γ {gamma} {format:?} {precision:?} cell {cell}");
+                        assert!(
+                            (rates[0] - w.value).abs() < 1e-9,
+                            "{at}: {} vs {}",
+                            rates[0],
+                            w.value
+                        );
+                        assert!(w.value >= gamma, "{at}: {} < γ", w.value);
+                        for (&r, &target) in rates.iter().zip(model.targets()).skip(1) {
+                            assert!(r >= target - 1e-9, "{at}: an SRU gets {r} < {target}");
+                        }
+                        if matches!(w.config.phases, SurfacePhases::Decimals(_)) {
+                            recomputed += usize::from(w.value != before.value);
+                        } else if format == PhaseFormat::Radians && precision.decimals().is_some() {
+                            kept_full += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            recomputed > 0 && kept_full > 0,
+            "{recomputed} recomputed, {kept_full} kept in full"
+        );
+    }
 }

@@ -286,7 +286,7 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::path::write_phases;
+    use crate::path::format_phases;
     use irs_model::planner::{Endpoint, PathAnswer, Waypoint};
     use irs_model::radiomap::CellConfig;
 
@@ -337,7 +337,7 @@ mod tests {
                 vertices: vec![0],
                 handovers: Vec::new(),
             };
-            let path = write_phases(path, format, precision);
+            let path = format_phases(path, format, precision);
             serde_json::to_value(&path.waypoints[0].config).unwrap()
         };
         assert_eq!(PhasePrecision::default(), PhasePrecision::TenthMilli);

@@ -320,7 +320,7 @@ pub(super) async fn plan_path(
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
-    let mut path = path::write_phases(path, format, precision);
+    let mut path = path::write_phases(&scenario, &map, path, format, precision);
     path.frame_id = frame.as_str().to_string();
     match route_format {
         RouteFormat::Json => {}
