@@ -8,14 +8,12 @@
 //! and compared with the bound. The draws are independent of the closed forms: they reuse only
 //! the geometry and the LoS phases.
 
-use crate::channel::{C64, ChannelModel};
+use crate::channel::ChannelModel;
 use crate::numerics::MeanEstimate;
-use crate::phases::PhaseMode;
 use crate::planner::PathAnswer;
 use crate::radiomap::{Cancelled, CellSolutions, Progress, RadioMap};
 use crate::rate::user_label;
 use crate::scenario::Scenario;
-use crate::solver::{cell_problem, sru_part};
 use rand::SeedableRng;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -98,9 +96,9 @@ pub fn check_path(
         .collect();
     let channel = &channels[0];
     let height = scenario.mru.antenna_height_m;
-    // The SRUs' channels do not depend on the waypoint: evaluate them once per path.
-    let with_irs = map.key.phases != PhaseMode::None;
-    let srus = sru_part(channel, scenario, with_irs);
+    // Rate maps: the users' expected gains at a waypoint's phases, the SRUs' part worked out
+    // once per path.
+    let evaluator = map.rate_evaluator(scenario);
     progress.start(path.waypoints.len());
     let waypoints: Vec<WaypointCheck> = path
         .waypoints
@@ -157,12 +155,8 @@ pub fn check_path(
                         .power_w
                         .as_ref()
                         .expect("rate waypoints carry powers");
-                    let problem = cell_problem(channel, mru, &srus, with_irs);
-                    let mut v: Vec<_> = theta.iter().map(|&t| C64::from_polar(1.0, t)).collect();
-                    v.push(C64::new(1.0, 0.0));
-                    let mut lambdas = vec![0.0; model.users()];
-                    problem.lambdas(&v, &mut lambdas);
-                    let bounds = model.rates(&lambdas, power, order);
+                    let evaluator = evaluator.as_ref().expect("a rate map has one");
+                    let bounds = model.rates(&evaluator.gains(cell, &theta), power, order);
                     let mut positions = vec![mru];
                     positions.extend(scenario.srus.iter().map(|s| s.position));
                     let mut rates = vec![MeanEstimate::default(); model.users()];
