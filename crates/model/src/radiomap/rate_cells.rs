@@ -3,8 +3,7 @@
 //! decoding order) is kept because a path answer returns it at each waypoint.
 
 use super::{Cancelled, CellConfig, MapKey, Progress};
-use crate::channel::C64;
-use crate::channel::ChannelModel;
+use crate::channel::{C64, ChannelModel};
 use crate::phases::{PhaseMode, decode_phase, encode_phase};
 use crate::rate::{Access, PowerSplit, RateModel};
 use crate::scenario::{Grid, Scenario};
