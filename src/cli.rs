@@ -2,8 +2,9 @@
 //! `plan` print exactly the JSON bodies the API returns; `export` writes Nav2 masks and a NumPy
 //! array of a map; `scenario` prints a scenario file in the self-contained form the API takes
 //! (a floor plan's map file read and inlined). Bad input exits with code 2 and a message naming the offending
-//! field; an infeasible path is an answer (exit 0), not an error; a failure that is not the
-//! input's (the server cannot bind, a file cannot be written) exits with code 1.
+//! field; a `plan` with no path meeting the threshold prints its answer (with the `reason`) and
+//! exits with code 3; a failure that is not the input's (the server cannot bind, a file cannot
+//! be written) exits with code 1.
 
 mod vda5050_args;
 
