@@ -144,6 +144,20 @@ mod tests {
         Scenario::builtin(name).expect("a built-in scenario")
     }
 
+    /// The small test floor and the key of its rate map.
+    fn small_rate_map() -> (Scenario, MapKey) {
+        let small = builtin("small-test");
+        let key = MapKey::new(
+            &small.content_hash(),
+            &small,
+            MapKind::Rate,
+            None,
+            None,
+            None,
+        );
+        (small, key.unwrap())
+    }
+
     fn round_trip(scenario: &Scenario, key: &MapKey) {
         let map = build(scenario, key, &Progress::default()).expect("builds");
         let bytes = encode(&map);
@@ -175,16 +189,7 @@ mod tests {
     /// A checkpoint's rows come back bit for bit (NaN cells included); other bytes are refused.
     #[test]
     fn checkpoint_rows_round_trip_and_other_bytes_are_refused() {
-        let small = builtin("small-test");
-        let key = MapKey::new(
-            &small.content_hash(),
-            &small,
-            MapKind::Rate,
-            None,
-            None,
-            None,
-        )
-        .unwrap();
+        let (small, key) = small_rate_map();
         let checkpoint = irs_model::radiomap::Checkpoint::recording(Vec::new());
         crate::map::build_resuming(&small, &key, &Progress::default(), &checkpoint).unwrap();
         let rows = checkpoint.take_solved();
@@ -247,16 +252,7 @@ mod tests {
 
     #[test]
     fn bytes_of_another_scenario_or_damaged_bytes_are_refused() {
-        let small = builtin("small-test");
-        let key = MapKey::new(
-            &small.content_hash(),
-            &small,
-            MapKind::Rate,
-            None,
-            None,
-            None,
-        )
-        .unwrap();
+        let (small, key) = small_rate_map();
         let bytes = encode(&build(&small, &key, &Progress::default()).unwrap());
         let other = builtin("paper-single-user");
         assert!(matches!(
