@@ -24,6 +24,10 @@ pub struct Endpoint {
     /// nearest feasible cell within the query's `tolerance_m` was taken instead (x, y, i, j
     /// are that cell's).
     pub moved: bool,
+    /// On a route graph, the id of the node the point went to (the nearest; x and y are its
+    /// position, i and j its cell).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub node: Option<String>,
 }
 
 /// One waypoint of a path and the configuration to apply from there on (phases held as `P`,

@@ -8,6 +8,7 @@ mod bottleneck;
 pub mod graph;
 mod query;
 mod queue;
+pub mod route_graph;
 
 pub use answer::{Endpoint, Handover, PathAnswer, SweepAnswer, SweepPoint, Waypoint};
 pub use query::{MAX_TOLERANCE_M, PathOptions, PathShape, Threshold};
@@ -37,6 +38,7 @@ fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), 
             j,
             snapped,
             moved: false,
+            node: None,
         },
     ))
 }
@@ -261,6 +263,7 @@ fn route(
                 distance_m: path.distance_m,
             })
         }
+        PathShape::RouteGraph => unreachable!("plan_with refuses route_graph before routing"),
         PathShape::AnyAngle => {
             let path = graph.any_angle_path(start, goal, threshold)?;
             let mut points = vec![(start, centre(start))];
@@ -300,6 +303,12 @@ fn plan_with(
     v_max_mps: f64,
     widest_path_threshold: impl FnOnce(&CellGraph, usize, usize) -> Option<f64>,
 ) -> Result<PathAnswer, FieldError> {
+    if options.shape == PathShape::RouteGraph {
+        return Err(FieldError::new(
+            "path_shape",
+            "a route_graph path is planned on the scenario's graph (route_graph::plan_on_graph)",
+        ));
+    }
     let graph = graph(map, values);
     // With a tolerance, an end in an obstacle or below the threshold moves to the nearest cell
     // that is neither ("max": the nearest free cell with a value).

@@ -64,6 +64,9 @@ pub enum PathShape {
     /// Straight segments at any angle between cell centres, each driven only where every cell
     /// it crosses is free and meets the threshold; never longer than the grid path.
     AnyAngle,
+    /// Along the scenario's route graph, from the node nearest the start to the node nearest
+    /// the goal, over edges whose every cell meets the threshold.
+    RouteGraph,
 }
 
 impl FromStr for PathShape {
@@ -72,7 +75,10 @@ impl FromStr for PathShape {
         match s {
             "grid" => Ok(PathShape::Grid),
             "any_angle" | "any-angle" => Ok(PathShape::AnyAngle),
-            other => Err(format!("expected grid or any_angle, got {other:?}")),
+            "route_graph" | "route-graph" => Ok(PathShape::RouteGraph),
+            other => Err(format!(
+                "expected grid, any_angle or route_graph, got {other:?}"
+            )),
         }
     }
 }

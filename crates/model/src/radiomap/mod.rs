@@ -204,6 +204,17 @@ impl<P> CellConfig<P> {
 }
 
 impl RadioMap {
+    /// The AP serving cell `index` (what [`RadioMap::cell_config`] names, without working out
+    /// the rest of the configuration).
+    pub fn serving_ap(&self, index: usize) -> usize {
+        match &self.cells {
+            CellSolutions::Gain { serving, .. } => {
+                serving.get(index).map_or(0, |&k| usize::from(k))
+            }
+            CellSolutions::Rate(_) => 0,
+        }
+    }
+
     /// The configuration to apply at cell `index`: on a rate map the one achieving its value;
     /// on a gain map the serving AP's (the one received strongest), which achieves `values`
     /// unless another AP, of a weaker budget, has the better channel there (docs/model.md §3).

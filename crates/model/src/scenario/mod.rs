@@ -13,6 +13,7 @@
 
 mod grid;
 mod mount;
+pub mod route_graph;
 pub use mount::MAX_MOUNT_WITHIN_M;
 pub mod parts;
 mod validate;
@@ -150,6 +151,7 @@ impl Draft {
             mru: self.mru,
             srus: self.srus,
             channel: self.channel,
+            route_graph: None,
         }
         .checked(image)
     }
@@ -184,6 +186,9 @@ pub struct Scenario {
     pub srus: Vec<Sru>,
     /// The channel's parameters.
     pub channel: ChannelSpec,
+    /// The route graph the site's robots drive along, if one is attached (the answers crate
+    /// reads and checks it: its formats are wire formats).
+    pub route_graph: Option<Arc<route_graph::RouteGraph>>,
 }
 
 impl Scenario {
