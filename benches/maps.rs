@@ -2,7 +2,8 @@
 //! a 1001 × 1001 gain map and A* on it, the full NOMA rate map with certificate, the per-cell
 //! cost of the `fast` solver and of the certificate, and the warehouse floor plan (decode +
 //! gain map at 0.25 m and 0.1 m, a path query on it), a factory hall with 40 machines, and a
-//! path answer on the paper map as the service writes it.
+//! path answer on the paper map as the service writes it, and route graphs on the warehouse
+//! (scoring ~10 000 edges, a route query at 10 000 nodes).
 //!
 //! `cargo bench` runs everything; `cargo bench -- gain` a subset. Single-core figures come from
 //! `RAYON_NUM_THREADS=1 cargo bench`.
@@ -13,10 +14,13 @@ use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
 use irs_model::phases::PhaseMode;
-use irs_model::planner::{self, CellGraph, Threshold};
+use irs_model::planner::{self, CellGraph, Threshold, route_graph};
 use irs_model::radiomap::{MapKey, Progress};
 use irs_model::rate::{Access, RateModel};
 use irs_model::scenario::Scenario;
+use irs_model::scenario::route_graph::{
+    GraphEdge, GraphFormat, GraphNode, GraphSource, RouteGraph,
+};
 use irs_model::solver::{self, certificate, fast};
 use std::hint::black_box;
 use std::time::Duration;
@@ -163,9 +167,16 @@ fn warehouse_document(resolution_m: f64) -> serde_json::Value {
     let mut document: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     document["grid"]["resolution_m"] = resolution_m.into();
+    let folder = path.parent().unwrap();
     irs_answers::mapfile::resolve_map_reference(
         &mut document,
-        path.parent().unwrap(),
+        folder,
+        &irs_answers::files::read_regular,
+    )
+    .unwrap();
+    irs_answers::route_graph::resolve_graph_reference(
+        &mut document,
+        folder,
         &irs_answers::files::read_regular,
     )
     .unwrap();
@@ -431,6 +442,83 @@ fn path_answer(c: &mut Criterion) {
     group.finish();
 }
 
+/// A lattice route graph of `side` × `side` nodes over the room inside `margin` of its walls,
+/// each node joined both ways to its east and north neighbours.
+fn lattice_graph(scenario: &Scenario, side: usize, margin: f64) -> RouteGraph {
+    let room = &scenario.room;
+    let at = |k: usize, lo: f64, hi: f64| {
+        lo + margin + (hi - lo - 2.0 * margin) * k as f64 / (side - 1) as f64
+    };
+    let mut nodes = Vec::new();
+    for i in 0..side {
+        for j in 0..side {
+            nodes.push(GraphNode {
+                id: nodes.len().to_string(),
+                position: [at(i, room.x_min, room.x_max), at(j, room.y_min, room.y_max)],
+            });
+        }
+    }
+    let mut edges = Vec::new();
+    let mut join = |a: usize, b: usize, nodes: &[GraphNode]| {
+        for (from, to) in [(a, b), (b, a)] {
+            edges.push(GraphEdge {
+                id: (nodes.len() + edges.len()).to_string(),
+                from,
+                to,
+                points: vec![nodes[from].position, nodes[to].position],
+            });
+        }
+    };
+    for i in 0..side {
+        for j in 0..side {
+            let k = i * side + j;
+            if i + 1 < side {
+                join(k, k + side, &nodes);
+            }
+            if j + 1 < side {
+                join(k, k + 1, &nodes);
+            }
+        }
+    }
+    RouteGraph {
+        nodes,
+        edges,
+        source: std::sync::Arc::new(GraphSource {
+            format: GraphFormat::Nav2GeoJson,
+            level: None,
+            document: serde_json::Value::Null,
+        }),
+    }
+}
+
+/// Route graphs on the warehouse's 0.25 m gain map: scoring ~10 000 edges (a 50 × 50 lattice,
+/// 9 800 edges, 0.8–1.2 m long), and a route query corner to corner on a 100 × 100 lattice
+/// (10 000 nodes, 39 600 edges) at the median edge's worst value, on scores kept.
+fn route_graphs(c: &mut Criterion) {
+    let s = Scenario::from_value(warehouse_document(0.25)).unwrap();
+    let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
+    let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
+    let mut group = c.benchmark_group("route_graph");
+    let scoring = lattice_graph(&s, 50, 0.5);
+    group.bench_function("score_9800_edges_warehouse", |b| {
+        b.iter(|| route_graph::score_edges(&map, &map.values, black_box(&scoring)))
+    });
+    let big = lattice_graph(&s, 100, 0.5);
+    let scores = route_graph::score_edges(&map, &map.values, &big);
+    let mut worst: Vec<f64> = scores.iter().filter_map(|s| s.worst).collect();
+    worst.sort_by(f64::total_cmp);
+    let threshold = worst[worst.len() / 4];
+    let (start, goal) = (0, big.nodes.len() - 1);
+    assert!(route_graph::shortest_route(&big, &scores, start, goal, threshold).is_some());
+    group.bench_function("route_10000_nodes", |b| {
+        b.iter(|| route_graph::shortest_route(black_box(&big), &scores, start, goal, threshold))
+    });
+    group.bench_function("widest_10000_nodes", |b| {
+        b.iter(|| route_graph::widest_threshold(black_box(&big), &scores, start, goal))
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
     gain_maps,
@@ -440,6 +528,7 @@ criterion_group!(
     any_angle,
     factory,
     placement,
-    path_answer
+    path_answer,
+    route_graphs
 );
 criterion_main!(benches);

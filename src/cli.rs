@@ -6,9 +6,11 @@
 //! exits with code 3; a failure that is not the input's (the server cannot bind, a file cannot
 //! be written) exits with code 1.
 
+mod graph_args;
 mod vda5050_args;
 
 use clap::{Args, Parser, Subcommand};
+pub use graph_args::{GraphArgs, RoadmapArgs, run_graph, run_roadmap};
 use irs_answers::export::{self, MaskKind};
 use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
@@ -64,6 +66,14 @@ pub enum Command {
     /// Print the map at a threshold as a VDA 5050 zone set: BLOCKED where a free cell is below
     /// it, PENALTY (with --penalty-band) where it meets it narrowly.
     Zones(ZonesArgs),
+    /// Score the scenario's route graph (Nav2 GeoJSON or Open-RMF nav graph) on its map: each
+    /// edge's worst value, where, its serving APs and whether it crosses an obstacle; at a
+    /// threshold, the edges to close.
+    Graph(GraphArgs),
+    /// Make a route graph of the map's free region (at --threshold, its feasible region): nodes
+    /// every --spacing-m metres, lanes to their neighbours wherever open; Nav2 GeoJSON or Open-RMF
+    /// YAML, scored, ready to attach as a scenario's route_graph.
+    Roadmap(RoadmapArgs),
     /// Rank candidate poses of an IRS (or positions of the AP) by an objective on their gain
     /// maps and print the ranking (the body of POST /v1/placements).
     Place(PlaceArgs),
@@ -269,8 +279,9 @@ pub struct PlanArgs {
     /// mbps (docs/model.md §3.1); default: the map's own (gain_db or bps_hz).
     #[arg(long, value_name = "UNIT")]
     pub unit: Option<Unit>,
-    /// The route's shape: grid (8-connected steps, the paper's) or any_angle (straight segments
-    /// wherever every cell crossed meets the threshold; never longer).
+    /// The route's shape: grid (8-connected steps, the paper's), any_angle (straight segments
+    /// wherever every cell crossed meets the threshold; never longer) or route_graph (along the
+    /// scenario's route graph, between the nodes nearest start and goal).
     #[arg(long, value_name = "SHAPE", default_value = "grid")]
     pub path_shape: PathShape,
     /// How far (m) a start or goal in an obstacle or below the threshold may move to the
@@ -460,9 +471,22 @@ fn with_progress_bar<T>(
 }
 
 fn print_json(value: &impl Serialize) -> Result<(), Failure> {
-    let text = serde_json::to_string(value).map_err(|e| Failure::runtime(e.to_string()))?;
-    println!("{text}");
-    Ok(())
+    let mut text = serde_json::to_string(value).map_err(|e| Failure::runtime(e.to_string()))?;
+    text.push('\n');
+    print_text(&text)
+}
+
+/// Writes `text` to standard output. A reader that stopped reading (`| head`) is not an error:
+/// what it wanted it has, as for any Unix filter; `print!` would panic there.
+fn print_text(text: &str) -> Result<(), Failure> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(Failure::runtime(format!("writing the answer: {e}")))
+        }
+        _ => Ok(()),
+    }
 }
 
 fn write_png(
@@ -543,18 +567,31 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     let (format, precision) = path::phase_options(Some(args.phase_format), args.phase_precision)
         .map_err(|e| Failure::input(flag(&e)))?;
     let unit = args.unit.unwrap_or(map.native_unit());
-    let path = planner::plan(
-        &map,
-        unit,
-        planner::PathOptions {
-            shape: args.path_shape,
-            tolerance_m: args.tolerance,
-        },
-        args.start,
-        args.goal,
-        threshold,
-        scenario.mru.v_max_mps,
-    )
+    let path = match args.path_shape {
+        PathShape::RouteGraph => map.values_in(unit).and_then(|values| {
+            path::plan_on_route_graph(
+                &scenario,
+                &map,
+                (unit, &values),
+                args.tolerance,
+                args.start,
+                args.goal,
+                threshold,
+            )
+        }),
+        shape => planner::plan(
+            &map,
+            unit,
+            planner::PathOptions {
+                shape,
+                tolerance_m: args.tolerance,
+            },
+            args.start,
+            args.goal,
+            threshold,
+            scenario.mru.v_max_mps,
+        ),
+    }
     .map_err(|e| Failure::input(flag(&e)))?;
     let mut path = path::write_phases(&scenario, &map, path, format, precision);
     path.frame_id = args.frame_id.as_str().to_string();
@@ -588,7 +625,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
     match args.output {
         RouteFormat::Json => print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?,
         RouteFormat::NavMsgsPath => print_json(&route::nav_msgs_path(&path))?,
-        RouteFormat::Csv => print!("{}", route::csv(&path)),
+        RouteFormat::Csv => print_text(&route::csv(&path))?,
         // No route, no order: the exit status says so.
         RouteFormat::Vda5050Order if !path.feasible => {}
         RouteFormat::Vda5050Order => print_json(

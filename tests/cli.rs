@@ -327,12 +327,15 @@ fn json(text: &str) -> serde_json::Value {
     serde_json::from_str(text).unwrap()
 }
 
-/// The warehouse scenario without its floor plan, written into `dir`; with `irs_on_room_wall`
+/// The warehouse scenario without its floor plan (its route graph inline, its file staying
+/// beside the original), written into `dir`; with `irs_on_room_wall`
 /// its IRS moves from the floor plan's wall face (x = 29.75) to the room's wall (x = 30), where
 /// it hangs whatever floor plan is given.
 fn bare_warehouse(dir: &std::path::Path, irs_on_room_wall: bool) -> std::path::PathBuf {
     let mut bare = json(&std::fs::read_to_string(WAREHOUSE).unwrap());
     bare.as_object_mut().unwrap().remove("floor_plan");
+    let lanes = json(&std::fs::read_to_string("scenarios/warehouse/lanes.geojson").unwrap());
+    bare["route_graph"] = serde_json::json!({"format": "nav2_geojson", "graph": lanes});
     if irs_on_room_wall {
         bare["irs"]["center"] = serde_json::json!([30.0, -4.0, 2.5]);
     }

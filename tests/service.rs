@@ -266,6 +266,20 @@ fn problem(status: StatusCode, body: &Value, expected: StatusCode, code: &str) {
     assert!(!body["detail"].as_str().unwrap().is_empty());
 }
 
+/// A scenario's `route_graph`: a Nav2 graph of two nodes and a two-way lane between them.
+fn two_node_graph(a: [f64; 2], b: [f64; 2]) -> Value {
+    let node = |id: u32, p: [f64; 2]| {
+        json!({"type": "Feature", "properties": {"id": id, "frame": "map"},
+               "geometry": {"type": "Point", "coordinates": p}})
+    };
+    let edge = |id: u32, start: u32, end: u32| {
+        json!({"type": "Feature", "properties": {"id": id, "startid": start, "endid": end},
+               "geometry": {"type": "MultiLineString", "coordinates": []}})
+    };
+    json!({"format": "nav2_geojson", "graph": {"type": "FeatureCollection",
+        "features": [node(0, a), node(1, b), edge(2, 0, 1), edge(3, 1, 0)]}})
+}
+
 /// The (method, path) pairs of openapi.yaml, read from its `paths:` section.
 fn documented_routes() -> Vec<(String, String)> {
     let text = std::fs::read_to_string(format!("{}/openapi.yaml", root())).unwrap();
@@ -2552,6 +2566,248 @@ impl Who {
     }
 }
 
+/// A route graph travels with its scenario: refused whole when malformed (naming the feature
+/// and field, nothing registered), scored on a map as a report or as the graph itself
+/// annotated, and routed on with a threshold, every answer format included.
+#[tokio::test]
+async fn route_graphs_are_scored_and_routed_over_http() {
+    let server = start(&[]);
+    let aws: Value = serde_json::from_str(
+        &std::fs::read_to_string(format!(
+            "{}/tests/data/route_graphs/nav2/aws_graph.geojson",
+            root()
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let (_, before) = server.get("/v1/scenarios").await;
+    let mut broken = aws.clone();
+    broken["features"][45]["properties"]["endid"] = json!(400);
+    let (s, body) = server
+        .post(
+            "/v1/scenarios",
+            scenario("paper-single-user.json", |v| {
+                v["name"] = "graph".into();
+                v["route_graph"] = json!({"format": "nav2_geojson", "graph": broken});
+            }),
+        )
+        .await;
+    problem(
+        s,
+        &body,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid_scenario",
+    );
+    assert_eq!(
+        body["field"], "route_graph.graph.features[45].properties.endid",
+        "{body}"
+    );
+    let (_, after) = server.get("/v1/scenarios").await;
+    assert_eq!(before, after, "a refused graph registers nothing");
+
+    let document = scenario("paper-single-user.json", |v| {
+        v["name"] = "graph".into();
+        v["route_graph"] = json!({"format": "nav2_geojson", "graph": aws});
+    });
+    let (s, created) = server.post("/v1/scenarios", document).await;
+    assert_eq!(s, StatusCode::CREATED, "{created}");
+    let sid = created["id"].as_str().unwrap().to_string();
+    let (_, read) = server.get(&format!("/v1/scenarios/{sid}")).await;
+    assert_eq!(read["scenario"]["route_graph"]["graph"], aws);
+    let (s, map) = server
+        .post("/v1/maps", json!({"scenario_id": sid, "kind": "gain"}))
+        .await;
+    assert_eq!(s, StatusCode::OK);
+    let mid = map["map_id"].as_str().unwrap();
+
+    let (s, report) = server.get(&format!("/v1/maps/{mid}/route-graph")).await;
+    assert_eq!(s, StatusCode::OK, "{report}");
+    let edges = report["edges"].as_array().unwrap();
+    assert_eq!((report["nodes"].as_u64(), edges.len()), (Some(40), 84));
+    assert!(report["closed_edges"].as_array().unwrap().iter().all(|id| {
+        edges
+            .iter()
+            .any(|e| &e["id"] == id && e["worst_value"].is_null())
+    }));
+    let mut worst: Vec<f64> = edges
+        .iter()
+        .filter_map(|e| e["worst_value"].as_f64())
+        .collect();
+    worst.sort_by(f64::total_cmp);
+    let threshold = worst[worst.len() / 2];
+    let (s, report) = server
+        .get(&format!(
+            "/v1/maps/{mid}/route-graph?threshold={threshold}&penalty_band=2"
+        ))
+        .await;
+    assert_eq!(s, StatusCode::OK, "{report}");
+    let closed = report["closed_edges"].as_array().unwrap();
+    assert!(closed.len() >= 84 / 2 - 1, "{}", closed.len());
+    assert_eq!(
+        report["closure_request"]["request"]["closed_edges"]
+            .as_array()
+            .unwrap()
+            .len(),
+        closed.len()
+    );
+    let response = server
+        .client
+        .get(format!(
+            "{}/v1/maps/{mid}/route-graph?threshold={threshold}&format=graph",
+            server.base
+        ))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.headers()["content-type"], "application/geo+json");
+    let graph: Value = response.json().await.unwrap();
+    assert_eq!(
+        graph["features"].as_array().unwrap().len(),
+        aws["features"].as_array().unwrap().len()
+    );
+    assert_eq!(
+        &graph["irs_planner"]["closed_edges"],
+        &report["closed_edges"]
+    );
+    for (query, field) in [
+        ("penalty_band=2", "penalty_band"),
+        ("threshold=x", "threshold"),
+        ("format=svg", "format"),
+        ("unit=furlongs", "unit"),
+        ("colour=red", "colour"),
+    ] {
+        let (s, body) = server
+            .get(&format!("/v1/maps/{mid}/route-graph?{query}"))
+            .await;
+        assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{query}: {body}");
+        assert_eq!(body["field"], field, "{body}");
+    }
+    // The paper floor's own map has no graph to score or route on, but makes one: a roadmap of
+    // its feasible region, which attached as its route graph is every edge open.
+    let paper = server.paper_gain_map_url().await;
+    let paper_id = paper.rsplit('/').next().unwrap();
+    let response = server
+        .client
+        .get(format!(
+            "{paper}/roadmap?spacing_m=2&threshold=-70&format=rmf_nav_graph"
+        ))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(response.headers()["content-type"], "application/yaml");
+    let yaml = response.text().await.unwrap();
+    assert!(
+        yaml.contains("levels:") && yaml.contains("lanes:"),
+        "{yaml}"
+    );
+    let (s, roadmap) = server
+        .get(&format!(
+            "/v1/maps/{paper_id}/roadmap?spacing_m=2&threshold=-70"
+        ))
+        .await;
+    assert_eq!(s, StatusCode::OK);
+    let (s, created) = server
+        .post(
+            "/v1/scenarios",
+            scenario("paper-single-user.json", |v| {
+                v["name"] = "roadmap".into();
+                v["route_graph"] = json!({"format": "nav2_geojson", "graph": roadmap});
+            }),
+        )
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{created}");
+    let (_, map) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario_id": created["id"], "kind": "gain"}),
+        )
+        .await;
+    let (s, report) = server
+        .get(&format!(
+            "/v1/maps/{}/route-graph?threshold=-70",
+            map["map_id"].as_str().unwrap()
+        ))
+        .await;
+    assert_eq!(s, StatusCode::OK, "{report}");
+    assert!(report["edges"].as_array().unwrap().len() > 100);
+    assert_eq!(report["closed_edges"], json!([]));
+    for (query, field) in [
+        ("threshold=-70", "spacing_m"),
+        ("spacing_m=0.1", "spacing_m"),
+        ("spacing_m=2&format=dxf", "format"),
+        ("spacing_m=2&penalty_band=1", "penalty_band"),
+    ] {
+        let (s, body) = server
+            .get(&format!("/v1/maps/{paper_id}/roadmap?{query}"))
+            .await;
+        assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{query}: {body}");
+        assert_eq!(body["field"], field, "{body}");
+    }
+    let (s, body) = server
+        .get(&format!("/v1/maps/{paper_id}/route-graph"))
+        .await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert_eq!(body["field"], "route_graph", "{body}");
+    let (s, body) = server
+        .post(
+            "/v1/paths",
+            json!({"map_id": paper_id, "start": [-5.5, -8.5], "goal": [5.5, 8.65],
+            "threshold": "max", "path_shape": "route_graph"}),
+        )
+        .await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert_eq!(body["field"], "path_shape", "{body}");
+
+    // A route on the graph: nearest nodes, vertices at nodes, every waypoint's cell at the
+    // threshold; the largest threshold found by the widest path.
+    let query = json!({"map_id": mid, "start": [-6.0, -9.0], "goal": [6.0, -2.4],
+        "threshold": "max", "path_shape": "route_graph"});
+    let (s, path) = server.post("/v1/paths", query.clone()).await;
+    assert_eq!(s, StatusCode::OK, "{path}");
+    assert_eq!(path["path_shape"], "route_graph");
+    assert!(path["feasible"].as_bool().unwrap(), "{path}");
+    assert_eq!(
+        (&path["start"]["node"], &path["goal"]["node"]),
+        (&json!("29"), &json!("35"))
+    );
+    let t = path["threshold"].as_f64().unwrap();
+    assert!(
+        path["waypoints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|w| w["value"].as_f64().unwrap() >= t)
+    );
+    let mut order = query.clone();
+    order["order"] = json!({"order_id": "graph-1"});
+    let response = server
+        .client
+        .post(format!("{}/v1/paths", server.base))
+        .header("content-type", "application/json")
+        .header("accept", "application/vnd.vda5050.order+json")
+        .body(order.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    let order: Value = response.json().await.unwrap();
+    assert_eq!(
+        order["nodes"].as_array().unwrap().len(),
+        path["vertices"].as_array().unwrap().len()
+    );
+    let mut above = query.clone();
+    above["threshold"] = json!(t + 0.01);
+    let (s, none) = server.post("/v1/paths", above).await;
+    assert_eq!(s, StatusCode::OK);
+    assert_eq!(none["reason"], "disconnected", "{none}");
+    let mut tolerant = query;
+    tolerant["tolerance_m"] = json!(1.0);
+    let (s, body) = server.post("/v1/paths", tolerant).await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert_eq!(body["field"], "tolerance_m", "{body}");
+}
+
 /// Tokens on: every route of openapi.yaml (read from it, so a new route cannot be left out),
 /// with every method, called by nobody, by the tenant that made the objects it names (alice)
 /// and by another (bob). Alice gets her answers; bob and anonymous callers get 404 for
@@ -2564,7 +2820,10 @@ async fn tenants_see_and_touch_only_their_own() {
         let server = &server;
         async move { server.send_as(Some(ALICE), method, &path, body).await }
     };
-    let doc = scenario("small-test.json", |v| v["name"] = "alice's floor".into());
+    let doc = scenario("small-test.json", |v| {
+        v["name"] = "alice's floor".into();
+        v["route_graph"] = two_node_graph([0.5, 0.5], [5.5, 0.5]);
+    });
     let (s, created) = as_alice("POST", "/v1/scenarios".into(), Some(doc.clone())).await;
     assert_eq!(s, StatusCode::CREATED, "{created}");
     let sid = created["id"].as_str().unwrap().to_string();
@@ -2668,6 +2927,16 @@ async fn tenants_see_and_touch_only_their_own() {
                 ("get", "/v1/maps/{map_id}/zone-set") => (
                     Class::Alices,
                     format!("/v1/maps/{mid}/zone-set?threshold=-80"),
+                    None,
+                ),
+                ("get", "/v1/maps/{map_id}/roadmap") => (
+                    Class::Alices,
+                    format!("/v1/maps/{mid}/roadmap?spacing_m=1"),
+                    None,
+                ),
+                ("get", "/v1/maps/{map_id}/route-graph") => (
+                    Class::Alices,
+                    format!("/v1/maps/{mid}/route-graph?threshold=-80"),
                     None,
                 ),
                 ("get" | "delete", "/v1/jobs/{job_id}") => {

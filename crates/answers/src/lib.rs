@@ -32,6 +32,7 @@ pub mod path;
 pub mod phase_text;
 pub mod render;
 pub mod route;
+pub mod route_graph;
 pub mod scenario;
 pub mod timing;
 pub mod vda5050;

@@ -7,7 +7,7 @@
 use crate::phase_text::{PhaseFormat, PhasePrecision, SurfacePhases};
 use irs_model::input::FieldError;
 use irs_model::montecarlo::{self, MonteCarloReport};
-use irs_model::planner::PathAnswer;
+use irs_model::planner::{PathAnswer, Threshold, route_graph};
 use irs_model::radiomap::{Cancelled, Progress, RadioMap, Unit};
 use irs_model::scenario::Scenario;
 use serde::Serialize;
@@ -22,6 +22,45 @@ pub struct CheckedPath {
     /// The Monte Carlo check of the phases as sent (docs/model.md §8), when asked for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<MonteCarloReport>,
+}
+
+/// A path along the scenario's route graph (`path_shape` `route_graph`): its edges scored on
+/// `map` with `values` (the map's values in `unit`), then the route from the node nearest
+/// `start` to the node nearest `goal`. Errors name `path_shape` when the scenario has no
+/// route graph and `tolerance_m` when one is given (the ends are the nearest nodes).
+#[allow(clippy::too_many_arguments)]
+pub fn plan_on_route_graph(
+    scenario: &Scenario,
+    map: &RadioMap,
+    (unit, values): (Unit, &[f64]),
+    tolerance_m: f64,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+) -> Result<PathAnswer, FieldError> {
+    let graph = scenario.route_graph.as_deref().ok_or_else(|| {
+        FieldError::new(
+            "path_shape",
+            "the map's scenario has no route graph: attach one as the scenario's route_graph",
+        )
+    })?;
+    if tolerance_m > 0.0 {
+        return Err(FieldError::new(
+            "tolerance_m",
+            "a route_graph path runs between the nodes nearest start and goal; give no tolerance",
+        ));
+    }
+    let scores = route_graph::score_edges(map, values, graph);
+    route_graph::plan_on_graph(
+        map,
+        (unit, values),
+        graph,
+        &scores,
+        start,
+        goal,
+        threshold,
+        scenario.mru.v_max_mps,
+    )
 }
 
 /// The phase format and precision of a path answer, defaults applied. A precision applies to

@@ -304,6 +304,7 @@ mod tests {
                 j: 0,
                 snapped: false,
                 moved: false,
+                node: None,
             };
             let path = PathAnswer {
                 map_id: String::new(),

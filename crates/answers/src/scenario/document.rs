@@ -7,6 +7,7 @@
 //! * out, a scenario becomes its canonical document: one AP as `ap`, one IRS as `irs`, so a
 //!   scenario has the same id whichever way it was written.
 
+use crate::route_graph::GraphDocument;
 use irs_model::floorplan::FloorPlan;
 use irs_model::input::{FieldError, present};
 use irs_model::scenario::{
@@ -14,6 +15,7 @@ use irs_model::scenario::{
     WallSpec, as_written,
 };
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// A scenario document (docs/scenarios.md). Parsing is strict: an unknown field is an error.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -64,6 +66,13 @@ pub struct Document {
     srus: Vec<Sru>,
     #[serde(default)]
     channel: ChannelSpec,
+    /// The route graph the site's robots drive along (crate::route_graph).
+    #[serde(
+        default,
+        deserialize_with = "present",
+        skip_serializing_if = "Option::is_none"
+    )]
+    route_graph: Option<GraphDocument>,
 }
 
 impl Document {
@@ -111,9 +120,13 @@ impl Document {
             srus: self.srus,
             channel: self.channel,
         };
-        draft
+        let mut scenario = draft
             .validated(image)
-            .map_err(|e| as_written(e, one_ap, one_irs))
+            .map_err(|e| as_written(e, one_ap, one_irs))?;
+        if let Some(graph) = self.route_graph {
+            scenario.route_graph = Some(Arc::new(graph.validated(&scenario.grid())?));
+        }
+        Ok(scenario)
     }
 }
 
@@ -143,6 +156,7 @@ impl From<&Scenario> for Document {
             mru: s.mru.clone(),
             srus: s.srus.clone(),
             channel: s.channel.clone(),
+            route_graph: s.route_graph.as_deref().map(GraphDocument::from),
         }
     }
 }

@@ -98,6 +98,7 @@ impl ScenarioDocument for Scenario {
 
     fn from_value(value: serde_json::Value) -> Result<Scenario, FieldError> {
         mapfile::reject_map_reference(&value)?;
+        crate::route_graph::reject_graph_reference(&value)?;
         crate::json::from_value_at_path::<Document>(value)?.validated(&image_file)
     }
 
@@ -112,6 +113,7 @@ impl ScenarioDocument for Scenario {
         base: &Path,
     ) -> Result<Scenario, FieldError> {
         mapfile::resolve_map_reference(&mut value, base, &files::read_regular)?;
+        crate::route_graph::resolve_graph_reference(&mut value, base, &files::read_regular)?;
         Scenario::from_value(value)
     }
 

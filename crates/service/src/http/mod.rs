@@ -1,5 +1,5 @@
 //! The HTTP layer: the route table (the contract is `openapi.yaml`) and one module per resource
-//! ([`scenarios`], [`maps`], [`paths`] with sweeps and coverage, [`exports`], [`jobs`],
+//! ([`scenarios`], [`maps`], [`paths`] with sweeps and coverage, [`exports`], [`route_graphs`], [`jobs`],
 //! [`placements`], [`ops`] for health, readiness, version and metrics). A handler parses its
 //! request, calls the application and renders the answer; all physics lives in the library
 //! crates. Also here: the JSON body extractor, listings' pages, problem+json answers
@@ -16,6 +16,7 @@ mod ops;
 mod paths;
 mod placements;
 pub(crate) mod problem;
+mod route_graphs;
 mod scenarios;
 
 use crate::app::App;
@@ -87,6 +88,16 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
             "/v1/maps/{map_id}/zone-set",
             &["get"],
             get(exports::zone_set),
+        ),
+        (
+            "/v1/maps/{map_id}/route-graph",
+            &["get"],
+            get(route_graphs::route_graph),
+        ),
+        (
+            "/v1/maps/{map_id}/roadmap",
+            &["get"],
+            get(route_graphs::roadmap),
         ),
         ("/v1/jobs", &["get"], get(jobs::list_jobs)),
         (

@@ -314,9 +314,21 @@ pub(super) async fn plan_path(
     let cells = map.grid.cells();
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let (planned, cache) = (map.clone(), state.cache().clone());
+    let on_graph = scenario.clone();
     let path = heavy(&state, "path", cells, move |_| {
         let index = cache.unit_index(&map_id, &planned, unit)?;
-        planner::plan_indexed(&planned, &index, options, start, goal, threshold, v_max)
+        match options.shape {
+            PathShape::RouteGraph => path::plan_on_route_graph(
+                &on_graph,
+                &planned,
+                (unit, index.values(&planned)),
+                tolerance_m,
+                start,
+                goal,
+                threshold,
+            ),
+            _ => planner::plan_indexed(&planned, &index, options, start, goal, threshold, v_max),
+        }
     })
     .await??;
     // Written before the Monte Carlo check, which then evaluates the phases as sent.
