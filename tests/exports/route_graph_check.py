@@ -159,7 +159,8 @@ def main():
             text = cli(["roadmap", "--scenario", scenario, "--spacing-m", spacing, "--threshold=-75", "--format", fmt])
             loads(name + " (CLI)", text, fmt)
             answer = kit.get(base, f"/v1/maps/{map_id}/roadmap?spacing_m={spacing}&threshold=-75&format={fmt}", parse="text")
-            check(answer.status == 200, f"{name}: served", str(answer.body)[:200])
+            failed = "" if answer.status == 200 else f"{answer.status} {str(answer.body)[:200]}"
+            check(answer.status == 200, f"{name}: served", failed)
             same = (json.loads(answer.body) == json.loads(text)) if fmt == "nav2_geojson" else (
                 yaml.safe_load(answer.body) == yaml.safe_load(text))
             check(same, f"{name}: the server's is the CLI's")

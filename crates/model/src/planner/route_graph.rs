@@ -328,31 +328,12 @@ fn score_polyline(map: &RadioMap, values: &[f64], points: &[[f64; 2]]) -> EdgeSc
     score
 }
 
-/// The graph's outgoing edges per node, for the searches.
-fn adjacency(graph: &RouteGraph) -> (Vec<usize>, Vec<usize>) {
-    let n = graph.nodes.len();
-    let mut start = vec![0usize; n + 1];
-    for e in &graph.edges {
-        start[e.from + 1] += 1;
-    }
-    for k in 0..n {
-        start[k + 1] += start[k];
-    }
-    let mut fill = start.clone();
-    let mut edges = vec![0usize; graph.edges.len()];
-    for (k, e) in graph.edges.iter().enumerate() {
-        edges[fill[e.from]] = k;
-        fill[e.from] += 1;
-    }
-    (start, edges)
-}
-
-/// A heap entry ordered by `key` (smallest first for Dijkstra; callers negate for the
-/// widest path), ties to the lower node.
+/// A heap entry ordered by `key` (smallest first for Dijkstra; the widest path negates its
+/// widths), ties to the lower node.
 #[derive(PartialEq)]
 struct Entry {
     key: f64,
-    node: usize,
+    node: u32,
 }
 impl Eq for Entry {}
 impl Ord for Entry {
@@ -378,103 +359,151 @@ pub struct GraphRoute {
     pub distance_m: f64,
 }
 
-/// The shortest route from node `start` to node `goal` over edges open at `threshold`
-/// (Dijkstra by length); `None` when no such route exists.
-pub fn shortest_route(
-    graph: &RouteGraph,
-    scores: &[EdgeScore],
-    start: usize,
-    goal: usize,
-    threshold: f64,
-) -> Option<GraphRoute> {
-    let (first, outgoing) = adjacency(graph);
-    let n = graph.nodes.len();
-    let mut distance = vec![f64::INFINITY; n];
-    let mut via = vec![usize::MAX; n];
-    let mut heap = BinaryHeap::new();
-    distance[start] = 0.0;
-    heap.push(Entry {
-        key: 0.0,
-        node: start,
-    });
-    while let Some(Entry { key, node }) = heap.pop() {
-        if key > distance[node] {
-            continue;
-        }
-        if node == goal {
-            break;
-        }
-        for &e in &outgoing[first[node]..first[node + 1]] {
-            if !scores[e].open_at(threshold) {
-                continue;
-            }
-            let next = graph.edges[e].to;
-            let d = key + scores[e].length_m;
-            if d < distance[next] {
-                distance[next] = d;
-                via[next] = e;
-                heap.push(Entry { key: d, node: next });
-            }
-        }
-    }
-    if !distance[goal].is_finite() {
-        return None;
-    }
-    let mut edges = Vec::new();
-    let mut node = goal;
-    while node != start {
-        let e = via[node];
-        edges.push(e);
-        node = graph.edges[e].from;
-    }
-    edges.reverse();
-    Some(GraphRoute {
-        edges,
-        distance_m: distance[goal],
-    })
+/// A graph's edges with their scores laid out for the searches: each node's outgoing edges
+/// contiguous (compressed rows), with the end node, length and worst value beside each, so a
+/// search reads three flat arrays instead of chasing every edge's polyline and score. Built once
+/// per graph and map; each query then costs only its own search.
+#[derive(Debug, Clone)]
+pub struct ScoredGraph {
+    /// Node k's outgoing edges are slots first[k]..first[k + 1].
+    first: Vec<u32>,
+    /// Per slot: the edge's index in the graph.
+    edge: Vec<u32>,
+    /// Per slot: the node it reaches.
+    to: Vec<u32>,
+    /// Per slot: its length (m).
+    length: Vec<f64>,
+    /// Per slot: its worst value, −∞ for an edge meeting a cell without a value.
+    worst: Vec<f64>,
+    /// Per edge: the node it leaves (to walk a route back).
+    from: Vec<u32>,
 }
 
-/// The largest threshold at which some route joins `start` to `goal`: the widest path, the
-/// best over routes of their worst edge. `None` when no route exists at any threshold;
-/// +∞ when start and goal are one node.
-pub fn widest_threshold(
-    graph: &RouteGraph,
-    scores: &[EdgeScore],
-    start: usize,
-    goal: usize,
-) -> Option<f64> {
-    let (first, outgoing) = adjacency(graph);
-    let mut width = vec![f64::NEG_INFINITY; graph.nodes.len()];
-    let mut heap = BinaryHeap::new();
-    width[start] = f64::INFINITY;
-    heap.push(Entry {
-        key: f64::NEG_INFINITY,
-        node: start,
-    });
-    while let Some(Entry { key, node }) = heap.pop() {
-        let w = -key;
-        if w < width[node] {
-            continue;
+impl ScoredGraph {
+    /// The search layout of `graph` with `scores` (one per edge, [`score_edges`]).
+    pub fn new(graph: &RouteGraph, scores: &[EdgeScore]) -> ScoredGraph {
+        let n = graph.nodes.len();
+        let mut first = vec![0u32; n + 1];
+        for e in &graph.edges {
+            first[e.from + 1] += 1;
         }
-        if node == goal {
-            return Some(w);
+        for k in 0..n {
+            first[k + 1] += first[k];
         }
-        for &e in &outgoing[first[node]..first[node + 1]] {
-            let Some(edge_worst) = scores[e].worst else {
-                continue;
-            };
-            let next = graph.edges[e].to;
-            let through = w.min(edge_worst);
-            if through > width[next] {
-                width[next] = through;
-                heap.push(Entry {
-                    key: -through,
-                    node: next,
-                });
-            }
+        let slots = graph.edges.len();
+        let mut fill = first.clone();
+        let (mut edge, mut to) = (vec![0u32; slots], vec![0u32; slots]);
+        let (mut length, mut worst) = (vec![0.0; slots], vec![0.0; slots]);
+        for (k, e) in graph.edges.iter().enumerate() {
+            let slot = fill[e.from] as usize;
+            fill[e.from] += 1;
+            edge[slot] = k as u32;
+            to[slot] = e.to as u32;
+            length[slot] = scores[k].length_m;
+            worst[slot] = scores[k].worst.unwrap_or(f64::NEG_INFINITY);
+        }
+        ScoredGraph {
+            first,
+            edge,
+            to,
+            length,
+            worst,
+            from: graph.edges.iter().map(|e| e.from as u32).collect(),
         }
     }
-    None
+
+    fn slots(&self, node: usize) -> std::ops::Range<usize> {
+        self.first[node] as usize..self.first[node + 1] as usize
+    }
+
+    /// The shortest route from node `start` to node `goal` over edges open at `threshold`
+    /// (every cell they meet at least `threshold`; Dijkstra by length); `None` when no such
+    /// route exists.
+    pub fn shortest_route(&self, start: usize, goal: usize, threshold: f64) -> Option<GraphRoute> {
+        let n = self.first.len() - 1;
+        let mut distance = vec![f64::INFINITY; n];
+        let mut via = vec![u32::MAX; n];
+        let mut heap = BinaryHeap::new();
+        distance[start] = 0.0;
+        heap.push(Entry {
+            key: 0.0,
+            node: start as u32,
+        });
+        while let Some(Entry { key, node }) = heap.pop() {
+            let node = node as usize;
+            if key > distance[node] {
+                continue;
+            }
+            if node == goal {
+                break;
+            }
+            for slot in self.slots(node) {
+                // −∞ (no value) is below every threshold.
+                if self.worst[slot] < threshold {
+                    continue;
+                }
+                let next = self.to[slot] as usize;
+                let d = key + self.length[slot];
+                if d < distance[next] {
+                    distance[next] = d;
+                    via[next] = self.edge[slot];
+                    heap.push(Entry {
+                        key: d,
+                        node: next as u32,
+                    });
+                }
+            }
+        }
+        if !distance[goal].is_finite() {
+            return None;
+        }
+        let mut edges = Vec::new();
+        let mut node = goal;
+        while node != start {
+            let e = via[node] as usize;
+            edges.push(e);
+            node = self.from[e] as usize;
+        }
+        edges.reverse();
+        Some(GraphRoute {
+            edges,
+            distance_m: distance[goal],
+        })
+    }
+
+    /// The largest threshold at which some route joins `start` to `goal`: the widest path,
+    /// the best over routes of their worst edge. `None` when no route exists at any threshold;
+    /// +∞ when start and goal are one node.
+    pub fn widest_threshold(&self, start: usize, goal: usize) -> Option<f64> {
+        let mut width = vec![f64::NEG_INFINITY; self.first.len() - 1];
+        let mut heap = BinaryHeap::new();
+        width[start] = f64::INFINITY;
+        heap.push(Entry {
+            key: f64::NEG_INFINITY,
+            node: start as u32,
+        });
+        while let Some(Entry { key, node }) = heap.pop() {
+            let (w, node) = (-key, node as usize);
+            if w < width[node] {
+                continue;
+            }
+            if node == goal {
+                return Some(w);
+            }
+            for slot in self.slots(node) {
+                let through = w.min(self.worst[slot]);
+                let next = self.to[slot] as usize;
+                if through > width[next] {
+                    width[next] = through;
+                    heap.push(Entry {
+                        key: -through,
+                        node: next as u32,
+                    });
+                }
+            }
+        }
+        None
+    }
 }
 
 /// The route on a scenario's route graph from the node nearest `start` to the node nearest
@@ -528,10 +557,11 @@ pub fn plan_on_graph(
         let c = grid.index(i, j);
         Some(values[c]).filter(|v| !v.is_nan() && !map.occupied[c])
     };
+    let searched = ScoredGraph::new(graph, scores);
     let widest = if s == g {
         cell_value(s)
     } else {
-        widest_threshold(graph, scores, s, g)
+        searched.widest_threshold(s, g)
     };
     let applied = match threshold {
         Threshold::Value(v) => Some(v),
@@ -548,7 +578,9 @@ pub fn plan_on_graph(
                 Err(Infeasible::StartBelowThreshold)
             }
         }
-        Some(t) => shortest_route(graph, scores, s, g, t).ok_or(Infeasible::Disconnected),
+        Some(t) => searched
+            .shortest_route(s, g, t)
+            .ok_or(Infeasible::Disconnected),
         None => Err(Infeasible::Disconnected),
     };
     let mut answer = PathAnswer {
@@ -812,7 +844,8 @@ mod tests {
                 .filter(|r| r.iter().all(|&e| scores[e].open_at(t)))
                 .map(|r| r.iter().map(|&e| scores[e].length_m).sum::<f64>())
                 .min_by(f64::total_cmp);
-            let found = shortest_route(&graph, &scores, s, g, t);
+            let searched = ScoredGraph::new(&graph, &scores);
+            let found = searched.shortest_route(s, g, t);
             prop_assert_eq!(found.as_ref().map(|r| r.distance_m), best);
             if let Some(route) = found {
                 // The edges chain from s to g, every one open, and add up to the length.
@@ -832,7 +865,7 @@ mod tests {
                         .try_fold(f64::INFINITY, |w, e| e.map(|e| w.min(e)))
                 })
                 .max_by(f64::total_cmp);
-            prop_assert_eq!(widest_threshold(&graph, &scores, s, g), widest);
+            prop_assert_eq!(searched.widest_threshold(s, g), widest);
         }
     }
 
@@ -996,8 +1029,9 @@ mod tests {
         }
         let s = graph.nearest_node([-10.0, 0.0]).unwrap();
         let g = graph.nearest_node([10.0, 0.0]).unwrap();
-        let route =
-            shortest_route(&graph, &scores, s, g, t).expect("a route at 3 dB below the widest");
+        let route = ScoredGraph::new(&graph, &scores)
+            .shortest_route(s, g, t)
+            .expect("a route at 3 dB below the widest");
         let cell = |k: usize| {
             let [x, y] = graph.nodes[k].position;
             let (i, j) = map.grid.snap(x, y).unwrap();
