@@ -34,11 +34,25 @@ const GRAZE_T: f64 = 1e-12;
 /// typed to the nanometre on an edge are occupied as intended.
 const ON_BOUNDARY_M: f64 = 1e-9;
 
+/// How deep (m) a segment must reach into an obstacle's interior, on every axis, to be
+/// blocked by it. A decimal coordinate is rarely a double (a cell centre at 117 · 0.05 m is
+/// 5.8500000000000005), so a link typed to run along a face at 5.85 would otherwise enter the
+/// box by 5·10⁻¹⁶ m and count as blocked. 10⁻⁹ m is a million times the rounding of room-sized
+/// coordinates, and far below the depth by which a link between decimal points that truly
+/// crosses an obstacle enters it: at least u / (2 D²) for points and faces on a lattice of step
+/// u across D steps (1.6·10⁻⁷ m for 5 cm over 20 m; docs/model.md §2 "Links"), which a property
+/// test checks against exact rational arithmetic.
+pub const GRAZE_M: f64 = 1e-9;
+
 /// The parameters t where the line p + t(q − p) lies inside the open slab (lo, hi) of one axis,
-/// as an interval [t0, t1]: everything when the line runs inside the slab parallel to it, an
-/// empty interval (t0 > t1) when it runs outside.
+/// narrowed by [`GRAZE_M`] at each face, as an interval [t0, t1]: everything when the line runs
+/// inside the slab parallel to it, an empty interval (t0 > t1) when it runs outside.
 #[inline(always)]
 fn slab(p: f64, q: f64, lo: f64, hi: f64) -> (f64, f64) {
+    let (lo, hi) = (lo + GRAZE_M, hi - GRAZE_M);
+    if lo >= hi {
+        return (f64::INFINITY, f64::NEG_INFINITY);
+    }
     let d = q - p;
     if d == 0.0 {
         if p <= lo || p >= hi {
@@ -507,6 +521,192 @@ pub(crate) mod tests {
         );
         assert!(hit([0.5, 0.5, 0.5], [5.0, 5.0, 5.0]), "starting inside");
         assert!(!hit([2.0, 2.0, 0.5], [3.0, 3.0, 0.5]), "far away");
+    }
+
+    /// A decimal a user types, `units` twentieths of a metre (0.05 m), as the JSON parser reads
+    /// it: the double nearest the decimal (an exact integer over 100, correctly rounded).
+    fn typed(units: i64) -> f64 {
+        (units * 5) as f64 / 100.0
+    }
+
+    /// Whether the segment a→b (closed) meets the open box lo–hi, all points given exactly in
+    /// twentieths of a metre: the open intervals of t per axis, intersected with [0, 1], compared
+    /// as fractions by cross-multiplication.
+    fn enters_open_box(a: [i64; 3], b: [i64; 3], lo: [i64; 3], hi: [i64; 3]) -> bool {
+        // Bounds as fractions n/d with d > 0: lower bounds strict, [0, 1] closed.
+        let (mut lower, mut upper) = ((0i128, 1i128, false), (1i128, 1i128, false));
+        let greater = |x: (i128, i128), y: (i128, i128)| x.0 * y.1 > y.0 * x.1;
+        for k in 0..3 {
+            let d = (b[k] - a[k]) as i128;
+            let (l, h) = ((lo[k] - a[k]) as i128, (hi[k] - a[k]) as i128);
+            if d == 0 {
+                if !(l < 0 && 0 < h) {
+                    return false;
+                }
+                continue;
+            }
+            let (t0, t1) = if d > 0 {
+                ((l, d), (h, d))
+            } else {
+                ((-h, -d), (-l, -d))
+            };
+            // t > t0 strictly; a bound equal to the running one becomes strict.
+            if greater(t0, (lower.0, lower.1)) || (!greater((lower.0, lower.1), t0) && !lower.2) {
+                lower = (t0.0, t0.1, true);
+            }
+            if greater((upper.0, upper.1), t1) || (!greater(t1, (upper.0, upper.1)) && !upper.2) {
+                upper = (t1.0, t1.1, true);
+            }
+        }
+        let (lo_f, hi_f) = ((lower.0, lower.1), (upper.0, upper.1));
+        greater(hi_f, lo_f) || (!greater(lo_f, hi_f) && !lower.2 && !upper.2)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// Grazing is line of sight for the decimals a user types: a box given by its centre
+        /// and size, an AP at a typed position and the cell centres of a 0.05, 0.1 or 0.15 m grid
+        /// (x_min + i·Δ in floating point, as the map computes them), faces and cells on
+        /// multiples of the grid step, so many links run exactly along a face, an edge or through
+        /// a corner. Blocked exactly when the exact segment enters the open box.
+        #[test]
+        fn decimal_links_are_blocked_exactly_when_they_enter_the_box(
+            step in prop::sample::select(vec![1i64, 2, 3]),
+            centre in (-40i64..40, -40i64..40),
+            half in (1i64..12, 1i64..12),
+            height in prop::sample::select(vec![20i64, 26, 40]),
+            source in (-60i64..60, -60i64..60, prop::sample::select(vec![20i64, 26, 40, 60])),
+            x_min in -60i64..-40,
+            cell in (0usize..40, 0usize..40),
+            antenna in prop::sample::select(vec![20i64, 26]),
+        ) {
+            // Faces on the grid's lattice: centre and half-size multiples of the step.
+            let (c, h) = ([centre.0 * step, centre.1 * step], [half.0 * step, half.1 * step]);
+            let b = Aabb {
+                lo: [typed(c[0]) - typed(2 * h[0]) / 2.0, typed(c[1]) - typed(2 * h[1]) / 2.0, 0.0],
+                hi: [typed(c[0]) + typed(2 * h[0]) / 2.0, typed(c[1]) + typed(2 * h[1]) / 2.0, typed(height)],
+            };
+            let (x0, dx) = (typed(x_min * step), typed(step));
+            let user = [x_min * step + cell.0 as i64 * step, x_min * step + cell.1 as i64 * step, antenna];
+            let ap = [source.0 * step, source.1 * step, source.2];
+            let exact = enters_open_box(
+                ap,
+                user,
+                [c[0] - h[0], c[1] - h[1], 0],
+                [c[0] + h[0], c[1] + h[1], height],
+            );
+            let a = P3::new(typed(ap[0]), typed(ap[1]), typed(ap[2]));
+            let u = P3::new(x0 + cell.0 as f64 * dx, x0 + cell.1 as f64 * dx, typed(antenna));
+            prop_assert_eq!(b.blocks(&a, &u), exact, "{:?} → {:?} against {:?}", a, u, b);
+            // The row test agrees with the segment test.
+            let mut blocked = [false];
+            b.block_row(&a, u[0], u[2], &[u[1]], &mut blocked);
+            prop_assert_eq!(blocked[0], exact);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// The same for walls at angles whose direction is rational (3-4-5 and 5-12-13
+        /// triangles, and the axes), so the exact answer stays in integers: links chosen at
+        /// random, along a long face, and along an end face, between typed decimal points on a
+        /// 0.05 m lattice and cell centres x_min + i·Δ. The wall's frame turns through cosines
+        /// like 0.6 and 0.8, which no double holds, so a link along a face is rounded into it or
+        /// out of it unless grazing has a tolerance.
+        #[test]
+        fn decimal_links_are_blocked_exactly_when_they_enter_a_wall(
+            direction in prop::sample::select(vec![(3i64, 4i64), (4, -3), (-5, 12), (12, 5), (1, 0), (0, 1)]),
+            k in 1i64..4,
+            from in (-20i64..20, -20i64..20),
+            thickness in 1i64..6,
+            height in prop::sample::select(vec![20i64, 40]),
+            mode in 0u8..3,
+            offsets in (-30i64..30, -30i64..30),
+            source_z in prop::sample::select(vec![20i64, 40, 60]),
+            antenna in prop::sample::select(vec![20i64, 26]),
+        ) {
+            let d = [direction.0 * k, direction.1 * k];
+            let norm = ((d[0] * d[0] + d[1] * d[1]) as f64).sqrt().round() as i64;
+            let to = [from.0 + d[0], from.1 + d[1]];
+            // Twice the half-thickness times |d| is an integer when the thickness is even in
+            // units: take thickness 2·t units.
+            let th = 2 * thickness;
+            // A point on the long face w = +th/2: from + (th/2)·n + m·d/|d|… in lattice terms,
+            // p with cross(d, p − from) = (th/2)·|d|: step along d from one such point.
+            let on_long_face = |m: i64| -> Option<[i64; 2]> {
+                // Solve d0·y − d1·x = thickness·|d| (cross(d, p−from) with p−from = (x, y)).
+                let target = thickness * norm;
+                for x in -60i64..60 {
+                    let rest = target + d[1] * x;
+                    if d[0] != 0 && rest % d[0] == 0 {
+                        let y = rest / d[0];
+                        return Some([from.0 + x + m * direction.0, from.1 + y + m * direction.1]);
+                    }
+                    if d[0] == 0 {
+                        // d = (0, d1): −d1·x = target.
+                        if target % d[1] == 0 {
+                            let x = -target / d[1];
+                            return Some([from.0 + x, from.1 + m]);
+                        }
+                        return None;
+                    }
+                }
+                None
+            };
+            let (ap, user) = match mode {
+                0 => ([from.0 + offsets.0, from.1 + offsets.1], [from.0 - offsets.1, to[1] + offsets.0]),
+                1 => match (on_long_face(offsets.0 % 5), on_long_face(offsets.1 % 5 + 6)) {
+                    (Some(a), Some(b)) => (a, b),
+                    _ => return Ok(()),
+                },
+                // Along the end face through `to`: perpendicular to d.
+                _ => (
+                    [to[0] - direction.1 * (offsets.0 % 4), to[1] + direction.0 * (offsets.0 % 4)],
+                    [to[0] - direction.1 * (offsets.1 % 4 + 5), to[1] + direction.0 * (offsets.1 % 4 + 5)],
+                ),
+            };
+            // Exact: the wall's frame scaled by |d| (s·|d| = d·(p − from), w·|d| = cross(d, p − from))
+            // and by 2 on both floor axes so the faces are integers.
+            let frame = |p: [i64; 2], z: i64| {
+                let (x, y) = (p[0] - from.0, p[1] - from.1);
+                [2 * (d[0] * x + d[1] * y), 2 * (d[0] * y - d[1] * x), z]
+            };
+            let exact = enters_open_box(
+                frame(ap, source_z),
+                frame(user, antenna),
+                [0, -th * norm, 0],
+                [2 * norm * norm, th * norm, height],
+            );
+            let wall = Wall::new(
+                [typed(from.0), typed(from.1)],
+                [typed(to[0]), typed(to[1])],
+                typed(th),
+                typed(height),
+            );
+            // The user as a cell centre of a 0.05 m grid whose first centre is at (−3, −3) m.
+            let x0 = typed(-60);
+            let u = P3::new(
+                x0 + (user[0] + 60) as f64 * typed(1),
+                x0 + (user[1] + 60) as f64 * typed(1),
+                typed(antenna),
+            );
+            let a = P3::new(typed(ap[0]), typed(ap[1]), typed(source_z));
+            prop_assert_eq!(wall.blocks(&a, &u), exact, "mode {}: {:?} → {:?}", mode, a, u);
+        }
+    }
+
+    /// The example: a 0.3 m box whose face is at x = 5.85, an AP on that face's line,
+    /// the cell (5.85, 9) of a 0.05 m grid: the link runs along the face, so it is line of sight.
+    #[test]
+    fn a_link_along_a_face_at_a_decimal_is_line_of_sight() {
+        let b = Aabb {
+            lo: [6.0 - 0.3 / 2.0, 7.0 - 2.0 / 2.0, 0.0],
+            hi: [6.0 + 0.3 / 2.0, 7.0 + 2.0 / 2.0, 3.0],
+        };
+        let x = 0.0 + 117.0 * 0.05;
+        assert_ne!(x, 5.85, "the cell centre is not the decimal");
+        assert!(!b.blocks(&P3::new(5.85, 5.0, 2.0), &P3::new(x, 9.0, 1.0)));
+        assert!(b.blocks(&P3::new(5.9, 5.0, 2.0), &P3::new(x + 0.1, 9.0, 1.0)));
     }
 
     #[test]

@@ -43,7 +43,9 @@ impl fmt::Display for MapKind {
 /// 3: with several APs, the one received strongest serves a cell, not the one of best gain.
 /// 4: a rate map's value, power split and decoding order are those of its phases as stored
 ///    (16-bit codes), not of the unrounded ones.
-pub const MODEL_VERSION: u32 = 4;
+/// 5: a link reaching less than 10⁻⁹ m into an obstacle grazes it (decimal coordinates rounded
+///    into a face no longer block).
+pub const MODEL_VERSION: u32 = 5;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
