@@ -2737,6 +2737,7 @@ async fn route_graphs_are_scored_and_routed_over_http() {
         ("spacing_m=0.1", "spacing_m"),
         ("spacing_m=2&format=dxf", "format"),
         ("spacing_m=2&penalty_band=1", "penalty_band"),
+        ("spacing_m=2&threshold=100", "threshold"),
     ] {
         let (s, body) = server
             .get(&format!("/v1/maps/{paper_id}/roadmap?{query}"))

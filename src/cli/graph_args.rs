@@ -80,6 +80,10 @@ pub struct RoadmapArgs {
     /// The unit of the scores and the threshold; default: the map's own.
     #[arg(long, value_name = "UNIT")]
     pub unit: Option<Unit>,
+    /// Width of the band above the threshold whose edges get a penalty in (0, 1]; only with
+    /// --threshold.
+    #[arg(long, value_name = "VALUE", value_parser = parse_finite)]
+    pub penalty_band: Option<f64>,
     /// nav2_geojson (a Nav2 Route Server graph) or rmf_nav_graph (an Open-RMF nav graph).
     #[arg(long, value_name = "FORMAT", default_value = "nav2_geojson", value_parser = parse_name::<FormatName>)]
     pub format: FormatName,
@@ -96,7 +100,7 @@ pub fn run_roadmap(args: &RoadmapArgs) -> Result<(), Failure> {
             map_id: map.id.clone(),
             unit: args.unit.unwrap_or(map.native_unit()),
             threshold: args.threshold,
-            penalty_band: None,
+            penalty_band: args.penalty_band,
         },
     };
     let graph = route_graph::roadmap(&map, &query).map_err(|e| Failure::input(flag(&e)))?;

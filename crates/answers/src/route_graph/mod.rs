@@ -108,17 +108,12 @@ impl GraphDocument {
         for (k, node) in nodes.iter().enumerate() {
             let [x, y] = node.position;
             if grid.snap(x, y).is_none() {
-                let field = match (format, &level) {
-                    (GraphFormat::Nav2GeoJson, _) => {
-                        format!(
-                            "route_graph.graph.features[{}].geometry.coordinates",
-                            features[k]
-                        )
-                    }
-                    (GraphFormat::RmfNavGraph, Some(level)) => {
-                        format!("route_graph.graph.levels.{level}.vertices[{k}]")
-                    }
-                    (GraphFormat::RmfNavGraph, None) => unreachable!("a nav graph has a level"),
+                let field = match &level {
+                    Some(level) => format!("route_graph.graph.levels.{level}.vertices[{k}]"),
+                    None => format!(
+                        "route_graph.graph.features[{}].geometry.coordinates",
+                        features[k]
+                    ),
                 };
                 return Err(FieldError::new(
                     field,
@@ -608,6 +603,26 @@ pub fn roadmap(
     let values = map.values_in(query.score.unit)?;
     let (nodes, mut edges) =
         irs_model::planner::route_graph::roadmap(map, &values, step, query.score.threshold);
+    if edges.is_empty() {
+        let field = if query.score.threshold.is_some() {
+            "threshold"
+        } else {
+            "spacing_m"
+        };
+        return Err(FieldError::new(
+            field,
+            "no two neighbouring lattice nodes are joined by an open edge: the roadmap would be empty",
+        ));
+    }
+    if edges.len() > MAX_GRAPH_EDGES {
+        return Err(FieldError::new(
+            "spacing_m",
+            format!(
+                "{} edges: a route graph holds at most {MAX_GRAPH_EDGES}; take a wider spacing",
+                edges.len()
+            ),
+        ));
+    }
     let (document, level) = match query.format {
         FormatName::Nav2Geojson => (nav2::document(&nodes, &edges), None),
         FormatName::RmfNavGraph => {
@@ -950,6 +965,42 @@ mod tests {
             .collect();
         assert!(!written.is_empty());
         assert!(written.iter().all(|p| p.contains('.')), "{written:?}");
+        // Scored again with a narrower band, the annotated graph keeps no stale penalty.
+        let mut again = (*graph.source).clone();
+        again.document = out.clone();
+        let regraph = RouteGraph {
+            nodes: graph.nodes.clone(),
+            edges: graph.edges.clone(),
+            source: std::sync::Arc::new(again),
+        };
+        let narrow = ScoreQuery {
+            penalty_band: Some(0.5),
+            ..query.clone()
+        };
+        let rescored = Annotation {
+            graph: &regraph,
+            scores: &scores,
+            query: &narrow,
+        };
+        let Annotated::GeoJson(twice) = annotated(&rescored) else {
+            panic!("GeoJSON in, GeoJSON out")
+        };
+        let penalised = |g: &Value| {
+            g["features"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|f| f["properties"]["metadata"]["penalty"].is_number())
+                .count()
+        };
+        let within = (0..scores.len())
+            .filter(|&k| rescored.penalty(k).is_some())
+            .count();
+        assert!(
+            penalised(&out) > within,
+            "a narrower band penalises fewer edges"
+        );
+        assert_eq!(penalised(&twice), within);
         let written_report = report(&annotation);
         let below: Vec<String> = scores
             .iter()

@@ -279,7 +279,8 @@ fn operations(value: &Value, path: &str) -> Result<(), FieldError> {
 }
 
 /// The graph as given with each edge's scores in `metadata.irs_planner` (and, at a
-/// threshold with a penalty band, `metadata.penalty` for nav2_route's PenaltyScorer), and the
+/// threshold with a penalty band, `metadata.penalty` for nav2_route's PenaltyScorer, set on the
+/// edges within the band and removed from the others), and the
 /// collection's foreign member `irs_planner` (RFC 7946 §6.1, which the loader ignores) saying
 /// what was scored and which edges to close.
 pub(super) fn annotate(document: &Value, annotation: &Annotation) -> Value {
@@ -294,8 +295,13 @@ pub(super) fn annotate(document: &Value, annotation: &Annotation) -> Value {
             .or_insert_with(|| json!({}));
         let edge_scores = annotation.edge_json(edge);
         let m = metadata.as_object_mut().expect("checked when read");
-        if let Some(penalty) = annotation.penalty(edge) {
-            m.insert("penalty".into(), json!(penalty));
+        // With a band the penalties are ours: an edge outside it loses one written before (a
+        // graph annotated once and scored again), so the scorer never reads a stale one.
+        if annotation.query.penalty_band.is_some() {
+            match annotation.penalty(edge) {
+                Some(penalty) => m.insert("penalty".into(), json!(penalty)),
+                None => m.remove("penalty"),
+            };
         }
         m.insert("irs_planner".into(), edge_scores);
     }

@@ -23,7 +23,8 @@ use irs_model::scenario::route_graph::{GraphEdge, GraphNode, GraphSource};
 use serde_json::{Map, Value, json};
 use std::collections::HashMap;
 
-/// A nav graph's YAML text as a JSON value (NaN and the infinities refused: JSON has neither).
+/// A nav graph's YAML text as a JSON value (`.nan` and `.inf`, which JSON cannot hold, become
+/// null, which the reader then refuses wherever it reads a number).
 pub(super) fn parse_yaml(text: &str) -> Result<Value, String> {
     let value: Value = serde_saphyr::from_str(text).map_err(|e| e.to_string())?;
     Ok(value)

@@ -225,7 +225,7 @@ pub fn roadmap(
                 let score = score_polyline(map, values, &[centre(a, b), centre(a2, b2)]);
                 let open = match threshold {
                     Some(t) => score.open_at(t),
-                    None => !score.crosses_obstacle && score.worst.is_some(),
+                    None => score.worst.is_some(),
                 };
                 if open {
                     pairs.push(((a, b), (a2, b2)));
@@ -361,8 +361,8 @@ pub struct GraphRoute {
 
 /// A graph's edges with their scores laid out for the searches: each node's outgoing edges
 /// contiguous (compressed rows), with the end node, length and worst value beside each, so a
-/// search reads three flat arrays instead of chasing every edge's polyline and score. Built once
-/// per graph and map; each query then costs only its own search.
+/// search reads three flat arrays instead of chasing every edge's polyline and score. Building
+/// it costs about half a search; one built for several searches saves that each time.
 #[derive(Debug, Clone)]
 pub struct ScoredGraph {
     /// Node k's outgoing edges are slots first[k]..first[k + 1].
@@ -397,8 +397,9 @@ impl ScoredGraph {
         for (k, e) in graph.edges.iter().enumerate() {
             let slot = fill[e.from] as usize;
             fill[e.from] += 1;
-            edge[slot] = k as u32;
-            to[slot] = e.to as u32;
+            // Graphs are read with at most MAX_GRAPH_NODES nodes and MAX_GRAPH_EDGES edges.
+            edge[slot] = u32::try_from(k).expect("fewer than 2³² edges");
+            to[slot] = u32::try_from(e.to).expect("fewer than 2³² nodes");
             length[slot] = scores[k].length_m;
             worst[slot] = scores[k].worst.unwrap_or(f64::NEG_INFINITY);
         }
@@ -567,7 +568,14 @@ pub fn plan_on_graph(
         Threshold::Value(v) => Some(v),
         Threshold::Max => widest,
     };
+    let occupied = |node: usize| {
+        let [x, y] = graph.nodes[node].position;
+        let (i, j) = grid.snap(x, y).expect("in the room");
+        map.occupied[grid.index(i, j)]
+    };
     let result = match applied {
+        _ if occupied(s) => Err(Infeasible::StartOccupied),
+        _ if occupied(g) => Err(Infeasible::GoalOccupied),
         Some(t) if s == g => {
             if cell_value(s).is_some_and(|v| v >= t) {
                 Ok(GraphRoute {
@@ -617,11 +625,19 @@ pub fn plan_on_graph(
         for pair in edge.points.windows(2) {
             let (a, b) = (pair[0], pair[1]);
             let length = (b[0] - a[0]).hypot(b[1] - a[1]);
+            if length == 0.0 {
+                // Two nodes at one point: nothing to drive, no heading to give.
+                continue;
+            }
             let mut crossings = Vec::new();
             segment_crossings(grid, a, b, &mut crossings);
             for c in crossings.iter().filter(|c| c.interior) {
-                // Entered past the segment's start (the start is the vertex before).
-                if c.t_in * length > 1e-9 && points.last().is_none_or(|&(last, _)| last != c.cell) {
+                let last = points.last_mut().expect("the start is first");
+                if c.t_in * length <= 1e-9 {
+                    // The segment leaves its start into this cell: a start on a cell boundary
+                    // snapped to the neighbour drives this one, whose configuration applies.
+                    last.0 = c.cell;
+                } else if last.0 != c.cell {
                     points.push((c.cell, lerp(a, b, c.t_in)));
                 }
             }
@@ -1046,5 +1062,41 @@ mod tests {
             route.distance_m,
             grid_path.distance_m
         );
+    }
+
+    /// A node on a cell boundary takes the configuration of the cell its edge drives through,
+    /// not of the neighbour the boundary point snaps to; an occupied end node is named as such.
+    #[test]
+    fn a_route_from_a_boundary_drives_with_the_cell_it_enters() {
+        let map = paper_map();
+        // y = 8.25 lies between the rows of centres 8.0 and 8.5; the edge goes south.
+        let nodes = [[-8.0, 8.25], [-8.0, 6.75], [0.0, 0.0]];
+        let graph = graph(&nodes, &[(0, 1), (1, 2)]);
+        let scores = score_edges(&map, &map.values, &graph);
+        let plan = |goal: [f64; 2]| {
+            plan_on_graph(
+                &map,
+                (Unit::GainDb, &map.values),
+                &graph,
+                &scores,
+                nodes[0],
+                goal,
+                Threshold::Max,
+                1.0,
+            )
+            .unwrap()
+        };
+        let answer = plan(nodes[1]);
+        assert!(answer.feasible);
+        let first = &answer.waypoints[0];
+        assert_eq!((first.x, first.y), (-8.0, 8.25));
+        assert_eq!(
+            map.grid.centre(first.i, first.j),
+            [-8.0, 8.0],
+            "the cell driven through"
+        );
+        assert!(answer.waypoints.windows(2).all(|w| w[0].j >= w[1].j));
+        // (0, 0) is inside the central box.
+        assert_eq!(plan(nodes[2]).reason, Some(Infeasible::GoalOccupied));
     }
 }

@@ -48,7 +48,8 @@ pub struct GraphEdge {
     pub from: usize,
     /// The node it reaches.
     pub to: usize,
-    /// The polyline a robot drives, from `from`'s position to `to`'s (at least those two).
+    /// The polyline a robot drives, from `from`'s position to `to`'s (at least those two; both
+    /// formats read today drive straight, so exactly those two).
     pub points: Vec<[f64; 2]>,
 }
 
@@ -77,8 +78,6 @@ pub struct RouteGraph {
 pub const MAX_GRAPH_NODES: usize = 100_000;
 /// Most edges a route graph may have.
 pub const MAX_GRAPH_EDGES: usize = 200_000;
-/// Most points an edge's polyline may have, its ends included.
-pub const MAX_EDGE_POINTS: usize = 1_000;
 
 impl RouteGraph {
     /// The node nearest to `p` (ties to the lower index); `None` for a graph without nodes.

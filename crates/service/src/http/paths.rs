@@ -315,7 +315,15 @@ pub(super) async fn plan_path(
     let (threshold, v_max) = (request.threshold, scenario.mru.v_max_mps);
     let (planned, cache) = (map.clone(), state.cache().clone());
     let on_graph = scenario.clone();
-    let path = heavy(&state, "path", cells, move |_| {
+    // A route-graph path scores every edge of the graph first (a few dozen cells each).
+    let work = match options.shape {
+        PathShape::RouteGraph => {
+            let edges = scenario.route_graph.as_ref().map_or(0, |g| g.edges.len());
+            cells.saturating_add(edges.saturating_mul(64))
+        }
+        _ => cells,
+    };
+    let path = heavy(&state, "path", work, move |_| {
         let index = cache.unit_index(&map_id, &planned, unit)?;
         match options.shape {
             PathShape::RouteGraph => path::plan_on_route_graph(

@@ -58,7 +58,6 @@ pub(super) async fn route_graph(
         threshold,
         penalty_band,
     };
-    score_query.validate()?;
     let edges = scenario.route_graph.as_ref().map_or(0, |g| g.edges.len());
     let work = map.grid.cells().saturating_add(edges.saturating_mul(64));
     let scored = heavy(&state, "route graph", work, move |_| {
