@@ -259,6 +259,7 @@ mod tests {
             free_thresh: 0.0,
             mode: MapMode::Scale,
             unknown_as: irs_model::floorplan::UnknownAs::Occupied,
+            map_io: Default::default(),
             obstacle_height_m: None,
         };
         // Decode the PGM's pixels as Nav2 would (image row 0 is the top: cell row ny − 1).

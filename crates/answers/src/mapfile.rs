@@ -219,7 +219,7 @@ pub fn encode_map(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use irs_model::floorplan::{FloorPlan, UnknownAs, decode_grey, nav2_value};
+    use irs_model::floorplan::{FloorPlan, MapIo, UnknownAs, decode_grey, nav2_value};
     use std::collections::HashMap;
 
     fn b64(bytes: &[u8]) -> String {
@@ -236,6 +236,7 @@ mod tests {
             free_thresh: 0.25,
             mode: MapMode::Trinary,
             unknown_as: UnknownAs::Occupied,
+            map_io: Default::default(),
             obstacle_height_m: None,
         }
     }
@@ -373,8 +374,15 @@ mod tests {
             ..plan(P5)
         };
         let grey = decode_grey(&scale.pgm).unwrap();
-        let back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
-        assert_eq!(back, values);
+        // Humble's and Jazzy's map servers both read the values written.
+        for map_io in [MapIo::Humble, MapIo::Jazzy] {
+            let p = FloorPlan {
+                map_io,
+                ..p.clone()
+            };
+            let back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
+            assert_eq!(back, values, "{map_io:?}");
+        }
         let keepout: Vec<i8> = (0..12).map(|k| [100, 0, -1][k % 3]).collect();
         let trinary = encode_map(&keepout, 4, 0.5, [0.0, 0.0], MapMode::Trinary, "k.pgm");
         let yaml: MapYaml = serde_saphyr::from_str(&trinary.yaml).unwrap();
@@ -385,9 +393,18 @@ mod tests {
             ..plan(P5)
         };
         let grey = decode_grey(&trinary.pgm).unwrap();
-        let mut back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
-        // Image rows run from the top: flip them back to map rows.
-        back = back.chunks(4).rev().flatten().copied().collect();
-        assert_eq!(back, keepout, "occupied, free and unknown read back");
+        for map_io in [MapIo::Humble, MapIo::Jazzy] {
+            let p = FloorPlan {
+                map_io,
+                ..p.clone()
+            };
+            let mut back: Vec<i8> = grey.pixels.iter().map(|&px| nav2_value(px, &p)).collect();
+            // Image rows run from the top: flip them back to map rows.
+            back = back.chunks(4).rev().flatten().copied().collect();
+            assert_eq!(
+                back, keepout,
+                "occupied, free and unknown read back ({map_io:?})"
+            );
+        }
     }
 }

@@ -31,6 +31,30 @@ pub enum MapMode {
     Raw,
 }
 
+/// Which Nav2 release's `map_io` arithmetic decodes the pixels. The two agree except on a pixel
+/// whose occupancy falls exactly on a threshold (or within float32 rounding of it), which
+/// Humble counts on the unknown side and Jazzy on the threshold's side, and in `scale` mode by
+/// one step of rounding now and then.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapIo {
+    /// Humble and Iron (`nav2_map_server` up to 1.2): occupancy in double, occupied when
+    /// `occ > occupied_thresh`, free when `occ < free_thresh`; `scale` rounds half to even
+    /// (`std::rint`).
+    #[default]
+    Humble,
+    /// Jazzy onward (the Eigen rewrite): occupancy in float32 (`pixel / 255.0f`), thresholds
+    /// cast to float32, occupied when `occ ≥ occupied_thresh`, free when `occ ≤ free_thresh`
+    /// (free checked last, so it wins a tie); `scale` in float32, rounded half away from zero.
+    Jazzy,
+}
+
+impl MapIo {
+    fn is_default(&self) -> bool {
+        *self == MapIo::Humble
+    }
+}
+
 /// What a pixel the map calls unknown (−1) is for radio purposes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -105,14 +129,22 @@ pub struct FloorPlan {
     /// What an unknown (−1) pixel is for radio and driving; default `occupied`.
     #[serde(default)]
     pub unknown_as: UnknownAs,
+    /// Which Nav2's decoding to reproduce; default `humble`. Left out of the canonical form
+    /// when it is the default, so floor plans written before it existed keep their ids.
+    #[serde(default, skip_serializing_if = "MapIo::is_default")]
+    pub map_io: MapIo,
     /// How high the occupied pixels stand (m); default: the ceiling (walls).
     #[serde(default, deserialize_with = "crate::input::present")]
     pub obstacle_height_m: Option<f64>,
 }
 
 /// Nav2's cell value of one 8-bit grey pixel (`nav2_map_server::loadMapFromFile`): 100
-/// occupied, 0 free, −1 unknown, 1…99 in between (`scale` and `raw` only).
+/// occupied, 0 free, −1 unknown, 1…99 in between (`scale` and `raw` only), in the arithmetic
+/// of the release `plan.map_io` names.
 pub fn nav2_value(pixel: u8, plan: &FloorPlan) -> i8 {
+    if plan.map_io == MapIo::Jazzy {
+        return nav2_value_jazzy(pixel, plan);
+    }
     let shade = f64::from(pixel) / 255.0;
     let occ = if plan.negate.0 { shade } else { 1.0 - shade };
     match plan.mode {
@@ -122,6 +154,22 @@ pub fn nav2_value(pixel: u8, plan: &FloorPlan) -> i8 {
         MapMode::Scale => ((occ - plan.free_thresh) / (plan.occupied_thresh - plan.free_thresh)
             * 100.0)
             .round_ties_even() as i8,
+        MapMode::Raw => i8::try_from(pixel).ok().filter(|v| *v <= 100).unwrap_or(-1),
+    }
+}
+
+/// [`nav2_value`] as Jazzy's `map_io.cpp` computes it: an Eigen float32 array compared with
+/// the thresholds converted to float32.
+fn nav2_value_jazzy(pixel: u8, plan: &FloorPlan) -> i8 {
+    let shade = f32::from(pixel) / 255.0f32;
+    let occ = if plan.negate.0 { shade } else { 1.0f32 - shade };
+    // The YAML's doubles, as Eigen converts a scalar to the array's type.
+    let (free, occupied) = (plan.free_thresh as f32, plan.occupied_thresh as f32);
+    match plan.mode {
+        MapMode::Trinary | MapMode::Scale if occ <= free => 0,
+        MapMode::Trinary | MapMode::Scale if occ >= occupied => 100,
+        MapMode::Trinary => -1,
+        MapMode::Scale => (((occ - free) / (occupied - free)) * 100.0f32).round() as i8,
         MapMode::Raw => i8::try_from(pixel).ok().filter(|v| *v <= 100).unwrap_or(-1),
     }
 }
@@ -282,6 +330,7 @@ mod tests {
             free_thresh: 0.25,
             mode: MapMode::Trinary,
             unknown_as: UnknownAs::Occupied,
+            map_io: MapIo::Humble,
             obstacle_height_m: None,
         }
     }
@@ -310,6 +359,40 @@ mod tests {
         assert_eq!(nav2_value(37, &p), 37);
         assert_eq!(nav2_value(100, &p), 100);
         assert_eq!(nav2_value(101, &p), -1);
+    }
+
+    /// Humble and Jazzy differ exactly where their arithmetics do: on a pixel whose occupancy
+    /// is a threshold. The expected differences were found by evaluating both arithmetics in
+    /// NumPy (float64 with strict comparisons, float32 with ≥/≤) over every 8-bit pixel: with
+    /// thresholds 0.6/0.2, pixel 102 (occupancy 1 − 102/255 = 0.6) is unknown for Humble and
+    /// occupied for Jazzy; with 0.8/0.4, pixels 51 (0.8) and 153 (0.4) are unknown for Humble,
+    /// occupied and free for Jazzy; with map_server's 0.65/0.25 they agree on every pixel.
+    #[test]
+    fn humble_and_jazzy_differ_only_on_a_threshold() {
+        let cases: [((f64, f64), &[(u8, i8, i8)]); 3] = [
+            ((0.6, 0.2), &[(102, -1, 100)]),
+            ((0.8, 0.4), &[(51, -1, 100), (153, -1, 0)]),
+            ((0.65, 0.25), &[]),
+        ];
+        for ((occupied, free), differences) in cases {
+            let mut p = plan();
+            (p.occupied_thresh, p.free_thresh) = (occupied, free);
+            for pixel in 0..=255u8 {
+                p.map_io = MapIo::Humble;
+                let humble = nav2_value(pixel, &p);
+                p.map_io = MapIo::Jazzy;
+                let jazzy = nav2_value(pixel, &p);
+                let expected = differences
+                    .iter()
+                    .find(|d| d.0 == pixel)
+                    .map_or((humble, humble), |d| (d.1, d.2));
+                assert_eq!(
+                    (humble, jazzy),
+                    expected,
+                    "pixel {pixel} at {occupied}/{free}"
+                );
+            }
+        }
     }
 
     #[test]
