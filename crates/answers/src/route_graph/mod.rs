@@ -1128,4 +1128,46 @@ mod tests {
         };
         assert_eq!(roadmap(&map, &too_fine).err().unwrap().field, "spacing_m");
     }
+
+    /// A scenario file's `route_graph.file` is read beside it, its format from the extension
+    /// (an Open-RMF YAML read as YAML), and refused naming the field when unreadable.
+    #[test]
+    fn graph_files_are_read_beside_the_scenario() {
+        let read = |path: &Path, _: u64| -> std::io::Result<Vec<u8>> {
+            match path.file_name().and_then(|n| n.to_str()) {
+                Some("office.yaml") => Ok(RMF_OFFICE.as_bytes().to_vec()),
+                Some("lanes.geojson") => Ok(NAV2_SAMPLE.as_bytes().to_vec()),
+                _ => Err(std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    "no such file",
+                )),
+            }
+        };
+        let mut doc = json!({"route_graph": {"file": "office.yaml"}});
+        resolve_graph_reference(&mut doc, Path::new("/site"), &read).unwrap();
+        assert_eq!(doc["route_graph"]["format"], "rmf_nav_graph");
+        assert_eq!(
+            doc["route_graph"]["graph"],
+            rmf::parse_yaml(RMF_OFFICE).unwrap()
+        );
+        let mut doc = json!({"route_graph": {"file": "lanes.geojson"}});
+        resolve_graph_reference(&mut doc, Path::new("/site"), &read).unwrap();
+        assert_eq!(doc["route_graph"]["format"], "nav2_geojson");
+        for (member, field) in [
+            (json!({"file": "missing.geojson"}), "route_graph.file"),
+            (json!({"file": "lanes.txt"}), "route_graph.file"),
+            (
+                json!({"file": "lanes.geojson", "graph": {}}),
+                "route_graph.graph",
+            ),
+            (
+                json!({"file": "lanes.txt", "format": "svg"}),
+                "route_graph.format",
+            ),
+        ] {
+            let mut doc = json!({ "route_graph": member });
+            let e = resolve_graph_reference(&mut doc, Path::new("/site"), &read).unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+        }
+    }
 }
