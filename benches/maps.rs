@@ -486,7 +486,7 @@ fn lattice_graph(scenario: &Scenario, side: usize, margin: f64) -> RouteGraph {
         source: std::sync::Arc::new(GraphSource {
             format: GraphFormat::Nav2GeoJson,
             level: None,
-            document: serde_json::Value::Null,
+            document: "null".into(),
         }),
     }
 }

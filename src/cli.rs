@@ -470,10 +470,21 @@ fn with_progress_bar<T>(
     })
 }
 
+/// Writes `value` as one line of JSON to standard output, serialised straight into a buffered
+/// writer: a map body is tens of megabytes, which a string first would copy twice more.
 fn print_json(value: &impl Serialize) -> Result<(), Failure> {
-    let mut text = serde_json::to_string(value).map_err(|e| Failure::runtime(e.to_string()))?;
-    text.push('\n');
-    print_text(&text)
+    use std::io::Write as _;
+    let mut out = std::io::BufWriter::with_capacity(1 << 16, std::io::stdout().lock());
+    let written = serde_json::to_writer(&mut out, value)
+        .map_err(std::io::Error::from)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush());
+    match written {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(Failure::runtime(format!("writing the answer: {e}")))
+        }
+        _ => Ok(()),
+    }
 }
 
 /// Writes `text` to standard output. A reader that stopped reading (`| head`) is not an error:
@@ -579,18 +590,22 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
                 threshold,
             )
         }),
-        shape => planner::plan(
-            &map,
-            unit,
-            planner::PathOptions {
-                shape,
-                tolerance_m: args.tolerance,
-            },
-            args.start,
-            args.goal,
-            threshold,
-            scenario.mru.v_max_mps,
-        ),
+        // The server's way: the widest-path threshold from the map's index, whose cost does
+        // not depend on the direction of the query (the search's did, by 9–28×).
+        shape => planner::UnitIndex::new(&map, unit).and_then(|index| {
+            planner::plan_indexed(
+                &map,
+                &index,
+                planner::PathOptions {
+                    shape,
+                    tolerance_m: args.tolerance,
+                },
+                args.start,
+                args.goal,
+                threshold,
+                scenario.mru.v_max_mps,
+            )
+        }),
     }
     .map_err(|e| Failure::input(flag(&e)))?;
     let mut path = path::write_phases(&scenario, &map, path, format, precision);

@@ -369,7 +369,9 @@ mod tests {
     /// occupied and free for Jazzy; with map_server's 0.65/0.25 they agree on every pixel.
     #[test]
     fn humble_and_jazzy_differ_only_on_a_threshold() {
-        let cases: [((f64, f64), &[(u8, i8, i8)]); 3] = [
+        // (thresholds, and the pixels where they differ: (pixel, Humble, Jazzy)).
+        type Differences = &'static [(u8, i8, i8)];
+        let cases: [((f64, f64), Differences); 3] = [
             ((0.6, 0.2), &[(102, -1, 100)]),
             ((0.8, 0.4), &[(51, -1, 100), (153, -1, 0)]),
             ((0.65, 0.25), &[]),

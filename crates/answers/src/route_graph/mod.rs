@@ -127,7 +127,7 @@ impl GraphDocument {
             source: Arc::new(GraphSource {
                 format,
                 level,
-                document: self.graph,
+                document: self.graph.to_string().into(),
             }),
         })
     }
@@ -141,9 +141,14 @@ impl From<&RouteGraph> for GraphDocument {
                 GraphFormat::Nav2GeoJson => None,
                 GraphFormat::RmfNavGraph => g.source.level.clone(),
             },
-            graph: g.source.document.clone(),
+            graph: source_document(&g.source),
         }
     }
+}
+
+/// The graph's document as a JSON value: the text the model keeps was written from one.
+fn source_document(source: &GraphSource) -> Value {
+    serde_json::from_str(&source.document).expect("a graph's document is the JSON it was read from")
 }
 
 /// Replaces a file reference `route_graph.file` in a scenario document by the graph read with
@@ -469,9 +474,11 @@ pub fn annotated(annotation: &Annotation) -> Annotated {
     let source = &annotation.graph.source;
     match source.format {
         GraphFormat::Nav2GeoJson => {
-            Annotated::GeoJson(nav2::annotate(&source.document, annotation))
+            Annotated::GeoJson(nav2::annotate(&source_document(source), annotation))
         }
-        GraphFormat::RmfNavGraph => Annotated::Yaml(rmf::annotate(source, annotation)),
+        GraphFormat::RmfNavGraph => {
+            Annotated::Yaml(rmf::annotate(&source_document(source), source, annotation))
+        }
     }
 }
 
@@ -642,7 +649,7 @@ pub fn roadmap(
         source: Arc::new(GraphSource {
             format: query.format.into(),
             level,
-            document,
+            document: document.to_string().into(),
         }),
     };
     let scores = irs_model::planner::route_graph::score_edges(map, &values, &graph);
@@ -967,7 +974,7 @@ mod tests {
         assert!(written.iter().all(|p| p.contains('.')), "{written:?}");
         // Scored again with a narrower band, the annotated graph keeps no stale penalty.
         let mut again = (*graph.source).clone();
-        again.document = out.clone();
+        again.document = out.to_string().into();
         let regraph = RouteGraph {
             nodes: graph.nodes.clone(),
             edges: graph.edges.clone(),

@@ -242,8 +242,8 @@ pub(super) fn lane_request(closed: &[String]) -> Value {
 /// The nav graph's YAML with each lane's scores under `irs_planner` in its options, and a
 /// top-level `irs_planner` saying what was scored and which lanes to close (parse_graph reads
 /// neither).
-pub(super) fn annotate(source: &GraphSource, annotation: &Annotation) -> String {
-    let mut out = source.document.clone();
+pub(super) fn annotate(document: &Value, source: &GraphSource, annotation: &Annotation) -> String {
+    let mut out = document.clone();
     let level = source.level.as_deref().expect("a nav graph has a level");
     if let Some(lanes) = out["levels"][level]["lanes"].as_array_mut() {
         for (k, lane) in lanes.iter_mut().enumerate() {

@@ -786,7 +786,7 @@ mod tests {
             source: Arc::new(GraphSource {
                 format: GraphFormat::Nav2GeoJson,
                 level: None,
-                document: serde_json::Value::Null,
+                document: "null".into(),
             }),
         }
     }
@@ -1035,7 +1035,7 @@ mod tests {
             source: Arc::new(GraphSource {
                 format: GraphFormat::Nav2GeoJson,
                 level: None,
-                document: serde_json::Value::Null,
+                document: "null".into(),
             }),
         };
         let scores = score_edges(&map, &map.values, &graph);

@@ -18,16 +18,18 @@ pub enum GraphFormat {
 }
 
 /// The graph as written: its format and its document (for Open-RMF, the YAML's data as JSON),
-/// kept verbatim so that the scenario's canonical document, and so its id, hashes the graph
-/// the user gave, and so that it can be written back annotated.
+/// kept so that the scenario's canonical document, and so its id, hashes the graph the user
+/// gave, and so that it can be written back annotated. The document is JSON text the model
+/// never reads, as a floor plan's image is base64 it never reads: formats are the answers
+/// crate's, and the model depends on no serialiser.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraphSource {
     /// How `document` is laid out.
     pub format: GraphFormat,
     /// The Open-RMF level the graph was read from (`None` for Nav2).
     pub level: Option<String>,
-    /// The document itself.
-    pub document: serde_json::Value,
+    /// The document as JSON text (keys sorted, numbers round-tripping).
+    pub document: Arc<str>,
 }
 
 /// A node: where it is, and the id its graph gives it.
