@@ -45,14 +45,11 @@ const ON_BOUNDARY_M: f64 = 1e-9;
 pub const GRAZE_M: f64 = 1e-9;
 
 /// The parameters t where the line p + t(q − p) lies inside the open slab (lo, hi) of one axis,
-/// narrowed by [`GRAZE_M`] at each face, as an interval [t0, t1]: everything when the line runs
-/// inside the slab parallel to it, an empty interval (t0 > t1) when it runs outside.
+/// as an interval [t0, t1]: everything when the line runs inside the slab parallel to it, an
+/// empty interval (t0 > t1) when it runs outside. Callers pass an obstacle's interior
+/// ([`Aabb::interior`]), so the per-user loops that call it stay branch-free and vectorised.
 #[inline(always)]
 fn slab(p: f64, q: f64, lo: f64, hi: f64) -> (f64, f64) {
-    let (lo, hi) = (lo + GRAZE_M, hi - GRAZE_M);
-    if lo >= hi {
-        return (f64::INFINITY, f64::NEG_INFINITY);
-    }
     let d = q - p;
     if d == 0.0 {
         if p <= lo || p >= hi {
@@ -131,13 +128,26 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    /// True when the segment a→b passes through the open interior (slab test with open
-    /// intervals, so a segment that only grazes a face, edge or corner is not blocked).
+    /// The box narrowed by [`GRAZE_M`] at every face: what a link must enter to be blocked.
+    /// `None` for a box no thicker than that on some axis, which blocks nothing.
+    #[inline]
+    fn interior(&self) -> Option<Aabb> {
+        let lo = self.lo.map(|v| v + GRAZE_M);
+        let hi = self.hi.map(|v| v - GRAZE_M);
+        (0..3).all(|k| lo[k] < hi[k]).then_some(Aabb { lo, hi })
+    }
+
+    /// True when the segment a→b passes through the open interior, deeper than [`GRAZE_M`]
+    /// (slab test with open intervals, so a segment that only grazes a face, edge or corner is
+    /// not blocked).
     pub fn blocks(&self, a: &P3, b: &P3) -> bool {
+        let Some(inside) = self.interior() else {
+            return false;
+        };
         let mut t_low = 0.0f64;
         let mut t_high = 1.0f64;
         for axis in 0..3 {
-            let (t0, t1) = slab(a[axis], b[axis], self.lo[axis], self.hi[axis]);
+            let (t0, t1) = slab(a[axis], b[axis], inside.lo[axis], inside.hi[axis]);
             t_low = t_low.max(t0);
             t_high = t_high.min(t1);
             if t_high - t_low <= GRAZE_T {
@@ -152,13 +162,23 @@ impl Aabb {
     /// (a row they already exclude costs nothing more); per user only the y slab remains. Max
     /// and min are exact, so each answer is bit for bit the per-segment test's.
     fn block_row(&self, a: &P3, x: f64, z: f64, ys: &[f64], blocked: &mut [bool]) {
-        let (x0, x1) = slab(a[0], x, self.lo[0], self.hi[0]);
-        let (z0, z1) = slab(a[2], z, self.lo[2], self.hi[2]);
+        let Some(inside) = self.interior() else {
+            return;
+        };
+        let (x0, x1) = slab(a[0], x, inside.lo[0], inside.hi[0]);
+        let (z0, z1) = slab(a[2], z, inside.lo[2], inside.hi[2]);
         let (t_low, t_high) = (x0.max(z0).max(0.0), x1.min(z1).min(1.0));
         if t_high - t_low <= GRAZE_T {
             return;
         }
-        slab_row(a[1], self.lo[1], self.hi[1], (t_low, t_high), ys, blocked);
+        slab_row(
+            a[1],
+            inside.lo[1],
+            inside.hi[1],
+            (t_low, t_high),
+            ys,
+            blocked,
+        );
     }
 
     /// The footprint's [x, y] spans.
@@ -261,14 +281,17 @@ impl Wall {
         targets: &mut Vec<[f64; 2]>,
         blocked: &mut [bool],
     ) {
-        let (z0, z1) = slab(a[2], users.z, self.local.lo[2], self.local.hi[2]);
+        let Some(inside) = self.local.interior() else {
+            return;
+        };
+        let (z0, z1) = slab(a[2], users.z, inside.lo[2], inside.hi[2]);
         let (t_low, t_high) = (z0.max(0.0), z1.min(1.0));
         if t_high - t_low <= GRAZE_T {
             return;
         }
         targets.clear();
         targets.extend(users.ys.iter().map(|&y| self.local_plane(users.x, y)));
-        let (lo, hi) = (self.local.lo, self.local.hi);
+        let (lo, hi) = (inside.lo, inside.hi);
         rectangle_row(
             self.local_plane(a[0], a[1]),
             [lo[0], lo[1]],
