@@ -294,6 +294,57 @@ fn route(
     }
 }
 
+/// Fills a feasible answer's route: a waypoint per (cell, point) with its cell's value and
+/// configuration (worked out once for consecutive points in one cell, as a vertex cell's entry
+/// and centre are), their poses, the route's vertices and its handovers.
+fn follow(
+    answer: &mut PathAnswer,
+    map: &RadioMap,
+    values: &[f64],
+    points: &[(usize, [f64; 2])],
+    vertices: Vec<usize>,
+    v_max_mps: f64,
+) {
+    let mut last: Option<(usize, CellConfig)> = None;
+    answer.waypoints = points
+        .iter()
+        .map(|&(c, [x, y])| {
+            let (i, j) = map.grid.cell_of(c);
+            let config = match &last {
+                Some((cell, config)) if *cell == c => config.clone(),
+                _ => map.cell_config(c),
+            };
+            last = Some((c, config.clone()));
+            Waypoint {
+                x,
+                y,
+                i,
+                j,
+                value: values[c],
+                yaw_rad: 0.0,
+                distance_m: 0.0,
+                time_s: 0.0,
+                config,
+            }
+        })
+        .collect();
+    set_poses(&mut answer.waypoints, v_max_mps);
+    answer.vertices = vertices;
+    answer.handovers = answer
+        .waypoints
+        .windows(2)
+        .enumerate()
+        .filter(|(_, pair)| pair[0].config.ap != pair[1].config.ap)
+        .map(|(k, pair)| Handover {
+            waypoint: k + 1,
+            x: pair[1].x,
+            y: pair[1].y,
+            from: pair[0].config.ap,
+            to: pair[1].config.ap,
+        })
+        .collect();
+}
+
 fn plan_with(
     map: &RadioMap,
     (unit, values, options): (Unit, &[f64], PathOptions),
@@ -368,46 +419,7 @@ fn plan_with(
     {
         answer.distance_m = Some(distance_m);
         answer.travel_time_s = Some(distance_m / v_max_mps);
-        // A vertex cell of an any-angle route has two waypoints (entry and centre): its
-        // configuration is worked out once.
-        let mut last: Option<(usize, CellConfig)> = None;
-        answer.waypoints = points
-            .iter()
-            .map(|&(c, [x, y])| {
-                let (i, j) = map.grid.cell_of(c);
-                let config = match &last {
-                    Some((cell, config)) if *cell == c => config.clone(),
-                    _ => map.cell_config(c),
-                };
-                last = Some((c, config.clone()));
-                Waypoint {
-                    x,
-                    y,
-                    i,
-                    j,
-                    value: values[c],
-                    yaw_rad: 0.0,
-                    distance_m: 0.0,
-                    time_s: 0.0,
-                    config,
-                }
-            })
-            .collect();
-        set_poses(&mut answer.waypoints, v_max_mps);
-        answer.vertices = vertices;
-        answer.handovers = answer
-            .waypoints
-            .windows(2)
-            .enumerate()
-            .filter(|(_, pair)| pair[0].config.ap != pair[1].config.ap)
-            .map(|(k, pair)| Handover {
-                waypoint: k + 1,
-                x: pair[1].x,
-                y: pair[1].y,
-                from: pair[0].config.ap,
-                to: pair[1].config.ap,
-            })
-            .collect();
+        follow(&mut answer, map, values, &points, vertices, v_max_mps);
     }
     Ok(answer)
 }

@@ -12,10 +12,10 @@
 //! value is below the threshold closed; the largest threshold at which any route exists is a
 //! widest-path (bottleneck) search on the same graph.
 
-use super::answer::{Endpoint, Handover, PathAnswer, Waypoint};
-use super::{DEFAULT_FRAME, Infeasible, PathShape, Threshold, set_poses};
+use super::answer::{Endpoint, PathAnswer};
+use super::{DEFAULT_FRAME, Infeasible, PathShape, Threshold, follow};
 use crate::input::FieldError;
-use crate::radiomap::{CellConfig, RadioMap, Unit};
+use crate::radiomap::{RadioMap, Unit};
 use crate::scenario::Grid;
 use crate::scenario::route_graph::{GraphEdge, GraphNode, RouteGraph};
 use std::cmp::Ordering;
@@ -645,44 +645,7 @@ pub fn plan_on_graph(
             points.push((snap_cell(b), b));
         }
     }
-    let mut last: Option<(usize, CellConfig)> = None;
-    answer.waypoints = points
-        .iter()
-        .map(|&(c, [x, y])| {
-            let (i, j) = grid.cell_of(c);
-            let config = match &last {
-                Some((cell, config)) if *cell == c => config.clone(),
-                _ => map.cell_config(c),
-            };
-            last = Some((c, config.clone()));
-            Waypoint {
-                x,
-                y,
-                i,
-                j,
-                value: values[c],
-                yaw_rad: 0.0,
-                distance_m: 0.0,
-                time_s: 0.0,
-                config,
-            }
-        })
-        .collect();
-    set_poses(&mut answer.waypoints, v_max_mps);
-    answer.vertices = vertices;
-    answer.handovers = answer
-        .waypoints
-        .windows(2)
-        .enumerate()
-        .filter(|(_, pair)| pair[0].config.ap != pair[1].config.ap)
-        .map(|(k, pair)| Handover {
-            waypoint: k + 1,
-            x: pair[1].x,
-            y: pair[1].y,
-            from: pair[0].config.ap,
-            to: pair[1].config.ap,
-        })
-        .collect();
+    follow(&mut answer, map, values, &points, vertices, v_max_mps);
     Ok(answer)
 }
 
