@@ -6,10 +6,12 @@
 //! exits with code 3; a failure that is not the input's (the server cannot bind, a file cannot
 //! be written) exits with code 1.
 
+mod fleet_args;
 mod graph_args;
 mod vda5050_args;
 
 use clap::{Args, Parser, Subcommand};
+pub use fleet_args::{FleetArgs, run_fleet};
 pub use graph_args::{GraphArgs, RoadmapArgs, run_graph, run_roadmap};
 use irs_answers::export::{self, MaskKind};
 use irs_answers::path::{self, CheckedPath, FrameId};
@@ -74,6 +76,10 @@ pub enum Command {
     /// every --spacing-m metres, lanes to their neighbours wherever open; Nav2 GeoJSON or Open-RMF
     /// YAML, scored, ready to attach as a scenario's route_graph.
     Roadmap(RoadmapArgs),
+    /// Plan several robots at once on the scenario's gain map, every robot's requirement held
+    /// at every time step with the IRSs shared (docs/model.md §6.5); print the plan (the body of
+    /// POST /v1/fleet-plans).
+    Fleet(FleetArgs),
     /// Rank candidate poses of an IRS (or positions of the AP) by an objective on their gain
     /// maps and print the ranking (the body of POST /v1/placements).
     Place(PlaceArgs),

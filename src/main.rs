@@ -19,6 +19,7 @@ fn main() -> ExitCode {
         Some(Command::Zones(args)) => cli::run_zones(&args),
         Some(Command::Graph(args)) => cli::run_graph(&args),
         Some(Command::Roadmap(args)) => cli::run_roadmap(&args),
+        Some(Command::Fleet(args)) => cli::run_fleet(&args),
         Some(Command::Place(args)) => cli::run_place(&args),
         Some(Command::Healthcheck(args)) => cli::run_healthcheck(&args),
         Some(Command::Serve(args)) => serve(args),

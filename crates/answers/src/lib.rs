@@ -25,6 +25,7 @@
 pub mod encoding;
 pub mod export;
 pub mod files;
+pub mod fleet;
 pub mod json;
 pub mod map;
 pub mod mapfile;

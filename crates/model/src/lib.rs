@@ -31,6 +31,7 @@
 //! (docs/architecture.md).
 
 pub mod channel;
+pub mod fleet;
 pub mod floorplan;
 pub mod geometry;
 pub mod input;

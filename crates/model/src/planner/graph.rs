@@ -75,7 +75,7 @@ impl<'a> CellGraph<'a> {
     /// [`NEIGHBOURS`]. The coordinates come along so that a search's heuristic needs no
     /// division per neighbour.
     #[inline]
-    pub(super) fn for_each_neighbour(
+    pub(crate) fn for_each_neighbour(
         &self,
         cell: usize,
         mut visit: impl FnMut(usize, (usize, usize), usize),

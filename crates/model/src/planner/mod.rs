@@ -22,7 +22,11 @@ use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, Unit, WorkError
 use crate::scenario::Grid;
 use std::borrow::Cow;
 
-fn endpoint(grid: &Grid, field: &str, p: [f64; 2]) -> Result<(usize, Endpoint), FieldError> {
+pub(crate) fn endpoint(
+    grid: &Grid,
+    field: &str,
+    p: [f64; 2],
+) -> Result<(usize, Endpoint), FieldError> {
     let (i, j) = grid.snap(p[0], p[1]).ok_or_else(|| {
         FieldError::new(field, format!("({}, {}) lies outside the room", p[0], p[1]))
     })?;
@@ -100,7 +104,7 @@ fn relocate(
     }
 }
 
-fn graph<'m>(map: &'m RadioMap, values: &'m [f64]) -> CellGraph<'m> {
+pub(crate) fn graph<'m>(map: &'m RadioMap, values: &'m [f64]) -> CellGraph<'m> {
     CellGraph {
         grid: &map.grid,
         values,

@@ -119,7 +119,7 @@ impl LinkBudget {
 
     /// A gain (dB) through this AP in one of the link budget's units (dBm, SNR, bit/s/Hz,
     /// Mbit/s; a gain stays a gain). NaN stays NaN.
-    fn convert_gain_db(&self, unit: Unit, gain_db: f64) -> f64 {
+    pub(crate) fn convert_gain_db(&self, unit: Unit, gain_db: f64) -> f64 {
         let snr_db = gain_db + self.offset_dbm - self.noise_dbm;
         match unit {
             // Not reached: a gain map gives its own values in dB (the best AP's gain).
@@ -129,6 +129,31 @@ impl LinkBudget {
             Unit::BpsHz => spectral_efficiency(snr_db),
             // Checked present by `RadioMap::values_in` before any cell is converted.
             Unit::Mbps => self.bandwidth_mhz.unwrap_or(f64::NAN) * spectral_efficiency(snr_db),
+        }
+    }
+}
+
+impl LinkBudget {
+    /// The channel gain (dB) through this AP at which a value in `unit` is reached: the inverse
+    /// of [`LinkBudget::convert_gain_db`], so a requirement in any unit becomes a gain threshold
+    /// per AP. A rate of 0 or less is met by every gain (−∞). Mbit/s needs the AP's bandwidth
+    /// (NaN without it; callers check first, as [`RadioMap::values_in`] does).
+    pub(crate) fn gain_db_for(&self, unit: Unit, value: f64) -> f64 {
+        let from_snr = |snr_db: f64| snr_db - self.offset_dbm + self.noise_dbm;
+        // SNR = 2^r − 1, written with exp_m1 so small rates keep their digits.
+        let from_rate = |r: f64| {
+            if r <= 0.0 {
+                f64::NEG_INFINITY
+            } else {
+                from_snr(10.0 * (r * std::f64::consts::LN_2).exp_m1().log10())
+            }
+        };
+        match unit {
+            Unit::GainDb => value,
+            Unit::Dbm => value - self.offset_dbm,
+            Unit::SnrDb => from_snr(value),
+            Unit::BpsHz => from_rate(value),
+            Unit::Mbps => from_rate(value / self.bandwidth_mhz.unwrap_or(f64::NAN)),
         }
     }
 }
@@ -241,5 +266,27 @@ mod tests {
         // At −40 dB of SNR, log₂(1 + 10⁻⁴) to full relative precision.
         let low = spectral_efficiency(-40.0);
         assert!((low / (1e-4f64.ln_1p() / std::f64::consts::LN_2) - 1.0).abs() < 1e-14);
+    }
+
+    /// A requirement in any unit turns back into the gain that meets it exactly.
+    #[test]
+    fn a_requirement_inverts_to_its_gain() {
+        let link = LinkBudget {
+            offset_dbm: 20.0,
+            noise_dbm: -94.0,
+            bandwidth_mhz: Some(20.0),
+            field: "ap".into(),
+        };
+        for unit in Unit::ALL {
+            for gain in [-120.0, -80.0, -61.5, -40.0] {
+                let value = link.convert_gain_db(unit, gain);
+                let back = link.gain_db_for(unit, value);
+                assert!(
+                    (back - gain).abs() < 1e-9,
+                    "{unit:?} {gain} → {value} → {back}"
+                );
+            }
+        }
+        assert_eq!(link.gain_db_for(Unit::BpsHz, 0.0), f64::NEG_INFINITY);
     }
 }

@@ -9,6 +9,7 @@
 pub(crate) mod auth;
 pub(crate) mod delivery;
 mod exports;
+mod fleet;
 mod jobs;
 pub(crate) mod json;
 mod maps;
@@ -112,6 +113,7 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
             get(placements::get_placement),
         ),
         ("/v1/paths", &["post"], post(paths::plan_path)),
+        ("/v1/fleet-plans", &["post"], post(fleet::plan_fleet)),
         ("/v1/checks/{check_id}", &["get"], get(paths::get_check)),
         ("/v1/sweeps", &["post"], post(paths::sweep)),
     ]

@@ -1,0 +1,425 @@
+//! Several robots at once (docs/model.md §6.5): robots that share APs and IRSs, planned one after
+//! another in priority order so that every robot's requirement holds at every time step.
+//!
+//! * [`joint`]: one instant, what every IRS holds and what every robot gets.
+//! * [`search`]: one robot's route in space and time, given the routes already fixed.
+//!
+//! Time runs in steps of Δt. A move to an orthogonal neighbour takes ⌈Δ/(V_max·Δt)⌉ steps, a
+//! diagonal one ⌈√2·Δ/(V_max·Δt)⌉ (1 and 2 at the default Δt = Δ/V_max), so no robot exceeds
+//! V_max; a robot may also wait a step in place. During a move of several steps a robot is
+//! measured at the cell it leaves and holds both cells. Once arrived it stays at its goal,
+//! still connected, until the plan ends. Two robots never hold one cell at one step nor swap
+//! cells between consecutive steps; collisions beyond that (robot bodies, speeds) are the
+//! fleet manager's. Robots not yet planned wait at their starts, which the robots planned
+//! before them avoid.
+
+mod joint;
+mod search;
+
+pub use joint::Configuration;
+
+use crate::input::FieldError;
+use crate::planner::{DEFAULT_FRAME, Endpoint, Infeasible};
+use crate::radiomap::{CellSolutions, RadioMap, Unit};
+use joint::{JointChannel, Link};
+use search::{Track, World};
+use serde::Serialize;
+
+/// At most this many robots in one plan.
+pub const MAX_ROBOTS: usize = 32;
+/// At most this many time steps in a plan's horizon.
+pub const MAX_STEPS: usize = 20_000;
+/// At most this many steps a move between neighbouring cells (Δt at least Δ/(V_max·64)).
+pub const MAX_MOVE_STEPS: usize = 64;
+/// At most this many space–time states expanded for one robot: the search's bound on work and
+/// memory (≈ 100 bytes a state, 50 MB at most), reported as [`Unserved::Budget`] when reached.
+pub const MAX_EXPANSIONS: usize = 500_000;
+/// A requirement is met when the gain is at least 1 − 10⁻⁹ of the required one: the rounding
+/// of a phasor sum, so a cell exactly at the threshold on the map is met in the plan too.
+const MET_TOLERANCE: f64 = 1e-9;
+
+/// One robot of a fleet request, in priority order (the first is planned first).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotRequest {
+    /// Where it starts (x, y) (m); snapped to the nearest cell centre.
+    pub start: [f64; 2],
+    /// Where it goes (x, y) (m).
+    pub goal: [f64; 2],
+    /// Its requirement at every step, in the request's unit, through its serving AP.
+    pub threshold: f64,
+}
+
+/// How a fleet is planned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FleetOptions {
+    /// The unit of the robots' thresholds and of the values reported.
+    pub unit: Unit,
+    /// V_max (m/s), every robot's top speed.
+    pub v_max_mps: f64,
+    /// Δt (s); `None` for Δ/V_max, one cell a step.
+    pub dt_s: Option<f64>,
+    /// The latest arrival (s); `None` for twice the longest robot's route alone plus 64 steps.
+    pub horizon_s: Option<f64>,
+}
+
+/// A planned fleet.
+#[derive(Debug, Clone, Serialize)]
+pub struct FleetPlan {
+    /// The unit of thresholds and values.
+    pub unit: Unit,
+    /// Δt (s).
+    pub dt_s: f64,
+    /// Steps of an orthogonal and of a diagonal move.
+    pub move_steps: [usize; 2],
+    /// The latest arrival step the search allowed.
+    pub horizon_steps: usize,
+    /// The frame positions are in.
+    pub frame: &'static str,
+    /// Per robot, in request order.
+    pub robots: Vec<RobotPlan>,
+    /// Every step from 0 to the last arrival: what the IRSs held and what each robot got.
+    pub timeline: Vec<Instant>,
+    /// Every (robot, step) whose requirement is not met: empty for a plan this module made.
+    pub violations: Vec<Violation>,
+}
+
+/// One robot's part of a plan.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobotPlan {
+    /// Where its start landed on the grid.
+    pub start: Endpoint,
+    /// Where its goal landed on the grid.
+    pub goal: Endpoint,
+    /// Its requirement, in the plan's unit.
+    pub threshold: f64,
+    /// How its route was found; absent when it could not be served.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub planned_by: Option<PlannedBy>,
+    /// Why it could not be served; absent when it was.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unserved: Option<Unserved>,
+    /// The step it reaches its goal.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arrival_step: Option<usize>,
+    /// Steps spent waiting in place.
+    pub waited_steps: usize,
+    /// The route's length (m).
+    pub distance_m: f64,
+    /// Flat cell index per step from 0 to its arrival (the cell it is measured at).
+    #[serde(skip)]
+    pub cells: Vec<usize>,
+}
+
+/// How a robot's route was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlannedBy {
+    /// Its shortest route alone (the single-robot path), driven without waiting, held with
+    /// every robot before it.
+    Alone,
+    /// The space–time search: the earliest arrival given the robots before it.
+    SpaceTime,
+}
+
+/// Why a robot could not be served.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(tag = "reason", rename_all = "snake_case")]
+pub enum Unserved {
+    /// Not even alone: no path of its own at its threshold.
+    Alone {
+        /// Why its own path fails.
+        why: Infeasible,
+    },
+    /// At its start at step 0 it shares a cell with, or breaks the requirement of, a robot
+    /// planned before it.
+    StartConflict,
+    /// No route reaches its goal by the horizon given the robots planned before it.
+    Horizon {
+        /// The horizon searched.
+        horizon_steps: usize,
+    },
+    /// The search expanded [`MAX_EXPANSIONS`] states without an answer.
+    Budget {
+        /// States expanded.
+        expanded: usize,
+    },
+}
+
+/// One step of a plan.
+#[derive(Debug, Clone, Serialize)]
+pub struct Instant {
+    /// k, from 0.
+    pub step: usize,
+    /// k·Δt (s).
+    pub time_s: f64,
+    /// Per surface, the robot it served (request index), or `None`.
+    pub served: Vec<Option<usize>>,
+    /// θ per surface (rad, in [0, 2π)): the one configuration every robot sees.
+    pub phases: Vec<Vec<f64>>,
+    /// Per robot (request order), where it is and what it gets; `None` for a robot not served.
+    pub robots: Vec<Option<RobotInstant>>,
+}
+
+/// Where one robot is at one step and what it gets.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RobotInstant {
+    /// x of its cell's centre (m).
+    pub x: f64,
+    /// y of its cell's centre (m).
+    pub y: f64,
+    /// Its cell's index along x.
+    pub i: usize,
+    /// Its cell's index along y.
+    pub j: usize,
+    /// The serving AP.
+    pub ap: usize,
+    /// Its value in the plan's unit.
+    pub value: f64,
+    /// Whether it meets its requirement.
+    pub met: bool,
+}
+
+/// A requirement not met.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Violation {
+    /// The robot (request index).
+    pub robot: usize,
+    /// The step.
+    pub step: usize,
+    /// Its time (s).
+    pub time_s: f64,
+    /// x of the robot's cell (m).
+    pub x: f64,
+    /// y of the robot's cell (m).
+    pub y: f64,
+    /// What it got, in the plan's unit.
+    pub value: f64,
+    /// What it needed.
+    pub required: f64,
+}
+
+/// The robots' requirements as gains, and the channel at every cell, lazily.
+pub(crate) struct Requirements<'m> {
+    map: &'m RadioMap,
+    joint: JointChannel,
+    /// Per robot, the required gain (linear) through each AP.
+    need: Vec<Vec<f64>>,
+    /// Per cell, an index into `store` once computed.
+    links: Vec<u32>,
+    store: Vec<Link>,
+}
+
+const NO_LINK: u32 = u32::MAX;
+
+impl<'m> Requirements<'m> {
+    fn link(&mut self, cell: usize) -> usize {
+        if self.links[cell] == NO_LINK {
+            let (i, j) = self.map.grid.cell_of(cell);
+            let link = self
+                .joint
+                .link(self.map.serving_ap(cell), self.map.grid.centre(i, j));
+            self.links[cell] = self.store.len() as u32;
+            self.store.push(link);
+        }
+        self.links[cell] as usize
+    }
+
+    /// The configuration at one step for `robots` at `cells`, and whether each is met.
+    fn instant(&mut self, robots: &[usize], cells: &[usize]) -> (Configuration, Vec<bool>) {
+        let ids: Vec<usize> = cells.iter().map(|&c| self.link(c)).collect();
+        let links: Vec<&Link> = ids.iter().map(|&k| &self.store[k]).collect();
+        let need: Vec<f64> = robots
+            .iter()
+            .zip(&links)
+            .map(|(&r, l)| self.need[r][l.ap])
+            .collect();
+        let config = self.joint.configure(&links, &need);
+        let met = config
+            .gains
+            .iter()
+            .zip(&need)
+            .map(|(g, n)| *g >= n * (1.0 - MET_TOLERANCE))
+            .collect();
+        (config, met)
+    }
+}
+
+/// Plans `robots` on a gain map, in order (docs/model.md §6.5). Errors name the request's
+/// field: `robots` (too many, an end off the floor), `unit`, `dt_s`, `horizon_s`, `map`.
+pub fn plan_fleet(
+    map: &RadioMap,
+    robots: &[RobotRequest],
+    options: FleetOptions,
+) -> Result<FleetPlan, FieldError> {
+    let CellSolutions::Gain {
+        models,
+        antenna_height_m,
+        ..
+    } = &map.cells
+    else {
+        return Err(FieldError::new(
+            "map",
+            "fleet plans need a gain map: robots sharing one AP by NOMA/OMA (rate maps) are \
+             not planned jointly yet",
+        ));
+    };
+    if robots.is_empty() || robots.len() > MAX_ROBOTS {
+        return Err(FieldError::new(
+            "robots",
+            format!("expected 1 to {MAX_ROBOTS} robots, got {}", robots.len()),
+        ));
+    }
+    let values = map.values_in(options.unit)?;
+    let grid = &map.grid;
+    let dt_s = options
+        .dt_s
+        .unwrap_or(grid.resolution_m / options.v_max_mps);
+    if !(dt_s.is_finite() && dt_s > 0.0) {
+        return Err(FieldError::new(
+            "dt_s",
+            format!("must be a positive number of seconds, got {dt_s}"),
+        ));
+    }
+    let steps_of = |length_m: f64| {
+        ((length_m / (options.v_max_mps * dt_s)) - 1e-9)
+            .ceil()
+            .max(1.0) as usize
+    };
+    if steps_of(std::f64::consts::SQRT_2 * grid.resolution_m) > MAX_MOVE_STEPS {
+        return Err(FieldError::new(
+            "dt_s",
+            format!(
+                "{dt_s} s is too short: a diagonal move of {:.3} m at {} m/s would take more \
+                 than {MAX_MOVE_STEPS} steps",
+                std::f64::consts::SQRT_2 * grid.resolution_m,
+                options.v_max_mps
+            ),
+        ));
+    }
+    let move_steps = [
+        steps_of(grid.resolution_m),
+        steps_of(std::f64::consts::SQRT_2 * grid.resolution_m),
+    ];
+    let ends = robots
+        .iter()
+        .enumerate()
+        .map(|(r, robot)| {
+            let field = format!("robots[{r}]");
+            Ok((
+                crate::planner::endpoint(grid, &format!("{field}.start"), robot.start)?,
+                crate::planner::endpoint(grid, &format!("{field}.goal"), robot.goal)?,
+            ))
+        })
+        .collect::<Result<Vec<_>, FieldError>>()?;
+    let graph = crate::planner::graph(map, &values);
+    // Each robot's route alone: the first try of the planner and the default horizon.
+    let alone: Vec<Result<Track, Infeasible>> = robots
+        .iter()
+        .zip(&ends)
+        .map(|(robot, ((s, _), (g, _)))| {
+            graph
+                .shortest_path(*s, *g, robot.threshold)
+                .map(|p| search::timed(grid, &p.cells, move_steps))
+        })
+        .collect();
+    let horizon_steps = match options.horizon_s {
+        Some(h) => {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(FieldError::new(
+                    "horizon_s",
+                    format!("must be a positive number of seconds, got {h}"),
+                ));
+            }
+            (h / dt_s).floor() as usize
+        }
+        None => {
+            let longest = alone
+                .iter()
+                .filter_map(|a| a.as_ref().ok())
+                .map(|t| t.at.len())
+                .max()
+                .unwrap_or(0);
+            2 * longest + 64
+        }
+    };
+    if horizon_steps > MAX_STEPS {
+        return Err(FieldError::new(
+            if options.horizon_s.is_some() {
+                "horizon_s"
+            } else {
+                "dt_s"
+            },
+            format!(
+                "the horizon is {horizon_steps} steps of {dt_s} s, more than {MAX_STEPS}: \
+                 shorten horizon_s or lengthen dt_s"
+            ),
+        ));
+    }
+    let links = &map.links;
+    let need: Vec<Vec<f64>> = robots
+        .iter()
+        .map(|robot| {
+            links
+                .iter()
+                .map(|l| 10f64.powf(l.gain_db_for(options.unit, robot.threshold) / 10.0))
+                .collect()
+        })
+        .collect();
+    let joint = JointChannel::new(models.clone(), *antenna_height_m, map.key.phases);
+    let mut req = Requirements {
+        map,
+        joint,
+        need,
+        links: vec![NO_LINK; grid.cells()],
+        store: Vec::new(),
+    };
+
+    let mut world = World::new(graph, move_steps, horizon_steps);
+    let mut plans = Vec::with_capacity(robots.len());
+    for (r, robot) in robots.iter().enumerate() {
+        let ((start, start_end), (goal, goal_end)) = ends[r].clone();
+        // The robots after this one wait at their starts meanwhile.
+        let parked: Vec<usize> = ends[r + 1..].iter().map(|((s, _), _)| *s).collect();
+        let outcome = match &alone[r] {
+            Err(why) => Err(Unserved::Alone { why: *why }),
+            Ok(route) => world.plan(&mut req, r, robot.threshold, route, start, goal, &parked),
+        };
+        let mut plan = RobotPlan {
+            start: start_end,
+            goal: goal_end,
+            threshold: robot.threshold,
+            planned_by: None,
+            unserved: None,
+            arrival_step: None,
+            waited_steps: 0,
+            distance_m: 0.0,
+            cells: Vec::new(),
+        };
+        match outcome {
+            Ok((track, by)) => {
+                plan.planned_by = Some(by);
+                plan.arrival_step = Some(track.at.len() - 1);
+                plan.waited_steps = track.waited();
+                plan.distance_m = track.distance_cells(grid) * grid.resolution_m;
+                plan.cells = track.at.iter().map(|&c| c as usize).collect();
+                world.fix(r, track);
+            }
+            Err(why) => plan.unserved = Some(why),
+        }
+        plans.push(plan);
+    }
+    let (timeline, violations) = world.timeline(&mut req, &plans, options.unit, dt_s);
+    Ok(FleetPlan {
+        unit: options.unit,
+        dt_s,
+        move_steps,
+        horizon_steps,
+        frame: DEFAULT_FRAME,
+        robots: plans,
+        timeline,
+        violations,
+    })
+}
+
+#[cfg(test)]
+mod tests;

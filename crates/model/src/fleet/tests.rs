@@ -1,0 +1,496 @@
+//! Fleet plans against the single-robot planner, a from-scratch re-evaluation of every step and
+//! a brute-force search over space–time states.
+
+use super::*;
+use crate::channel::{C64, expected_gain};
+use crate::phases::PhaseMode;
+use crate::planner::{PathOptions, Threshold};
+use crate::radiomap::{MapKey, build};
+use crate::scenario::Scenario;
+use std::collections::HashSet;
+
+fn map_of(scenario: &Scenario) -> RadioMap {
+    let key = MapKey::gain("x", scenario, PhaseMode::Continuous).unwrap();
+    build(scenario, &key, "x".into(), &Default::default()).unwrap()
+}
+
+fn options() -> FleetOptions {
+    FleetOptions {
+        unit: Unit::GainDb,
+        v_max_mps: 1.0,
+        dt_s: None,
+        horizon_s: None,
+    }
+}
+
+fn models(map: &RadioMap) -> (Vec<std::sync::Arc<crate::channel::ChannelModel>>, f64) {
+    match &map.cells {
+        CellSolutions::Gain {
+            models,
+            antenna_height_m,
+            ..
+        } => (models.clone(), *antenna_height_m),
+        CellSolutions::Rate(_) => unreachable!(),
+    }
+}
+
+/// With one robot a surface serves it alone: eq. 12's gain, the map's, at every cell.
+#[test]
+fn one_robot_gets_the_closed_form_gain() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let (models, height) = models(&map);
+    let joint = JointChannel::new(models, height, PhaseMode::Continuous);
+    let mut checked = 0;
+    for cell in (0..map.grid.cells()).step_by(7) {
+        if map.occupied[cell] {
+            continue;
+        }
+        let (i, j) = map.grid.cell_of(cell);
+        let link = joint.link(0, map.grid.centre(i, j));
+        let config = joint.configure(&[&link], &[1.0]);
+        let db = 10.0 * config.gains[0].log10();
+        assert!(
+            (db - map.values[cell]).abs() < 1e-9,
+            "{db} {}",
+            map.values[cell]
+        );
+        checked += 1;
+    }
+    assert!(checked > 100);
+}
+
+/// Two robots the surface reaches: it serves the one further from its requirement, which then
+/// gets its best gain while the other gets less than its own best.
+#[test]
+fn a_surface_serves_the_robot_of_largest_deficit() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let (models, height) = models(&map);
+    let joint = JointChannel::new(models, height, PhaseMode::Continuous);
+    let (a, b) = (joint.link(0, [-6.0, -8.0]), joint.link(0, [6.0, -8.0]));
+    assert!(!a.unreached() && !b.unreached());
+    let alone = |l: &Link| joint.configure(&[l], &[1.0]).gains[0];
+    let (best_a, best_b) = (alone(&a), alone(&b));
+    for (need, expect) in [([best_a, best_b * 0.01], 0), ([best_a * 0.01, best_b], 1)] {
+        let config = joint.configure(&[&a, &b], &need);
+        assert_eq!(config.served, vec![Some(expect)]);
+        let best = [best_a, best_b];
+        assert!((config.gains[expect] / best[expect] - 1.0).abs() < 1e-12);
+        assert!(config.gains[1 - expect] < best[1 - expect] * 0.99);
+    }
+}
+
+/// One robot's plan is the single-robot path, cell for cell, with the map's values.
+#[test]
+fn one_robot_plans_the_single_robot_path() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let (start, goal) = ([-10.0, 0.0], [10.0, 0.0]);
+    let widest = crate::planner::plan(
+        &map,
+        Unit::GainDb,
+        PathOptions::default(),
+        start,
+        goal,
+        Threshold::Max,
+        1.0,
+    )
+    .unwrap();
+    let threshold = widest.threshold.unwrap() - 1.0;
+    let single = crate::planner::plan(
+        &map,
+        Unit::GainDb,
+        PathOptions::default(),
+        start,
+        goal,
+        Threshold::Value(threshold),
+        1.0,
+    )
+    .unwrap();
+    let plan = plan_fleet(
+        &map,
+        &[RobotRequest {
+            start,
+            goal,
+            threshold,
+        }],
+        options(),
+    )
+    .unwrap();
+    let robot = &plan.robots[0];
+    assert_eq!(robot.planned_by, Some(PlannedBy::Alone));
+    let mut cells = robot.cells.clone();
+    cells.dedup();
+    let expected: Vec<usize> = single
+        .waypoints
+        .iter()
+        .map(|w| map.grid.index(w.i, w.j))
+        .collect();
+    assert_eq!(cells, expected);
+    assert!((robot.distance_m - single.distance_m.unwrap()).abs() < 1e-9);
+    assert!(plan.violations.is_empty());
+    for instant in &plan.timeline {
+        let at = instant.robots[0].unwrap();
+        let cell = map.grid.index(at.i, at.j);
+        assert!((at.value - map.values[cell]).abs() < 1e-9);
+    }
+}
+
+/// Cells of the paper floor that are free, spread over it.
+fn free_points(map: &RadioMap, count: usize, seed: usize) -> Vec<[f64; 2]> {
+    let free: Vec<usize> = (0..map.grid.cells())
+        .filter(|&c| !map.occupied[c])
+        .collect();
+    (0..count)
+        .map(|k| {
+            let c = free[(seed + k * 7919) % free.len()];
+            let (i, j) = map.grid.cell_of(c);
+            map.grid.centre(i, j)
+        })
+        .collect()
+}
+
+/// Every step of a plan recomputed from the channel model with the timeline's phases: every
+/// served robot meets its requirement, no two share a cell or swap, and the values reported
+/// are the ones recomputed.
+fn check_from_scratch(map: &RadioMap, robots: &[RobotRequest], plan: &FleetPlan) {
+    let (models, height) = models(map);
+    for instant in &plan.timeline {
+        let theta: Vec<f64> = instant.phases.concat();
+        let mut cells = HashSet::new();
+        for (r, at) in instant.robots.iter().enumerate() {
+            let Some(at) = at else { continue };
+            assert!(
+                cells.insert((at.i, at.j)),
+                "two robots at one cell, step {}",
+                instant.step
+            );
+            let model = &models[at.ap];
+            let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
+            let direct = model.evaluate([at.x, at.y, height], true, &mut w);
+            let db = 10.0 * expected_gain(&direct, &w, &theta).log10();
+            assert!((db - at.value).abs() < 1e-9, "{db} against {}", at.value);
+            assert!(
+                db >= robots[r].threshold - 1e-8,
+                "robot {r} at step {}: {db} < {}",
+                instant.step,
+                robots[r].threshold
+            );
+        }
+    }
+    for (a, ra) in plan.robots.iter().enumerate() {
+        for (b, rb) in plan.robots.iter().enumerate() {
+            if a == b || ra.cells.is_empty() || rb.cells.is_empty() {
+                continue;
+            }
+            let at = |r: &RobotPlan, k: usize| *r.cells.get(k).unwrap_or(r.cells.last().unwrap());
+            for k in 0..plan.timeline.len() {
+                let swapped = at(ra, k) != at(ra, k + 1)
+                    && at(ra, k) == at(rb, k + 1)
+                    && at(ra, k + 1) == at(rb, k);
+                assert!(!swapped, "robots {a} and {b} swap at step {k}");
+            }
+        }
+    }
+}
+
+/// Eight robots on the paper floor, each asking for close to the best its route allows: the
+/// plan, re-evaluated from scratch, meets every requirement at every step.
+#[test]
+fn a_plan_holds_when_every_step_is_recomputed() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let points = free_points(&map, 16, 11);
+    let robots: Vec<RobotRequest> = (0..8)
+        .map(|r| {
+            let (start, goal) = (points[2 * r], points[2 * r + 1]);
+            let widest = crate::planner::plan(
+                &map,
+                Unit::GainDb,
+                PathOptions::default(),
+                start,
+                goal,
+                Threshold::Max,
+                1.0,
+            )
+            .unwrap();
+            RobotRequest {
+                start,
+                goal,
+                threshold: widest.threshold.unwrap() - 0.5,
+            }
+        })
+        .collect();
+    let plan = plan_fleet(&map, &robots, options()).unwrap();
+    assert!(plan.violations.is_empty(), "{:?}", plan.violations);
+    let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
+    assert!(served >= 6, "only {served} of 8 served");
+    check_from_scratch(&map, &robots, &plan);
+    assert!(
+        plan.robots
+            .iter()
+            .any(|r| r.planned_by == Some(PlannedBy::SpaceTime) && r.waited_steps > 0)
+    );
+    // Some surface served a robot other than the first: the robots did share it.
+    assert!(
+        plan.timeline
+            .iter()
+            .any(|i| i.served.iter().any(|s| s.is_some_and(|r| r != 0)))
+    );
+}
+
+/// The earliest arrival of robot `r` found by breadth-first search over (cell, step), written
+/// apart from the planner: `fixed` holds the routes (cells per step) of the robots before it,
+/// `parked` the starts of those after it. Every state is checked from scratch.
+#[allow(clippy::too_many_arguments)]
+fn brute_force(
+    map: &RadioMap,
+    robots: &[RobotRequest],
+    r: usize,
+    fixed: &[(usize, Vec<usize>)],
+    parked: &[usize],
+    horizon: usize,
+) -> Option<usize> {
+    let grid = map.grid;
+    let (models, height) = models(map);
+    let joint = JointChannel::new(models, height, PhaseMode::Continuous);
+    let diagonal = |a: usize, b: usize| {
+        let (p, q) = (grid.cell_of(a), grid.cell_of(b));
+        p.0 != q.0 && p.1 != q.1
+    };
+    // (cell measured, other cell held) of a fixed route at step k: a step followed by a
+    // diagonal neighbour is the inner step of a two-step move.
+    let held = |route: &Vec<usize>, k: usize| -> (usize, Option<usize>) {
+        let at = |k: usize| *route.get(k).unwrap_or(route.last().unwrap());
+        let next = at(k + 1);
+        (
+            at(k),
+            (next != at(k) && diagonal(at(k), next)).then_some(next),
+        )
+    };
+    let end = fixed.iter().map(|(_, c)| c.len() - 1).max().unwrap_or(0);
+    let need = |q: usize, ap: usize| {
+        10f64.powf(map.links[ap].gain_db_for(Unit::GainDb, robots[q].threshold) / 10.0)
+    };
+    let ok = |cell: usize, also: Option<usize>, k: usize| {
+        let mine = [Some(cell), also];
+        let taken = |c: Option<usize>| c.is_some() && mine.contains(&c);
+        if parked.iter().any(|&p| taken(Some(p))) {
+            return false;
+        }
+        let mut links = Vec::new();
+        let mut needs = Vec::new();
+        for (q, route) in fixed {
+            let (a, b) = held(route, k);
+            if taken(Some(a)) || taken(b) {
+                return false;
+            }
+            let (i, j) = grid.cell_of(a);
+            let ap = map.serving_ap(a);
+            links.push(joint.link(ap, grid.centre(i, j)));
+            needs.push(need(*q, ap));
+        }
+        let (i, j) = grid.cell_of(cell);
+        let ap = map.serving_ap(cell);
+        links.push(joint.link(ap, grid.centre(i, j)));
+        needs.push(need(r, ap));
+        let refs: Vec<&Link> = links.iter().collect();
+        let gains = joint.configure(&refs, &needs).gains;
+        gains
+            .iter()
+            .zip(&needs)
+            .all(|(g, n)| *g >= n * (1.0 - 1e-9))
+    };
+    let swaps = |from: usize, to: usize, k: usize| {
+        from != to
+            && fixed
+                .iter()
+                .any(|(_, route)| held(route, k).0 == to && held(route, k + 1).0 == from)
+    };
+    let feasible = |c: usize| !map.occupied[c] && map.values[c] >= robots[r].threshold;
+    let (start, goal) = (
+        grid.index(
+            grid.snap(robots[r].start[0], robots[r].start[1]).unwrap().0,
+            grid.snap(robots[r].start[0], robots[r].start[1]).unwrap().1,
+        ),
+        grid.index(
+            grid.snap(robots[r].goal[0], robots[r].goal[1]).unwrap().0,
+            grid.snap(robots[r].goal[0], robots[r].goal[1]).unwrap().1,
+        ),
+    );
+    if !ok(start, None, 0) {
+        return None;
+    }
+    // Every state reachable at step k, k = 0, 1, …
+    let mut layers: Vec<HashSet<usize>> = vec![HashSet::from([start])];
+    let mut pending: Vec<(usize, usize, usize)> = Vec::new(); // (arrival step, cell, from)
+    for k in 0..=horizon {
+        let here: Vec<usize> = layers[k].iter().copied().collect();
+        for &c in &here {
+            if c == goal && (k + 1..=end + 1).all(|t| ok(goal, None, t)) {
+                return Some(k);
+            }
+        }
+        if k == horizon {
+            break;
+        }
+        layers.push(HashSet::new());
+        for &(at, c, _) in pending.iter().filter(|p| p.0 == k + 1) {
+            layers[k + 1].insert(c);
+            let _ = at;
+        }
+        pending.retain(|p| p.0 != k + 1);
+        for &c in &here {
+            if ok(c, None, k + 1) {
+                layers[k + 1].insert(c);
+            }
+            let (i, j) = grid.cell_of(c);
+            for (di, dj) in [
+                (1, 0),
+                (-1, 0),
+                (0, 1),
+                (0, -1),
+                (1, 1),
+                (1, -1),
+                (-1, 1),
+                (-1, -1),
+            ] {
+                let (a, b) = (i as isize + di, j as isize + dj);
+                if a < 0 || b < 0 || a >= grid.nx as isize || b >= grid.ny as isize {
+                    continue;
+                }
+                let n = grid.index(a as usize, b as usize);
+                let corner = di != 0
+                    && dj != 0
+                    && (map.occupied[grid.index(a as usize, j)]
+                        || map.occupied[grid.index(i, b as usize)]);
+                if !feasible(n) || corner {
+                    continue;
+                }
+                let d = if di != 0 && dj != 0 { 2 } else { 1 };
+                if k + d > horizon {
+                    continue;
+                }
+                let fine = (1..d).all(|t| ok(c, Some(n), k + t))
+                    && ok(n, None, k + d)
+                    && (d > 1 || !swaps(c, n, k));
+                if !fine {
+                    continue;
+                }
+                if d == 1 {
+                    layers[k + 1].insert(n);
+                } else {
+                    pending.push((k + d, n, c));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// On a 7 × 5 floor, two robots in either priority order with thresholds that make them
+/// contend for the surface: whenever the breadth-first search finds a route for a robot given
+/// the one before it, the planner serves it, and a route found in space and time arrives as
+/// early as the search's.
+#[test]
+fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
+    let scenario = Scenario::builtin_with("small-test", |v| {
+        v["grid"]["resolution_m"] = 1.0.into();
+        v["mru"]["v_max_mps"] = 1.0.into();
+    })
+    .unwrap()
+    .unwrap();
+    let map = map_of(&scenario);
+    let free: Vec<usize> = (0..map.grid.cells())
+        .filter(|&c| !map.occupied[c])
+        .collect();
+    let point = |c: usize| {
+        let (i, j) = map.grid.cell_of(c);
+        map.grid.centre(i, j)
+    };
+    let horizon = 16;
+    let mut outcomes = std::collections::BTreeMap::new();
+    for case in 0..120usize {
+        let pick = |k: usize| free[(case * 31 + k * 17 + case * case * 7) % free.len()];
+        let (s0, g0, s1, g1) = (pick(0), pick(1), pick(2), pick(3));
+        if [s0, g0].contains(&s1) || [s0, g0].contains(&g1) || s0 == g0 {
+            continue;
+        }
+        // Thresholds a little below the weakest end's value: the robots lean on the surface.
+        let slack = [0.5, 2.0, 6.0][case % 3];
+        let threshold = |s: usize, g: usize| map.values[s].min(map.values[g]) - slack;
+        let robots = [
+            RobotRequest {
+                start: point(s0),
+                goal: point(g0),
+                threshold: threshold(s0, g0),
+            },
+            RobotRequest {
+                start: point(s1),
+                goal: point(g1),
+                threshold: threshold(s1, g1),
+            },
+        ];
+        let plan = plan_fleet(
+            &map,
+            &robots,
+            FleetOptions {
+                horizon_s: Some(horizon as f64),
+                ..options()
+            },
+        )
+        .unwrap();
+        assert!(plan.violations.is_empty());
+        for r in 0..2 {
+            let fixed: Vec<(usize, Vec<usize>)> = (0..r)
+                .filter(|&q| plan.robots[q].unserved.is_none())
+                .map(|q| (q, plan.robots[q].cells.clone()))
+                .collect();
+            let parked: Vec<usize> = if r == 0 { vec![s1] } else { vec![] };
+            let truth = brute_force(&map, &robots, r, &fixed, &parked, horizon);
+            let robot = &plan.robots[r];
+            let label = match (robot.planned_by, robot.unserved) {
+                (Some(PlannedBy::Alone), _) => "alone",
+                (Some(PlannedBy::SpaceTime), _) => "space_time",
+                (None, Some(Unserved::Alone { .. })) => "infeasible_alone",
+                (None, Some(Unserved::StartConflict)) => "start_conflict",
+                (None, Some(Unserved::Horizon { .. })) => "horizon",
+                _ => "other",
+            };
+            *outcomes.entry(label).or_insert(0) += 1;
+            match (robot.planned_by, truth) {
+                (Some(PlannedBy::SpaceTime), Some(k)) => {
+                    assert_eq!(robot.arrival_step, Some(k), "case {case} robot {r}")
+                }
+                (Some(PlannedBy::Alone), Some(k)) => {
+                    assert!(robot.arrival_step.unwrap() >= k, "case {case} robot {r}")
+                }
+                (Some(_), None) => {
+                    // Only a route alone may end beyond the horizon.
+                    assert_eq!(robot.planned_by, Some(PlannedBy::Alone), "case {case}");
+                    assert!(
+                        robot.arrival_step.unwrap() > horizon,
+                        "case {case} robot {r}"
+                    );
+                }
+                (None, Some(k)) => panic!(
+                    "case {case} robot {r}: unserved, but arrives at {k}: {:?}",
+                    robot.unserved
+                ),
+                (None, None) => {}
+            }
+        }
+    }
+    eprintln!("{outcomes:?}");
+    assert!(
+        outcomes.get("space_time").copied().unwrap_or(0) >= 3,
+        "{outcomes:?}"
+    );
+    assert!(
+        outcomes.get("horizon").copied().unwrap_or(0)
+            + outcomes.get("start_conflict").copied().unwrap_or(0)
+            >= 1,
+        "{outcomes:?}"
+    );
+}
