@@ -2872,6 +2872,7 @@ async fn tenants_see_and_touch_only_their_own() {
         json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": "max"});
     let sweep =
         json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "thresholds": [-90, -80]});
+    let fleet = json!({"map_id": mid, "robots": [{"start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": -120}]});
     /// What a route is to the matrix: everybody's, a listing, a registration, or a route on
     /// (or naming) alice's objects.
     #[derive(Debug, PartialEq)]
@@ -2958,6 +2959,7 @@ async fn tenants_see_and_touch_only_their_own() {
                 }
                 ("post", "/v1/paths") => (Class::Alices, route.clone(), Some(path_query.clone())),
                 ("post", "/v1/sweeps") => (Class::Alices, route.clone(), Some(sweep.clone())),
+                ("post", "/v1/fleet-plans") => (Class::Alices, route.clone(), Some(fleet.clone())),
                 other => panic!("{other:?}: a route the tenants' matrix does not know; add it"),
             };
         let method = method.to_uppercase();
