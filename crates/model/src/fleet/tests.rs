@@ -34,6 +34,17 @@ fn models(map: &RadioMap) -> (Vec<std::sync::Arc<crate::channel::ChannelModel>>,
     }
 }
 
+/// The single-robot grid path at V_max = 1 m/s.
+fn single_path(
+    map: &RadioMap,
+    start: [f64; 2],
+    goal: [f64; 2],
+    threshold: Threshold,
+) -> crate::planner::PathAnswer {
+    let options = PathOptions::default();
+    crate::planner::plan(map, Unit::GainDb, options, start, goal, threshold, 1.0).unwrap()
+}
+
 /// With one robot a surface serves it alone: eq. 12's gain, the map's, at every cell.
 #[test]
 fn one_robot_gets_the_closed_form_gain() {
@@ -87,27 +98,11 @@ fn one_robot_plans_the_single_robot_path() {
     let scenario = Scenario::builtin("paper-single-user").unwrap();
     let map = map_of(&scenario);
     let (start, goal) = ([-10.0, 0.0], [10.0, 0.0]);
-    let widest = crate::planner::plan(
-        &map,
-        Unit::GainDb,
-        PathOptions::default(),
-        start,
-        goal,
-        Threshold::Max,
-        1.0,
-    )
-    .unwrap();
-    let threshold = widest.threshold.unwrap() - 1.0;
-    let single = crate::planner::plan(
-        &map,
-        Unit::GainDb,
-        PathOptions::default(),
-        start,
-        goal,
-        Threshold::Value(threshold),
-        1.0,
-    )
-    .unwrap();
+    let threshold = single_path(&map, start, goal, Threshold::Max)
+        .threshold
+        .unwrap()
+        - 1.0;
+    let single = single_path(&map, start, goal, Threshold::Value(threshold));
     let plan = plan_fleet(
         &map,
         &[RobotRequest {
@@ -205,16 +200,7 @@ fn a_plan_holds_when_every_step_is_recomputed() {
     let robots: Vec<RobotRequest> = (0..8)
         .map(|r| {
             let (start, goal) = (points[2 * r], points[2 * r + 1]);
-            let widest = crate::planner::plan(
-                &map,
-                Unit::GainDb,
-                PathOptions::default(),
-                start,
-                goal,
-                Threshold::Max,
-                1.0,
-            )
-            .unwrap();
+            let widest = single_path(&map, start, goal, Threshold::Max);
             RobotRequest {
                 start,
                 goal,
