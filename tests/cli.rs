@@ -315,6 +315,57 @@ fn serve_failures_are_runtime_errors_unless_the_input_is_bad() {
 
 const WAREHOUSE: &str = "scenarios/warehouse/warehouse.json";
 
+/// `fleet` prints the plan of the robots file and draws their routes; a bad robots file exits 2
+/// naming the robot's field.
+#[test]
+fn fleet_plans_the_robots_file_and_draws_their_routes() {
+    let dir = scratch("fleet");
+    let png = dir.join("fleet.png");
+    let (code, out, err) = run(&[
+        "fleet",
+        "--scenario",
+        "scenarios/paper-single-user.json",
+        "--kind",
+        "gain",
+        "--robots",
+        "scenarios/fleets/paper-three.json",
+        "--quiet",
+        "--png",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let plan = json(&out);
+    assert_eq!(plan["names"], serde_json::json!(["a", "b", "c"]));
+    assert_eq!(plan["violations"], serde_json::json!([]));
+    assert!(
+        plan["robots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r["arrival_step"].is_u64())
+    );
+    assert_eq!(&std::fs::read(&png).unwrap()[..8], b"\x89PNG\r\n\x1a\n");
+    let bad = dir.join("robots.json");
+    std::fs::write(
+        &bad,
+        r#"{"robots": [{"start": [0, 9], "goal": [40, 0], "threshold": -80}]}"#,
+    )
+    .unwrap();
+    let (code, _, err) = run(&[
+        "fleet",
+        "--scenario",
+        "scenarios/paper-single-user.json",
+        "--kind",
+        "gain",
+        "--robots",
+        bad.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("robots[0].goal"), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// A scratch folder for one test.
 fn scratch(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("irs-cli-{name}-{}", std::process::id()));

@@ -3348,8 +3348,52 @@ async fn fleets_are_planned_over_http() {
         }
         assert_eq!(instant["phases"].as_array().unwrap().len(), 1);
     }
+    // The single path given as a route, and a second robot planned around it, by NOMA.
+    let route: Vec<Value> = single["waypoints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| json!([w["x"], w["y"], w["time_s"]]))
+        .collect();
+    let (s, shared) = server
+        .post(
+            "/v1/fleet-plans",
+            json!({"map_id": mid, "access": "noma", "unit": "bps_hz", "robots": [
+                {"route": route, "threshold": 1.0},
+                {"start": [10, -9], "goal": [-10, -9], "threshold": 1.0},
+            ]}),
+        )
+        .await;
+    assert_eq!(s, StatusCode::OK, "{shared}");
+    assert_eq!(shared["robots"][0]["planned_by"], "given");
+    assert_eq!(shared["access"], "noma");
+    let both = shared["timeline"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|i| i["robots"].as_array().unwrap().iter().all(|r| !r.is_null()))
+        .unwrap();
+    let places: Vec<u64> = both["robots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["decoded"].as_u64().unwrap())
+        .collect();
+    assert_eq!(places.iter().sum::<u64>(), 1, "{both}");
     for (body, field) in [
         (json!({"map_id": mid, "robots": []}), "robots"),
+        (
+            json!({"map_id": mid, "access": "oma", "unit": "dbm", "robots": [{"start": [0, 9], "goal": [0, -9], "threshold": -80}]}),
+            "unit",
+        ),
+        (
+            json!({"map_id": mid, "robots": [{"start": [0, 9], "threshold": -80}]}),
+            "robots[0].goal",
+        ),
+        (
+            json!({"map_id": mid, "robots": [{"route": [[0, 9, 1], [0, 8, 0.5]], "threshold": -80}]}),
+            "robots[0].route[1]",
+        ),
         (
             json!({"map_id": mid, "robots": [{"start": [50, 0], "goal": [0, 0], "threshold": -80}]}),
             "robots[0].start",

@@ -1,11 +1,13 @@
 //! The `fleet` command: several robots planned at once on the scenario's gain map (the body of
 //! `POST /v1/fleet-plans`), the robots read from a JSON file.
 
-use super::{Failure, MapArgs, build_map, load_scenario, print_json};
+use super::{Failure, MapArgs, build_map, load_scenario, print_json, write_png};
 use clap::Args;
 use irs_answers::files::{MAX_SCENARIO_FILE_BYTES, read_regular_text};
 use irs_answers::fleet::{self, FleetQuery};
+use irs_answers::render::RenderOptions;
 use irs_answers::timing::Timed;
+use irs_model::input::parse_finite;
 use irs_model::radiomap::MapKind;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -19,13 +21,21 @@ pub struct FleetArgs {
     /// in priority order.
     #[arg(long, value_name = "FILE")]
     pub robots: PathBuf,
+    /// With --png: a tick on every route every this many seconds.
+    #[arg(long, value_name = "SECONDS", default_value = "10", value_parser = parse_finite)]
+    pub tick_s: f64,
 }
 
 /// `irs-planner fleet …`.
 pub fn run_fleet(args: &FleetArgs) -> Result<(), Failure> {
     if args.map.kind != MapKind::Gain {
         return Err(Failure::input(
-            "--kind: fleet plans need a gain map (robots sharing an AP by NOMA/OMA are not planned jointly yet)",
+            "--kind: fleet plans run on gain maps (robots sharing an AP are given \"access\" in the robots file)",
+        ));
+    }
+    if args.tick_s <= 0.0 {
+        return Err(Failure::input(
+            "--tick-s: must be a positive number of seconds",
         ));
     }
     let file = args.robots.display();
@@ -38,5 +48,11 @@ pub fn run_fleet(args: &FleetArgs) -> Result<(), Failure> {
     let started = Instant::now();
     let answer = fleet::plan(&map, scenario.mru.v_max_mps, &query)
         .map_err(|e| Failure::input(format!("--robots {file}: {}: {}", e.field, e.reason)))?;
+    write_png(
+        &args.map,
+        &map,
+        &scenario,
+        RenderOptions::for_fleet(&answer.plan, args.tick_s),
+    )?;
     print_json(&Timed::since(started, answer))
 }

@@ -2,9 +2,10 @@
 //! /v1/fleet-plans` and `irs-planner fleet` share, checked field by field, and the answer both
 //! write: per robot its timed waypoints, per step what every IRS held and what every robot got.
 
-use irs_model::fleet::{self, FleetOptions, FleetPlan, RobotRequest};
+use irs_model::fleet::{self, FleetOptions, FleetPlan, Motion, RobotRequest};
 use irs_model::input::{FieldError, present};
 use irs_model::radiomap::{RadioMap, Unit};
+use irs_model::rate::Access;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -26,6 +27,10 @@ pub struct FleetQuery {
     /// The latest arrival (s), default twice the longest route alone plus 64 steps.
     #[serde(default, deserialize_with = "present")]
     pub horizon_s: Option<f64>,
+    /// `noma` or `oma`: robots served by one AP share its power, each needing its rate
+    /// (`unit` bps_hz or mbps); absent, each robot has its AP to itself.
+    #[serde(default, deserialize_with = "present")]
+    pub access: Option<Access>,
 }
 
 /// One robot of a [`FleetQuery`].
@@ -35,10 +40,16 @@ pub struct RobotSpec {
     /// Its name, echoed in the answer (default `robot-<index>`).
     #[serde(default, deserialize_with = "present")]
     pub name: Option<String>,
-    /// Where it starts (x, y) (m).
-    pub start: [f64; 2],
+    /// Where it starts (x, y) (m): with `goal`, a robot to plan.
+    #[serde(default, deserialize_with = "present")]
+    pub start: Option<[f64; 2]>,
     /// Where it goes (x, y) (m).
-    pub goal: [f64; 2],
+    #[serde(default, deserialize_with = "present")]
+    pub goal: Option<[f64; 2]>,
+    /// Instead of `start` and `goal`, its route as poses [x, y, t] (m, m, s from the plan's
+    /// start), t strictly increasing: checked as given, not planned.
+    #[serde(default, deserialize_with = "present")]
+    pub route: Option<Vec<[f64; 3]>>,
     /// Its requirement at every step, in the query's unit.
     pub threshold: f64,
 }
@@ -87,11 +98,35 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
     let mut names = Vec::with_capacity(query.robots.len());
     for (r, spec) in query.robots.iter().enumerate() {
         let field = |f: &str| format!("robots[{r}].{f}");
-        for (name, p) in [("start", spec.start), ("goal", spec.goal)] {
-            if !p.iter().all(|v| v.is_finite()) {
-                return Err(FieldError::new(field(name), "coordinates must be finite"));
+        let motion = match (spec.start, spec.goal, &spec.route) {
+            (Some(start), Some(goal), None) => {
+                for (name, p) in [("start", start), ("goal", goal)] {
+                    if !p.iter().all(|v| v.is_finite()) {
+                        return Err(FieldError::new(field(name), "coordinates must be finite"));
+                    }
+                }
+                Motion::Trip { start, goal }
             }
-        }
+            (None, None, Some(route)) => Motion::Route(route.clone()),
+            (_, _, Some(_)) => {
+                return Err(FieldError::new(
+                    field("route"),
+                    "give either a route or a start and a goal, not both",
+                ));
+            }
+            (None, _, None) => {
+                return Err(FieldError::new(
+                    field("start"),
+                    "give a start and a goal, or a route",
+                ));
+            }
+            (Some(_), None, None) => {
+                return Err(FieldError::new(
+                    field("goal"),
+                    "give a start and a goal, or a route",
+                ));
+            }
+        };
         if !spec.threshold.is_finite() {
             return Err(FieldError::new(
                 field("threshold"),
@@ -113,8 +148,7 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
         }
         names.push(name);
         robots.push(RobotRequest {
-            start: spec.start,
-            goal: spec.goal,
+            motion,
             threshold: spec.threshold,
         });
     }
@@ -123,6 +157,7 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
         v_max_mps,
         dt_s: query.dt_s,
         horizon_s: query.horizon_s,
+        access: query.access,
     };
     let mut plan = fleet::plan_fleet(map, &robots, options)?;
     for instant in &mut plan.timeline {

@@ -38,6 +38,11 @@ pub struct RenderOptions {
     /// Pixels per cell; default: the longer side of the plot fits in 768 px
     /// ([`default_cell_px`]).
     pub cell_px: Option<usize>,
+    /// A fleet's routes: per robot its cell (flat index) at every step, drawn in a colour of
+    /// its own with its request index at its start.
+    pub fleet: Vec<Vec<usize>>,
+    /// A tick on every fleet route every this many steps.
+    pub tick_steps: usize,
 }
 
 impl RenderOptions {
@@ -57,6 +62,18 @@ impl RenderOptions {
                 map.grid.index(answer.goal.i, answer.goal.j),
             )),
             cell_px: None,
+            ..RenderOptions::default()
+        }
+    }
+
+    /// The picture of a fleet plan: each served robot's route with a tick every
+    /// `tick_s` seconds (at least every step).
+    pub fn for_fleet(plan: &irs_model::fleet::FleetPlan, tick_s: f64) -> Self {
+        RenderOptions {
+            unit: Some(plan.unit),
+            fleet: plan.robots.iter().map(|r| r.cells.clone()).collect(),
+            tick_steps: ((tick_s / plan.dt_s).round() as usize).max(1),
+            ..RenderOptions::default()
         }
     }
 }
@@ -79,6 +96,17 @@ const PATH: Rgb = [255, 255, 255];
 const START: Rgb = [0, 200, 0];
 const GOAL: Rgb = [230, 0, 0];
 const IRS: Rgb = [230, 0, 230];
+/// Fleet routes, one colour per robot in turn (Okabe–Ito, distinguishable with colour-blind
+/// vision).
+const ROUTES: [Rgb; 7] = [
+    [230, 159, 0],
+    [86, 180, 233],
+    [0, 158, 115],
+    [240, 228, 66],
+    [0, 114, 178],
+    [213, 94, 0],
+    [204, 121, 167],
+];
 const DEVICE: Rgb = [255, 255, 255];
 /// Factor applied to the colour of cells below the threshold.
 const DIM: f64 = 0.3;
@@ -306,6 +334,7 @@ pub fn png(
     };
     draw_colour_bar(&mut canvas, &layout, &bar);
     draw_devices(&mut canvas, map, scenario, &layout);
+    draw_fleet(&mut canvas, map, &layout, options);
     if let Some((start, goal)) = options.ends {
         for (cell, rgb) in [(start, START), (goal, GOAL)] {
             let (i, j) = map.grid.cell_of(cell);
@@ -468,6 +497,39 @@ fn draw_colour_bar(canvas: &mut Canvas, layout: &Layout, bar: &ColourBar) {
         canvas.fill(x0 - glyph / 2, y, bar_width + glyph, 1, BACKGROUND);
     }
     canvas.text(x0, top - glyph * 2, unit.symbol(), s, INK);
+}
+
+/// Each robot's cells as a square of its colour, an ink tick every `tick_steps` steps, and its
+/// index at its start.
+fn draw_fleet(canvas: &mut Canvas, map: &RadioMap, layout: &Layout, options: &RenderOptions) {
+    let side = ((layout.cell_px as f64 * 0.6).round() as i64).max(2);
+    let tick = (layout.cell_px as f64 * 0.25).max(1.5);
+    for (r, cells) in options.fleet.iter().enumerate() {
+        let rgb = ROUTES[r % ROUTES.len()];
+        for (k, &c) in cells.iter().enumerate() {
+            let (i, j) = map.grid.cell_of(c);
+            let (cx, cy) = layout.cell_centre(map, i, j);
+            let (cx, cy) = (cx as i64, cy as i64);
+            // Outlined in ink: the route colours also occur on the map's scale.
+            canvas.fill(cx - side / 2 - 1, cy - side / 2 - 1, side + 2, side + 2, INK);
+            canvas.fill(cx - side / 2, cy - side / 2, side, side, rgb);
+            if k > 0 && options.tick_steps > 0 && k % options.tick_steps == 0 {
+                canvas.disk(cx as f64, cy as f64, tick, INK);
+            }
+        }
+        if let Some(&first) = cells.first() {
+            let (i, j) = map.grid.cell_of(first);
+            let (cx, cy) = layout.cell_centre(map, i, j);
+            let s = layout.text_scale;
+            canvas.text(
+                cx as i64 + side,
+                cy as i64 - 8 * s as i64,
+                &r.to_string(),
+                s,
+                INK,
+            );
+        }
+    }
 }
 
 fn draw_devices(canvas: &mut Canvas, map: &RadioMap, scenario: &Scenario, layout: &Layout) {

@@ -15,12 +15,15 @@
 
 mod joint;
 mod search;
+mod sharing;
 
 pub use joint::Configuration;
 
 use crate::input::FieldError;
 use crate::planner::{DEFAULT_FRAME, Endpoint, Infeasible};
 use crate::radiomap::{CellSolutions, RadioMap, Unit};
+use crate::rate::Access;
+use crate::scenario::Grid;
 use joint::{JointChannel, Link};
 use search::{Track, World};
 use serde::Serialize;
@@ -38,15 +41,46 @@ pub const MAX_EXPANSIONS: usize = 500_000;
 /// of a phasor sum, so a cell exactly at the threshold on the map is met in the plan too.
 const MET_TOLERANCE: f64 = 1e-9;
 
-/// One robot of a fleet request, in priority order (the first is planned first).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// At most this many poses in a given route.
+pub const MAX_ROUTE_POSES: usize = 10_000;
+
+/// One robot of a fleet request. Robots with a given route come first (they drive as given);
+/// the others are planned after them in request order.
+#[derive(Debug, Clone, PartialEq)]
 pub struct RobotRequest {
-    /// Where it starts (x, y) (m); snapped to the nearest cell centre.
-    pub start: [f64; 2],
-    /// Where it goes (x, y) (m).
-    pub goal: [f64; 2],
+    /// How it moves.
+    pub motion: Motion,
     /// Its requirement at every step, in the request's unit, through its serving AP.
     pub threshold: f64,
+}
+
+/// How a robot of a fleet request moves.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Motion {
+    /// From `start` to `goal` (x, y) (m), each snapped to the nearest cell centre: planned.
+    Trip {
+        /// Where it starts.
+        start: [f64; 2],
+        /// Where it goes.
+        goal: [f64; 2],
+    },
+    /// Poses (x, y, t) (m, m, s), t strictly increasing from t ≥ 0: driven as given (a straight
+    /// line at constant speed between poses, at the first pose before its time, at the last
+    /// after it) and checked, not planned; e.g. a path answer's waypoints with their times.
+    Route(Vec<[f64; 3]>),
+}
+
+impl Motion {
+    /// The first and last point.
+    fn ends(&self) -> ([f64; 2], [f64; 2]) {
+        match self {
+            Motion::Trip { start, goal } => (*start, *goal),
+            Motion::Route(poses) => {
+                let (a, b) = (poses[0], poses[poses.len() - 1]);
+                ([a[0], a[1]], [b[0], b[1]])
+            }
+        }
+    }
 }
 
 /// How a fleet is planned.
@@ -60,6 +94,10 @@ pub struct FleetOptions {
     pub dt_s: Option<f64>,
     /// The latest arrival (s); `None` for twice the longest robot's route alone plus 64 steps.
     pub horizon_s: Option<f64>,
+    /// How robots served by one AP share it: `None`, each has it to itself (requirements on
+    /// its link in any unit); NOMA or OMA, they share its power (requirements are rates:
+    /// `bps_hz` or `mbps`).
+    pub access: Option<Access>,
 }
 
 /// A planned fleet.
@@ -67,6 +105,9 @@ pub struct FleetOptions {
 pub struct FleetPlan {
     /// The unit of thresholds and values.
     pub unit: Unit,
+    /// How robots of one AP share it (absent: each has it to itself).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub access: Option<Access>,
     /// Δt (s).
     pub dt_s: f64,
     /// Steps of an orthogonal and of a diagonal move.
@@ -119,6 +160,8 @@ pub enum PlannedBy {
     Alone,
     /// The space–time search: the earliest arrival given the robots before it.
     SpaceTime,
+    /// Its route was given: driven as given, checked, not planned.
+    Given,
 }
 
 /// Why a robot could not be served.
@@ -173,10 +216,19 @@ pub struct RobotInstant {
     pub j: usize,
     /// The serving AP.
     pub ap: usize,
-    /// Its value in the plan's unit.
+    /// Its link in the plan's unit, through its AP with all of the AP's power (with `access`
+    /// the power is shared: a robot whose AP serves its group gets exactly its rate, with
+    /// `power_share` of the power).
     pub value: f64,
     /// Whether it meets its requirement.
     pub met: bool,
+    /// With `access`, where its AP serves its robots: its share of the AP's transmit power.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub power_share: Option<f64>,
+    /// With NOMA, where its AP serves its robots: its place in the SIC order among them
+    /// (0 = decoded first, the weakest).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decoded: Option<usize>,
 }
 
 /// A requirement not met.
@@ -202,8 +254,10 @@ pub struct Violation {
 pub(crate) struct Requirements<'m> {
     map: &'m RadioMap,
     joint: JointChannel,
-    /// Per robot, the required gain (linear) through each AP.
+    /// Per robot, the required gain (linear) through each AP: alone with all of its power.
     need: Vec<Vec<f64>>,
+    /// With `access`, how robots of one AP share it.
+    sharing: Option<Sharing>,
     /// Per cell, an index into `store` once computed.
     links: Vec<u32>,
     store: Vec<Link>,
@@ -224,8 +278,8 @@ impl<'m> Requirements<'m> {
         self.links[cell] as usize
     }
 
-    /// The configuration at one step for `robots` at `cells`, and whether each is met.
-    fn instant(&mut self, robots: &[usize], cells: &[usize]) -> (Configuration, Vec<bool>) {
+    /// The configuration at one step for `robots` at `cells`, and what each gets.
+    fn instant(&mut self, robots: &[usize], cells: &[usize]) -> Evaluated {
         let ids: Vec<usize> = cells.iter().map(|&c| self.link(c)).collect();
         let links: Vec<&Link> = ids.iter().map(|&k| &self.store[k]).collect();
         let need: Vec<f64> = robots
@@ -234,14 +288,66 @@ impl<'m> Requirements<'m> {
             .map(|(&r, l)| self.need[r][l.ap])
             .collect();
         let config = self.joint.configure(&links, &need);
-        let met = config
-            .gains
-            .iter()
-            .zip(&need)
-            .map(|(g, n)| *g >= n * (1.0 - MET_TOLERANCE))
-            .collect();
-        (config, met)
+        let Some(sharing) = &self.sharing else {
+            let met = config
+                .gains
+                .iter()
+                .zip(&need)
+                .map(|(g, n)| *g >= n * (1.0 - MET_TOLERANCE))
+                .collect();
+            return Evaluated {
+                config,
+                met,
+                shares: vec![None; robots.len()],
+            };
+        };
+        let mut met = vec![false; robots.len()];
+        let mut shares = vec![None; robots.len()];
+        let aps: Vec<usize> = links.iter().map(|l| l.ap).collect();
+        for ap in 0..sharing.rho.len() {
+            let group: Vec<usize> = (0..robots.len()).filter(|&k| aps[k] == ap).collect();
+            if group.is_empty() {
+                continue;
+            }
+            let gains: Vec<f64> = group.iter().map(|&k| config.gains[k]).collect();
+            let rates: Vec<f64> = group
+                .iter()
+                .map(|&k| sharing.rates[robots[k]][ap])
+                .collect();
+            if let Some(share) = sharing::share(sharing.access, sharing.rho[ap], &gains, &rates) {
+                for (g, &k) in group.iter().enumerate() {
+                    met[k] = true;
+                    let place = share.order.iter().position(|&o| o == g);
+                    shares[k] = Some((share.fractions[g], place));
+                }
+            }
+        }
+        Evaluated {
+            config,
+            met,
+            shares,
+        }
     }
+}
+
+/// One step evaluated.
+pub(crate) struct Evaluated {
+    /// What the IRSs hold and each robot's gain.
+    pub config: Configuration,
+    /// Per robot, whether its requirement is met.
+    pub met: Vec<bool>,
+    /// With `access`, per robot whose AP serves its group: its share of the AP's power and,
+    /// with NOMA, its place in the SIC order.
+    pub shares: Vec<Option<(f64, Option<usize>)>>,
+}
+
+/// How robots of one AP share it, and what they need.
+struct Sharing {
+    access: Access,
+    /// Per AP, ρ = P_max·G/σ²: the SNR of a unit gain with all of its power (§3.1).
+    rho: Vec<f64>,
+    /// Per robot, its rate (bit/s/Hz) through each AP.
+    rates: Vec<Vec<f64>>,
 }
 
 /// Plans `robots` on a gain map, in order (docs/model.md §6.5). Errors name the request's
@@ -259,8 +365,8 @@ pub fn plan_fleet(
     else {
         return Err(FieldError::new(
             "map",
-            "fleet plans need a gain map: robots sharing one AP by NOMA/OMA (rate maps) are \
-             not planned jointly yet",
+            "fleet plans run on gain maps (robots sharing an AP are given `access`; the \
+             scenario's static SRUs take no part)",
         ));
     };
     if robots.is_empty() || robots.len() > MAX_ROBOTS {
@@ -300,19 +406,34 @@ pub fn plan_fleet(
         steps_of(grid.resolution_m),
         steps_of(std::f64::consts::SQRT_2 * grid.resolution_m),
     ];
+    // Given routes as tracks, checked before any work.
+    let given: Vec<Option<Track>> = robots
+        .iter()
+        .enumerate()
+        .map(|(r, robot)| match &robot.motion {
+            Motion::Route(poses) => {
+                given_track(grid, poses, dt_s, &format!("robots[{r}].route")).map(Some)
+            }
+            Motion::Trip { .. } => Ok(None),
+        })
+        .collect::<Result<_, FieldError>>()?;
     let ends = robots
         .iter()
         .enumerate()
         .map(|(r, robot)| {
-            let field = format!("robots[{r}]");
+            let (start, goal) = robot.motion.ends();
+            let (start_field, goal_field) = match robot.motion {
+                Motion::Trip { .. } => (format!("robots[{r}].start"), format!("robots[{r}].goal")),
+                Motion::Route(_) => (format!("robots[{r}].route"), format!("robots[{r}].route")),
+            };
             Ok((
-                crate::planner::endpoint(grid, &format!("{field}.start"), robot.start)?,
-                crate::planner::endpoint(grid, &format!("{field}.goal"), robot.goal)?,
+                crate::planner::endpoint(grid, &start_field, start)?,
+                crate::planner::endpoint(grid, &goal_field, goal)?,
             ))
         })
         .collect::<Result<Vec<_>, FieldError>>()?;
     let graph = crate::planner::graph(map, &values);
-    // Each robot's route alone: the first try of the planner and the default horizon.
+    // Each planned robot's route alone: the first try of the planner and the default horizon.
     let alone: Vec<Result<Track, Infeasible>> = robots
         .iter()
         .zip(&ends)
@@ -335,7 +456,10 @@ pub fn plan_fleet(
         None => {
             let longest = alone
                 .iter()
-                .filter_map(|a| a.as_ref().ok())
+                .zip(&given)
+                .filter(|(_, g)| g.is_none())
+                .filter_map(|(a, _)| a.as_ref().ok())
+                .chain(given.iter().flatten())
                 .map(|t| t.at.len())
                 .max()
                 .unwrap_or(0);
@@ -365,24 +489,70 @@ pub fn plan_fleet(
                 .collect()
         })
         .collect();
+    let sharing = match options.access {
+        None => None,
+        Some(access) => {
+            if !matches!(options.unit, Unit::BpsHz | Unit::Mbps) {
+                return Err(FieldError::new(
+                    "unit",
+                    format!(
+                        "with access {access}, requirements are rates: bps_hz or mbps, got {}",
+                        options.unit.name()
+                    ),
+                ));
+            }
+            Some(Sharing {
+                access,
+                rho: links
+                    .iter()
+                    .map(|l| 10f64.powf((l.offset_dbm - l.noise_dbm) / 10.0))
+                    .collect(),
+                rates: robots
+                    .iter()
+                    .map(|robot| {
+                        links
+                            .iter()
+                            .map(|l| match options.unit {
+                                Unit::Mbps => {
+                                    robot.threshold / l.bandwidth_mhz.expect("checked by values_in")
+                                }
+                                _ => robot.threshold,
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            })
+        }
+    };
     let joint = JointChannel::new(models.clone(), *antenna_height_m, map.key.phases);
     let mut req = Requirements {
         map,
         joint,
         need,
+        sharing,
         links: vec![NO_LINK; grid.cells()],
         store: Vec::new(),
     };
 
     let mut world = World::new(graph, move_steps, horizon_steps);
-    let mut plans = Vec::with_capacity(robots.len());
-    for (r, robot) in robots.iter().enumerate() {
+    // Given routes are fixed first, then the trips are planned in request order.
+    let order: Vec<usize> = (0..robots.len())
+        .filter(|&r| given[r].is_some())
+        .chain((0..robots.len()).filter(|&r| given[r].is_none()))
+        .collect();
+    let mut plans: Vec<Option<RobotPlan>> = vec![None; robots.len()];
+    for (position, &r) in order.iter().enumerate() {
+        let robot = &robots[r];
         let ((start, start_end), (goal, goal_end)) = ends[r].clone();
-        // The robots after this one wait at their starts meanwhile.
-        let parked: Vec<usize> = ends[r + 1..].iter().map(|((s, _), _)| *s).collect();
-        let outcome = match &alone[r] {
-            Err(why) => Err(Unserved::Alone { why: *why }),
-            Ok(route) => world.plan(&mut req, r, robot.threshold, route, start, goal, &parked),
+        let outcome = if let Some(track) = &given[r] {
+            Ok((track.clone(), PlannedBy::Given))
+        } else {
+            // The trips after this one wait at their starts meanwhile.
+            let parked: Vec<usize> = order[position + 1..].iter().map(|&q| ends[q].0.0).collect();
+            match &alone[r] {
+                Err(why) => Err(Unserved::Alone { why: *why }),
+                Ok(route) => world.plan(&mut req, r, robot.threshold, route, start, goal, &parked),
+            }
         };
         let mut plan = RobotPlan {
             start: start_end,
@@ -399,18 +569,25 @@ pub fn plan_fleet(
             Ok((track, by)) => {
                 plan.planned_by = Some(by);
                 plan.arrival_step = Some(track.at.len() - 1);
-                plan.waited_steps = track.waited();
-                plan.distance_m = track.distance_cells(grid) * grid.resolution_m;
+                (plan.waited_steps, plan.distance_m) = match &robot.motion {
+                    Motion::Route(poses) => (0, polyline_length(poses)),
+                    Motion::Trip { .. } => (
+                        track.waited(),
+                        track.distance_cells(grid) * grid.resolution_m,
+                    ),
+                };
                 plan.cells = track.at.iter().map(|&c| c as usize).collect();
                 world.fix(r, track);
             }
             Err(why) => plan.unserved = Some(why),
         }
-        plans.push(plan);
+        plans[r] = Some(plan);
     }
+    let plans: Vec<RobotPlan> = plans.into_iter().map(|p| p.expect("every robot")).collect();
     let (timeline, violations) = world.timeline(&mut req, &plans, options.unit, dt_s);
     Ok(FleetPlan {
         unit: options.unit,
+        access: options.access,
         dt_s,
         move_steps,
         horizon_steps,
@@ -419,6 +596,81 @@ pub fn plan_fleet(
         timeline,
         violations,
     })
+}
+
+/// A given route's track: at step k the cell of its position at time k·Δt. Errors name the
+/// pose (`robots[2].route[5]`): off the floor, a time not after the one before, too many poses
+/// or too long a route.
+fn given_track(
+    grid: &Grid,
+    poses: &[[f64; 3]],
+    dt_s: f64,
+    field: &str,
+) -> Result<Track, FieldError> {
+    if poses.is_empty() || poses.len() > MAX_ROUTE_POSES {
+        return Err(FieldError::new(
+            field,
+            format!("expected 1 to {MAX_ROUTE_POSES} poses, got {}", poses.len()),
+        ));
+    }
+    for (k, p) in poses.iter().enumerate() {
+        let here = format!("{field}[{k}]");
+        if !p.iter().all(|v| v.is_finite()) {
+            return Err(FieldError::new(here, "x, y and t must be finite"));
+        }
+        if grid.snap(p[0], p[1]).is_none() {
+            return Err(FieldError::new(
+                here,
+                format!("({}, {}) lies outside the room", p[0], p[1]),
+            ));
+        }
+        let after = if k == 0 {
+            p[2] >= 0.0
+        } else {
+            p[2] > poses[k - 1][2]
+        };
+        if !after {
+            return Err(FieldError::new(
+                here,
+                "t must be at least 0 and increase strictly from pose to pose",
+            ));
+        }
+    }
+    let last_t = poses[poses.len() - 1][2];
+    let steps = (last_t / dt_s).ceil();
+    if steps > MAX_STEPS as f64 {
+        return Err(FieldError::new(
+            field,
+            format!("it ends at {last_t} s, {steps} steps of {dt_s} s: more than {MAX_STEPS}"),
+        ));
+    }
+    let mut at = Vec::with_capacity(steps as usize + 1);
+    let mut segment = 0;
+    for k in 0..=steps as usize {
+        let t = k as f64 * dt_s;
+        while segment + 1 < poses.len() && poses[segment + 1][2] <= t {
+            segment += 1;
+        }
+        let p = poses[segment];
+        let [x, y] = match poses.get(segment + 1) {
+            Some(q) if t > p[2] => {
+                let f = (t - p[2]) / (q[2] - p[2]);
+                [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
+            }
+            _ => [p[0], p[1]],
+        };
+        let (i, j) = grid.snap(x, y).expect("between two points of the room");
+        at.push(grid.index(i, j) as u32);
+    }
+    Ok(Track::still(at))
+}
+
+/// The length of a route's polyline (m).
+fn polyline_length(poses: &[[f64; 3]]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
 }
 
 #[cfg(test)]

@@ -26,6 +26,12 @@ pub(crate) struct Track {
 }
 
 impl Track {
+    /// A track that holds one cell at every step (a given route sampled).
+    pub fn still(at: Vec<u32>) -> Track {
+        let also = vec![NONE; at.len()];
+        Track { at, also }
+    }
+
     /// Where it is at step k: after its arrival, at its goal.
     fn state(&self, k: usize) -> (u32, u32) {
         match self.at.get(k) {
@@ -95,6 +101,9 @@ pub(crate) struct World<'m> {
     parked: Vec<u32>,
     /// Whether every requirement holds with the robot being planned at (cell, step layer).
     memo: HashMap<(u32, u32), bool>,
+    /// Per step layer, which fixed robots meet their requirement among themselves: all of them
+    /// unless a given route fails on its own, which a robot planned later is not blamed for.
+    base: HashMap<u32, Vec<bool>>,
 }
 
 /// A state's key: its cell and step, every step after the last arrival being one.
@@ -113,6 +122,7 @@ impl<'m> World<'m> {
             end: 0,
             parked: Vec::new(),
             memo: HashMap::new(),
+            base: HashMap::new(),
         }
     }
 
@@ -155,10 +165,18 @@ impl<'m> World<'m> {
         ok
     }
 
-    fn requirements_hold(&self, req: &mut Requirements, r: usize, cell: usize, k: usize) -> bool {
+    /// Whether robot `r` at `cell` at step k meets its requirement and every fixed robot that
+    /// met its own without `r` still does.
+    fn requirements_hold(
+        &mut self,
+        req: &mut Requirements,
+        r: usize,
+        cell: usize,
+        k: usize,
+    ) -> bool {
         let own = req.link(cell);
         let link = &req.store[own];
-        if link.unreached() {
+        if link.unreached() && req.sharing.is_none() {
             // No surface reaches it: it takes no part in their choice, so the fixed robots
             // get what they had (met, as they were fixed), and it gets |h̃|² + τ.
             let (gains, need) = (
@@ -173,9 +191,22 @@ impl<'m> World<'m> {
             .iter()
             .map(|(_, t)| t.state(k).0 as usize)
             .collect();
+        let layer = self.layer(k);
+        let base = self
+            .base
+            .entry(layer)
+            .or_insert_with(|| {
+                if robots.is_empty() {
+                    Vec::new()
+                } else {
+                    req.instant(&robots, &cells).met
+                }
+            })
+            .clone();
         robots.push(r);
         cells.push(cell);
-        req.instant(&robots, &cells).1.iter().all(|&m| m)
+        let met = req.instant(&robots, &cells).met;
+        met[robots.len() - 1] && base.iter().zip(&met).all(|(&was, &is)| !was || is)
     }
 
     /// True when a fixed robot goes from `to` to `from` while this one goes from `from` to
@@ -211,6 +242,7 @@ impl<'m> World<'m> {
         parked: &[usize],
     ) -> Result<(Track, PlannedBy), Unserved> {
         self.memo.clear();
+        self.base.clear();
         self.parked = parked
             .iter()
             .map(|&c| c as u32)
@@ -332,8 +364,16 @@ impl<'m> World<'m> {
                 .iter()
                 .map(|(_, t)| t.state(k).0 as usize)
                 .collect();
-            let (config, met) = if robots.is_empty() {
-                (req.joint.configure(&[], &[]), Vec::new())
+            let super::Evaluated {
+                config,
+                met,
+                shares,
+            } = if robots.is_empty() {
+                super::Evaluated {
+                    config: req.joint.configure(&[], &[]),
+                    met: Vec::new(),
+                    shares: Vec::new(),
+                }
             } else {
                 req.instant(&robots, &cells)
             };
@@ -357,6 +397,8 @@ impl<'m> World<'m> {
                     ap,
                     value,
                     met: met[slot],
+                    power_share: shares[slot].map(|(f, _)| f),
+                    decoded: shares[slot].and_then(|(_, place)| place),
                 });
                 if !met[slot] {
                     violations.push(Violation {

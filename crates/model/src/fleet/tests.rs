@@ -20,6 +20,7 @@ fn options() -> FleetOptions {
         v_max_mps: 1.0,
         dt_s: None,
         horizon_s: None,
+        access: None,
     }
 }
 
@@ -31,6 +32,14 @@ fn models(map: &RadioMap) -> (Vec<std::sync::Arc<crate::channel::ChannelModel>>,
             ..
         } => (models.clone(), *antenna_height_m),
         CellSolutions::Rate(_) => unreachable!(),
+    }
+}
+
+/// A robot to plan from `start` to `goal`.
+fn trip(start: [f64; 2], goal: [f64; 2], threshold: f64) -> RobotRequest {
+    RobotRequest {
+        motion: Motion::Trip { start, goal },
+        threshold,
     }
 }
 
@@ -103,16 +112,7 @@ fn one_robot_plans_the_single_robot_path() {
         .unwrap()
         - 1.0;
     let single = single_path(&map, start, goal, Threshold::Value(threshold));
-    let plan = plan_fleet(
-        &map,
-        &[RobotRequest {
-            start,
-            goal,
-            threshold,
-        }],
-        options(),
-    )
-    .unwrap();
+    let plan = plan_fleet(&map, &[trip(start, goal, threshold)], options()).unwrap();
     let robot = &plan.robots[0];
     assert_eq!(robot.planned_by, Some(PlannedBy::Alone));
     let mut cells = robot.cells.clone();
@@ -201,11 +201,7 @@ fn a_plan_holds_when_every_step_is_recomputed() {
         .map(|r| {
             let (start, goal) = (points[2 * r], points[2 * r + 1]);
             let widest = single_path(&map, start, goal, Threshold::Max);
-            RobotRequest {
-                start,
-                goal,
-                threshold: widest.threshold.unwrap() - 0.5,
-            }
+            trip(start, goal, widest.threshold.unwrap() - 0.5)
         })
         .collect();
     let plan = plan_fleet(&map, &robots, options()).unwrap();
@@ -295,16 +291,12 @@ fn brute_force(
                 .any(|(_, route)| held(route, k).0 == to && held(route, k + 1).0 == from)
     };
     let feasible = |c: usize| !map.occupied[c] && map.values[c] >= robots[r].threshold;
-    let (start, goal) = (
-        grid.index(
-            grid.snap(robots[r].start[0], robots[r].start[1]).unwrap().0,
-            grid.snap(robots[r].start[0], robots[r].start[1]).unwrap().1,
-        ),
-        grid.index(
-            grid.snap(robots[r].goal[0], robots[r].goal[1]).unwrap().0,
-            grid.snap(robots[r].goal[0], robots[r].goal[1]).unwrap().1,
-        ),
-    );
+    let cell_of = |[x, y]: [f64; 2]| {
+        let (i, j) = grid.snap(x, y).unwrap();
+        grid.index(i, j)
+    };
+    let (start, goal) = robots[r].motion.ends();
+    let (start, goal) = (cell_of(start), cell_of(goal));
     if !ok(start, None, 0) {
         return None;
     }
@@ -407,16 +399,8 @@ fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
         let slack = [0.5, 2.0, 6.0][case % 3];
         let threshold = |s: usize, g: usize| map.values[s].min(map.values[g]) - slack;
         let robots = [
-            RobotRequest {
-                start: point(s0),
-                goal: point(g0),
-                threshold: threshold(s0, g0),
-            },
-            RobotRequest {
-                start: point(s1),
-                goal: point(g1),
-                threshold: threshold(s1, g1),
-            },
+            trip(point(s0), point(g0), threshold(s0, g0)),
+            trip(point(s1), point(g1), threshold(s1, g1)),
         ];
         let plan = plan_fleet(
             &map,
@@ -452,6 +436,7 @@ fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
                 (Some(PlannedBy::Alone), Some(k)) => {
                     assert!(robot.arrival_step.unwrap() >= k, "case {case} robot {r}")
                 }
+                (Some(PlannedBy::Given), _) => unreachable!("no route is given here"),
                 (Some(_), None) => {
                     // Only a route alone may end beyond the horizon.
                     assert_eq!(robot.planned_by, Some(PlannedBy::Alone), "case {case}");
@@ -479,4 +464,265 @@ fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
             >= 1,
         "{outcomes:?}"
     );
+}
+
+/// The small floor at 1 m cells, every robot at 1 m/s.
+fn tiny_map() -> RadioMap {
+    let scenario = Scenario::builtin_with("small-test", |v| {
+        v["grid"]["resolution_m"] = 1.0.into();
+        v["mru"]["v_max_mps"] = 1.0.into();
+    })
+    .unwrap()
+    .unwrap();
+    map_of(&scenario)
+}
+
+/// A route given as poses is driven as given: sampled at every step, reported `given`, and
+/// checked, its failures reported as violations rather than planned away.
+#[test]
+fn a_given_route_is_checked_as_given() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    // Along y = 8.5, free from wall to wall, at 0.5 m/s from t = 2 s.
+    let poses = vec![[-10.0, 8.5, 2.0], [0.0, 8.5, 22.0], [10.0, 8.5, 42.0]];
+    for (threshold, failing) in [(-200.0, false), (100.0, true)] {
+        let robots = [RobotRequest {
+            motion: Motion::Route(poses.clone()),
+            threshold,
+        }];
+        let plan = plan_fleet(&map, &robots, options()).unwrap();
+        let robot = &plan.robots[0];
+        assert_eq!(robot.planned_by, Some(PlannedBy::Given));
+        assert_eq!(robot.arrival_step, Some(84), "42 s in steps of 0.5 s");
+        assert!((robot.distance_m - 20.0).abs() < 1e-12);
+        let at = |k: usize| plan.timeline[k].robots[0].unwrap();
+        // Waiting at its first pose until t = 2 s, then 1 m every 2 s (4 steps).
+        assert_eq!(
+            (at(0).x, at(4).x, at(8).x, at(12).x),
+            (-10.0, -10.0, -9.0, -8.0)
+        );
+        assert_eq!(at(84).x, 10.0);
+        assert_eq!(plan.violations.len(), if failing { 85 } else { 0 });
+    }
+    let refused = |poses: Vec<[f64; 3]>| {
+        let robots = [RobotRequest {
+            motion: Motion::Route(poses),
+            threshold: 0.0,
+        }];
+        plan_fleet(&map, &robots, options()).unwrap_err().field
+    };
+    assert_eq!(
+        refused(vec![[0.0, 8.5, 1.0], [1.0, 8.5, 1.0]]),
+        "robots[0].route[1]"
+    );
+    assert_eq!(refused(vec![[0.0, 8.5, -1.0]]), "robots[0].route[0]");
+    assert_eq!(
+        refused(vec![[0.0, 8.5, 0.0], [30.0, 8.5, 5.0]]),
+        "robots[0].route[1]"
+    );
+    assert_eq!(refused(vec![]), "robots[0].route");
+    assert_eq!(
+        refused(vec![[0.0, 8.5, 0.0], [1.0, 8.5, 1e9]]),
+        "robots[0].route"
+    );
+}
+
+/// A robot planned after a given route never makes it fail where it met its requirement on
+/// its own, and never shares its cell; the given route is checked, not moved.
+#[test]
+fn a_planned_robot_never_breaks_a_given_route() {
+    let map = tiny_map();
+    let free: Vec<usize> = (0..map.grid.cells())
+        .filter(|&c| !map.occupied[c])
+        .collect();
+    let point = |c: usize| {
+        let (i, j) = map.grid.cell_of(c);
+        map.grid.centre(i, j)
+    };
+    let (models, height) = models(&map);
+    let joint = JointChannel::new(models, height, PhaseMode::Continuous);
+    let mut outcomes = std::collections::BTreeMap::new();
+    for case in 0..200usize {
+        let pick = |k: usize| free[(case * 13 + k * 29 + case * case * 3) % free.len()];
+        let (s0, g0, s1, g1) = (pick(0), pick(1), pick(2), pick(3));
+        if s0 == g0 || [s0, g0].contains(&s1) || [s0, g0].contains(&g1) {
+            continue;
+        }
+        let t0 = map.values[s0].min(map.values[g0]) - 1.0;
+        let path = single_path(&map, point(s0), point(g0), Threshold::Value(t0));
+        if !path.feasible {
+            continue;
+        }
+        let poses: Vec<[f64; 3]> = path
+            .waypoints
+            .iter()
+            .map(|w| [w.x, w.y, w.time_s])
+            .collect();
+        let t1 = map.values[s1].min(map.values[g1]) - [0.5, 3.0][case % 2];
+        let robots = [
+            RobotRequest {
+                motion: Motion::Route(poses),
+                threshold: t0,
+            },
+            trip(point(s1), point(g1), t1),
+        ];
+        let plan = plan_fleet(&map, &robots, options()).unwrap();
+        assert_eq!(plan.robots[0].planned_by, Some(PlannedBy::Given));
+        *outcomes
+            .entry(format!("{:?}", plan.robots[1].planned_by))
+            .or_insert(0) += 1;
+        if plan.robots[1].unserved.is_some() {
+            // Nothing more permissive finds a route either: the breadth-first search holds
+            // both cells of a given route's diagonal jump and asks every robot to be met.
+            let fixed = [(0, plan.robots[0].cells.clone())];
+            let horizon = plan.horizon_steps;
+            assert_eq!(
+                brute_force(&map, &robots, 1, &fixed, &[], horizon),
+                None,
+                "case {case}: {:?}",
+                plan.robots[1].unserved
+            );
+        }
+        let need = |r: usize, ap: usize| {
+            10f64.powf(map.links[ap].gain_db_for(Unit::GainDb, robots[r].threshold) / 10.0)
+        };
+        for instant in &plan.timeline {
+            let a = instant.robots[0].unwrap();
+            let alone = joint.link(a.ap, [a.x, a.y]);
+            let met_alone =
+                joint.configure(&[&alone], &[1.0]).gains[0] >= need(0, a.ap) * (1.0 - 1e-9);
+            assert!(
+                !met_alone || a.met,
+                "case {case}: robot 1 broke the given route at step {}",
+                instant.step
+            );
+            if let Some(b) = instant.robots[1] {
+                assert!(
+                    b.met,
+                    "case {case}: the planned robot fails at step {}",
+                    instant.step
+                );
+                assert_ne!(
+                    (a.i, a.j),
+                    (b.i, b.j),
+                    "case {case}: one cell at step {}",
+                    instant.step
+                );
+            }
+        }
+    }
+    assert!(outcomes.len() >= 2, "{outcomes:?}");
+}
+
+/// Four robots sharing the paper floor's one AP by NOMA, then by OMA, each needing a rate:
+/// every step recomputed from the channel model with the reported phases, power shares and
+/// SIC order gives every served robot at least its rate (eqs. 22 and 24), and the shares of
+/// each step fit the AP's power.
+#[test]
+fn robots_sharing_an_ap_get_their_rates_at_every_step() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let (models, height) = models(&map);
+    let rho = 10f64.powf((map.links[0].offset_dbm - map.links[0].noise_dbm) / 10.0);
+    let points = free_points(&map, 8, 5);
+    for access in [Access::Noma, Access::Oma] {
+        let robots: Vec<RobotRequest> = (0..4)
+            .map(|r| {
+                let (start, goal) = (points[2 * r], points[2 * r + 1]);
+                let options = PathOptions::default();
+                let widest = crate::planner::plan(
+                    &map,
+                    Unit::BpsHz,
+                    options,
+                    start,
+                    goal,
+                    Threshold::Max,
+                    1.0,
+                )
+                .unwrap();
+                // A fifth of its best rate alone: four robots must share the power.
+                trip(start, goal, widest.threshold.unwrap() / 5.0)
+            })
+            .collect();
+        let options = FleetOptions {
+            unit: Unit::BpsHz,
+            access: Some(access),
+            ..options()
+        };
+        let plan = plan_fleet(&map, &robots, options).unwrap();
+        assert!(plan.violations.is_empty(), "{:?}", plan.violations);
+        let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
+        assert!(served >= 3, "{access:?}: {served} served");
+        for instant in &plan.timeline {
+            let theta = instant.phases.concat();
+            let present: Vec<(usize, RobotInstant)> = instant
+                .robots
+                .iter()
+                .enumerate()
+                .filter_map(|(r, at)| at.map(|a| (r, a)))
+                .collect();
+            let n = present.len() as f64;
+            let gain = |a: &RobotInstant| {
+                let model = &models[a.ap];
+                let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
+                let direct = model.evaluate([a.x, a.y, height], true, &mut w);
+                expected_gain(&direct, &w, &theta)
+            };
+            let total: f64 = present.iter().map(|(_, a)| a.power_share.unwrap()).sum();
+            assert!(total <= 1.0 + 1e-9, "step {}: shares {total}", instant.step);
+            for (r, a) in &present {
+                let (lambda, f) = (gain(a), a.power_share.unwrap());
+                let rate = match access {
+                    Access::Oma => (1.0 + n * lambda * rho * f).log2() / n,
+                    Access::Noma => {
+                        let place = a.decoded.unwrap();
+                        let later: f64 = present
+                            .iter()
+                            .filter(|(_, b)| b.decoded.unwrap() > place)
+                            .map(|(_, b)| b.power_share.unwrap())
+                            .sum();
+                        (1.0 + lambda * rho * f / (lambda * rho * later + 1.0)).log2()
+                    }
+                };
+                assert!(
+                    rate >= robots[*r].threshold - 1e-7,
+                    "{access:?} step {} robot {r}: {rate} < {}",
+                    instant.step,
+                    robots[*r].threshold
+                );
+                if access == Access::Noma {
+                    // SIC decodes the weaker first.
+                    for (_, b) in &present {
+                        if b.decoded.unwrap() > a.decoded.unwrap() {
+                            assert!(gain(b) >= lambda * (1.0 - 1e-12));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A robot given to sit on another's straight route for 15 s: the other goes around it (or
+/// waits) in space and time, and never shares its cell.
+#[test]
+fn a_robot_goes_around_a_given_route() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let robots = [
+        RobotRequest {
+            motion: Motion::Route(vec![[0.0, 9.0, 0.0], [0.0, 9.0, 15.0], [0.0, 8.5, 15.5]]),
+            threshold: -200.0,
+        },
+        trip([-10.0, 9.0], [10.0, 9.0], -200.0),
+    ];
+    let plan = plan_fleet(&map, &robots, options()).unwrap();
+    let mover = &plan.robots[1];
+    assert_eq!(mover.planned_by, Some(PlannedBy::SpaceTime));
+    // The straight row takes 40 steps; around the sitting robot costs a few more, far less
+    // than waiting the 30 steps it sits there.
+    let arrival = mover.arrival_step.unwrap();
+    assert!((41..=46).contains(&arrival), "{arrival}");
+    assert!(plan.violations.is_empty());
+    check_from_scratch(&map, &robots, &plan);
 }

@@ -16,6 +16,7 @@ use irs_answers::fleet::{self, FleetQuery, RobotSpec};
 use irs_answers::timing::Timed;
 use irs_model::input::present;
 use irs_model::radiomap::Unit;
+use irs_model::rate::Access;
 use serde::Deserialize;
 use std::time::Instant;
 
@@ -35,6 +36,8 @@ pub(super) struct FleetRequest {
     dt_s: Option<f64>,
     #[serde(default, deserialize_with = "present")]
     horizon_s: Option<f64>,
+    #[serde(default, deserialize_with = "present")]
+    access: Option<Access>,
 }
 
 pub(super) async fn plan_fleet(
@@ -53,6 +56,7 @@ pub(super) async fn plan_fleet(
         unit: request.unit,
         dt_s: request.dt_s,
         horizon_s: request.horizon_s,
+        access: request.access,
     };
     // Each robot's search touches at most every cell a bounded number of times.
     let work = map.grid.cells().saturating_mul(query.robots.len().max(1));
