@@ -8,7 +8,7 @@ use irs_answers::fleet::{self, FleetQuery};
 use irs_answers::render::RenderOptions;
 use irs_answers::timing::Timed;
 use irs_model::input::parse_finite;
-use irs_model::radiomap::MapKind;
+use irs_model::radiomap::{MapKind, Progress, WorkError};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -46,8 +46,14 @@ pub fn run_fleet(args: &FleetArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let started = Instant::now();
-    let answer = fleet::plan(&map, scenario.mru.v_max_mps, &query)
-        .map_err(|e| Failure::input(format!("--robots {file}: {}: {}", e.field, e.reason)))?;
+    let answer = fleet::plan(&map, scenario.mru.v_max_mps, &query, &Progress::default()).map_err(
+        |e| match e {
+            WorkError::Invalid(e) => {
+                Failure::input(format!("--robots {file}: {}: {}", e.field, e.reason))
+            }
+            WorkError::Cancelled(c) => Failure::runtime(c.to_string()),
+        },
+    )?;
     write_png(
         &args.map,
         &map,

@@ -4,7 +4,7 @@
 
 use irs_model::fleet::{self, FleetOptions, FleetPlan, Motion, RobotRequest};
 use irs_model::input::{FieldError, present};
-use irs_model::radiomap::{RadioMap, Unit};
+use irs_model::radiomap::{Progress, RadioMap, Unit, WorkError};
 use irs_model::rate::Access;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -92,8 +92,13 @@ pub struct TimedWaypoint {
 const PHASE_STEP_RAD: f64 = 1e-4;
 
 /// Plans `query` on `map` at V_max = `v_max_mps` (the scenario's robot). Errors name the field
-/// (`robots[2].start`, `unit`, `dt_s`, …).
-pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetAnswer, FieldError> {
+/// (`robots[2].start`, `unit`, `dt_s`, …); cancelling `progress` stops the search.
+pub fn plan(
+    map: &RadioMap,
+    v_max_mps: f64,
+    query: &FleetQuery,
+    progress: &Progress,
+) -> Result<FleetAnswer, WorkError> {
     let mut robots = Vec::with_capacity(query.robots.len());
     let mut names = Vec::with_capacity(query.robots.len());
     for (r, spec) in query.robots.iter().enumerate() {
@@ -102,7 +107,9 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
             (Some(start), Some(goal), None) => {
                 for (name, p) in [("start", start), ("goal", goal)] {
                     if !p.iter().all(|v| v.is_finite()) {
-                        return Err(FieldError::new(field(name), "coordinates must be finite"));
+                        return Err(
+                            FieldError::new(field(name), "coordinates must be finite").into()
+                        );
                     }
                 }
                 Motion::Trip { start, goal }
@@ -112,39 +119,36 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
                 return Err(FieldError::new(
                     field("route"),
                     "give either a route or a start and a goal, not both",
-                ));
+                )
+                .into());
             }
             (None, _, None) => {
-                return Err(FieldError::new(
-                    field("start"),
-                    "give a start and a goal, or a route",
-                ));
+                return Err(
+                    FieldError::new(field("start"), "give a start and a goal, or a route").into(),
+                );
             }
             (Some(_), None, None) => {
-                return Err(FieldError::new(
-                    field("goal"),
-                    "give a start and a goal, or a route",
-                ));
+                return Err(
+                    FieldError::new(field("goal"), "give a start and a goal, or a route").into(),
+                );
             }
         };
         if !spec.threshold.is_finite() {
-            return Err(FieldError::new(
-                field("threshold"),
-                "must be a finite number",
-            ));
+            return Err(FieldError::new(field("threshold"), "must be a finite number").into());
         }
         let name = match &spec.name {
             Some(n) if n.is_empty() || n.chars().count() > MAX_NAME_CHARS => {
                 return Err(FieldError::new(
                     field("name"),
                     format!("must have 1 to {MAX_NAME_CHARS} characters"),
-                ));
+                )
+                .into());
             }
             Some(n) => n.clone(),
             None => format!("robot-{r}"),
         };
         if names.contains(&name) {
-            return Err(FieldError::new(field("name"), format!("{name:?} is taken")));
+            return Err(FieldError::new(field("name"), format!("{name:?} is taken")).into());
         }
         names.push(name);
         robots.push(RobotRequest {
@@ -159,7 +163,7 @@ pub fn plan(map: &RadioMap, v_max_mps: f64, query: &FleetQuery) -> Result<FleetA
         horizon_s: query.horizon_s,
         access: query.access,
     };
-    let mut plan = fleet::plan_fleet(map, &robots, options)?;
+    let mut plan = fleet::plan_fleet(map, &robots, options, progress)?;
     for instant in &mut plan.timeline {
         for theta in instant.phases.iter_mut().flatten() {
             let rounded = (*theta / PHASE_STEP_RAD).round() * PHASE_STEP_RAD;

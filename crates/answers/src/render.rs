@@ -511,7 +511,13 @@ fn draw_fleet(canvas: &mut Canvas, map: &RadioMap, layout: &Layout, options: &Re
             let (cx, cy) = layout.cell_centre(map, i, j);
             let (cx, cy) = (cx as i64, cy as i64);
             // Outlined in ink: the route colours also occur on the map's scale.
-            canvas.fill(cx - side / 2 - 1, cy - side / 2 - 1, side + 2, side + 2, INK);
+            canvas.fill(
+                cx - side / 2 - 1,
+                cy - side / 2 - 1,
+                side + 2,
+                side + 2,
+                INK,
+            );
             canvas.fill(cx - side / 2, cy - side / 2, side, side, rgb);
             if k > 0 && options.tick_steps > 0 && k % options.tick_steps == 0 {
                 canvas.disk(cx as f64, cy as f64, tick, INK);

@@ -21,7 +21,7 @@ pub use joint::Configuration;
 
 use crate::input::FieldError;
 use crate::planner::{DEFAULT_FRAME, Endpoint, Infeasible};
-use crate::radiomap::{CellSolutions, RadioMap, Unit};
+use crate::radiomap::{Cancelled, CellSolutions, Progress, RadioMap, Unit, WorkError};
 use crate::rate::Access;
 use crate::scenario::Grid;
 use joint::{JointChannel, Link};
@@ -37,6 +37,9 @@ pub const MAX_MOVE_STEPS: usize = 64;
 /// At most this many space–time states expanded for one robot: the search's bound on work and
 /// memory (≈ 100 bytes a state, 50 MB at most), reported as [`Unserved::Budget`] when reached.
 pub const MAX_EXPANSIONS: usize = 500_000;
+/// At most this many states expanded for a whole plan (a few seconds of one core on the largest
+/// floors): the robots planned once it is spent are reported [`Unserved::Budget`].
+pub const MAX_PLAN_EXPANSIONS: usize = 2_000_000;
 /// A requirement is met when the gain is at least 1 − 10⁻⁹ of the required one: the rounding
 /// of a phasor sum, so a cell exactly at the threshold on the map is met in the plan too.
 const MET_TOLERANCE: f64 = 1e-9;
@@ -181,7 +184,8 @@ pub enum Unserved {
         /// The horizon searched.
         horizon_steps: usize,
     },
-    /// The search expanded [`MAX_EXPANSIONS`] states without an answer.
+    /// The search expanded [`MAX_EXPANSIONS`] states (or what was left of the plan's
+    /// [`MAX_PLAN_EXPANSIONS`]) without an answer.
     Budget {
         /// States expanded.
         expanded: usize,
@@ -352,11 +356,14 @@ struct Sharing {
 
 /// Plans `robots` on a gain map, in order (docs/model.md §6.5). Errors name the request's
 /// field: `robots` (too many, an end off the floor), `unit`, `dt_s`, `horizon_s`, `map`.
+/// `progress` counts robots planned; cancelling it stops the search within a few thousand
+/// states.
 pub fn plan_fleet(
     map: &RadioMap,
     robots: &[RobotRequest],
     options: FleetOptions,
-) -> Result<FleetPlan, FieldError> {
+    progress: &Progress,
+) -> Result<FleetPlan, WorkError> {
     let CellSolutions::Gain {
         models,
         antenna_height_m,
@@ -367,13 +374,15 @@ pub fn plan_fleet(
             "map",
             "fleet plans run on gain maps (robots sharing an AP are given `access`; the \
              scenario's static SRUs take no part)",
-        ));
+        )
+        .into());
     };
     if robots.is_empty() || robots.len() > MAX_ROBOTS {
         return Err(FieldError::new(
             "robots",
             format!("expected 1 to {MAX_ROBOTS} robots, got {}", robots.len()),
-        ));
+        )
+        .into());
     }
     let values = map.values_in(options.unit)?;
     let grid = &map.grid;
@@ -384,7 +393,8 @@ pub fn plan_fleet(
         return Err(FieldError::new(
             "dt_s",
             format!("must be a positive number of seconds, got {dt_s}"),
-        ));
+        )
+        .into());
     }
     let steps_of = |length_m: f64| {
         ((length_m / (options.v_max_mps * dt_s)) - 1e-9)
@@ -400,7 +410,8 @@ pub fn plan_fleet(
                 std::f64::consts::SQRT_2 * grid.resolution_m,
                 options.v_max_mps
             ),
-        ));
+        )
+        .into());
     }
     let move_steps = [
         steps_of(grid.resolution_m),
@@ -449,7 +460,8 @@ pub fn plan_fleet(
                 return Err(FieldError::new(
                     "horizon_s",
                     format!("must be a positive number of seconds, got {h}"),
-                ));
+                )
+                .into());
             }
             (h / dt_s).floor() as usize
         }
@@ -477,7 +489,8 @@ pub fn plan_fleet(
                 "the horizon is {horizon_steps} steps of {dt_s} s, more than {MAX_STEPS}: \
                  shorten horizon_s or lengthen dt_s"
             ),
-        ));
+        )
+        .into());
     }
     let links = &map.links;
     let need: Vec<Vec<f64>> = robots
@@ -499,7 +512,8 @@ pub fn plan_fleet(
                         "with access {access}, requirements are rates: bps_hz or mbps, got {}",
                         options.unit.name()
                     ),
-                ));
+                )
+                .into());
             }
             Some(Sharing {
                 access,
@@ -534,7 +548,8 @@ pub fn plan_fleet(
         store: Vec::new(),
     };
 
-    let mut world = World::new(graph, move_steps, horizon_steps);
+    let mut world = World::new(graph, move_steps, horizon_steps, progress);
+    progress.start(robots.len());
     // Given routes are fixed first, then the trips are planned in request order.
     let order: Vec<usize> = (0..robots.len())
         .filter(|&r| given[r].is_some())
@@ -542,6 +557,9 @@ pub fn plan_fleet(
         .collect();
     let mut plans: Vec<Option<RobotPlan>> = vec![None; robots.len()];
     for (position, &r) in order.iter().enumerate() {
+        if progress.is_cancelled() {
+            return Err(Cancelled.into());
+        }
         let robot = &robots[r];
         let ((start, start_end), (goal, goal_end)) = ends[r].clone();
         let outcome = if let Some(track) = &given[r] {
@@ -551,9 +569,12 @@ pub fn plan_fleet(
             let parked: Vec<usize> = order[position + 1..].iter().map(|&q| ends[q].0.0).collect();
             match &alone[r] {
                 Err(why) => Err(Unserved::Alone { why: *why }),
-                Ok(route) => world.plan(&mut req, r, robot.threshold, route, start, goal, &parked),
+                Ok(route) => {
+                    world.plan(&mut req, r, robot.threshold, route, start, goal, &parked)?
+                }
             }
         };
+        progress.advance(1);
         let mut plan = RobotPlan {
             start: start_end,
             goal: goal_end,
@@ -611,18 +632,20 @@ fn given_track(
         return Err(FieldError::new(
             field,
             format!("expected 1 to {MAX_ROUTE_POSES} poses, got {}", poses.len()),
-        ));
+        )
+        .into());
     }
     for (k, p) in poses.iter().enumerate() {
         let here = format!("{field}[{k}]");
         if !p.iter().all(|v| v.is_finite()) {
-            return Err(FieldError::new(here, "x, y and t must be finite"));
+            return Err(FieldError::new(here, "x, y and t must be finite").into());
         }
         if grid.snap(p[0], p[1]).is_none() {
             return Err(FieldError::new(
                 here,
                 format!("({}, {}) lies outside the room", p[0], p[1]),
-            ));
+            )
+            .into());
         }
         let after = if k == 0 {
             p[2] >= 0.0
@@ -633,7 +656,8 @@ fn given_track(
             return Err(FieldError::new(
                 here,
                 "t must be at least 0 and increase strictly from pose to pose",
-            ));
+            )
+            .into());
         }
     }
     let last_t = poses[poses.len() - 1][2];
@@ -642,7 +666,8 @@ fn given_track(
         return Err(FieldError::new(
             field,
             format!("it ends at {last_t} s, {steps} steps of {dt_s} s: more than {MAX_STEPS}"),
-        ));
+        )
+        .into());
     }
     let mut at = Vec::with_capacity(steps as usize + 1);
     let mut segment = 0;

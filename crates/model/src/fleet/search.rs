@@ -6,10 +6,12 @@
 //! After the last fixed robot arrives the world no longer changes, so every step beyond it is
 //! one layer of the search: the states stay within cells × (last arrival + 2).
 
-use super::{Instant, MAX_EXPANSIONS, PlannedBy, Requirements, RobotInstant, RobotPlan};
+use super::{Instant, MAX_EXPANSIONS, MAX_PLAN_EXPANSIONS, PlannedBy, Requirements};
+use super::{RobotInstant, RobotPlan};
 use super::{Unserved, Violation};
 use crate::planner::CellGraph;
 use crate::radiomap::Unit;
+use crate::radiomap::{Cancelled, Progress};
 use crate::scenario::Grid;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
@@ -104,6 +106,9 @@ pub(crate) struct World<'m> {
     /// Per step layer, which fixed robots meet their requirement among themselves: all of them
     /// unless a given route fails on its own, which a robot planned later is not blamed for.
     base: HashMap<u32, Vec<bool>>,
+    /// States the plan may still expand ([`MAX_PLAN_EXPANSIONS`] at first).
+    budget: usize,
+    progress: &'m Progress,
 }
 
 /// A state's key: its cell and step, every step after the last arrival being one.
@@ -113,7 +118,12 @@ type Key = (u32, u32);
 type Reached = HashMap<Key, (usize, Option<(u32, usize)>)>;
 
 impl<'m> World<'m> {
-    pub fn new(graph: CellGraph<'m>, move_steps: [usize; 2], horizon: usize) -> World<'m> {
+    pub fn new(
+        graph: CellGraph<'m>,
+        move_steps: [usize; 2],
+        horizon: usize,
+        progress: &'m Progress,
+    ) -> World<'m> {
         World {
             graph,
             move_steps,
@@ -123,6 +133,8 @@ impl<'m> World<'m> {
             parked: Vec::new(),
             memo: HashMap::new(),
             base: HashMap::new(),
+            budget: MAX_PLAN_EXPANSIONS,
+            progress,
         }
     }
 
@@ -229,7 +241,7 @@ impl<'m> World<'m> {
     }
 
     /// Robot `r`'s route from `start` to `goal` at `threshold`: `alone` (its route on its own)
-    /// if it holds, else the earliest arrival in space and time.
+    /// if it holds, else the earliest arrival in space and time; `Err` once cancelled.
     #[allow(clippy::too_many_arguments)]
     pub fn plan(
         &mut self,
@@ -240,7 +252,7 @@ impl<'m> World<'m> {
         start: usize,
         goal: usize,
         parked: &[usize],
-    ) -> Result<(Track, PlannedBy), Unserved> {
+    ) -> Result<Result<(Track, PlannedBy), Unserved>, Cancelled> {
         self.memo.clear();
         self.base.clear();
         self.parked = parked
@@ -249,12 +261,13 @@ impl<'m> World<'m> {
             .filter(|&c| c != start as u32)
             .collect();
         if self.holds(req, r, alone) {
-            return Ok((alone.clone(), PlannedBy::Alone));
+            return Ok(Ok((alone.clone(), PlannedBy::Alone)));
         }
         let (start, goal) = (start as u32, goal as u32);
         if !self.allowed(req, r, start, NONE, 0) {
-            return Err(Unserved::StartConflict);
+            return Ok(Err(Unserved::StartConflict));
         }
+        let limit = MAX_EXPANSIONS.min(self.budget);
         let grid = *self.graph.grid;
         let [orth, diag] = self.move_steps;
         let (gi, gj) = grid.cell_of(goal as usize);
@@ -278,11 +291,16 @@ impl<'m> World<'m> {
                 continue;
             }
             expanded += 1;
-            if expanded > MAX_EXPANSIONS {
-                return Err(Unserved::Budget { expanded });
+            if expanded % 4096 == 0 && self.progress.is_cancelled() {
+                return Err(Cancelled);
+            }
+            if expanded > limit {
+                self.budget -= limit;
+                return Ok(Err(Unserved::Budget { expanded: limit }));
             }
             if cell == goal && self.stays(req, r, goal, k) {
-                return Ok((self.track(&reached, key, k), PlannedBy::SpaceTime));
+                self.budget -= expanded;
+                return Ok(Ok((self.track(&reached, key, k), PlannedBy::SpaceTime)));
             }
             let mut push = |world: &World, to: u32, at: usize| {
                 let key = (to, world.layer(at));
@@ -314,9 +332,10 @@ impl<'m> World<'m> {
                 }
             }
         }
-        Err(Unserved::Horizon {
+        self.budget -= expanded;
+        Ok(Err(Unserved::Horizon {
             horizon_steps: self.horizon,
-        })
+        }))
     }
 
     /// Whether the robot can stay at `goal` from step k until the world stops changing.

@@ -35,6 +35,14 @@ fn models(map: &RadioMap) -> (Vec<std::sync::Arc<crate::channel::ChannelModel>>,
     }
 }
 
+/// The field a refused request names.
+fn field_of(e: WorkError) -> String {
+    match e {
+        WorkError::Invalid(e) => e.field,
+        WorkError::Cancelled(_) => panic!("cancelled"),
+    }
+}
+
 /// A robot to plan from `start` to `goal`.
 fn trip(start: [f64; 2], goal: [f64; 2], threshold: f64) -> RobotRequest {
     RobotRequest {
@@ -112,7 +120,13 @@ fn one_robot_plans_the_single_robot_path() {
         .unwrap()
         - 1.0;
     let single = single_path(&map, start, goal, Threshold::Value(threshold));
-    let plan = plan_fleet(&map, &[trip(start, goal, threshold)], options()).unwrap();
+    let plan = plan_fleet(
+        &map,
+        &[trip(start, goal, threshold)],
+        options(),
+        &Progress::default(),
+    )
+    .unwrap();
     let robot = &plan.robots[0];
     assert_eq!(robot.planned_by, Some(PlannedBy::Alone));
     let mut cells = robot.cells.clone();
@@ -204,7 +218,7 @@ fn a_plan_holds_when_every_step_is_recomputed() {
             trip(start, goal, widest.threshold.unwrap() - 0.5)
         })
         .collect();
-    let plan = plan_fleet(&map, &robots, options()).unwrap();
+    let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
     assert!(plan.violations.is_empty(), "{:?}", plan.violations);
     let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
     assert!(served >= 6, "only {served} of 8 served");
@@ -409,6 +423,7 @@ fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
                 horizon_s: Some(horizon as f64),
                 ..options()
             },
+            &Progress::default(),
         )
         .unwrap();
         assert!(plan.violations.is_empty());
@@ -490,7 +505,7 @@ fn a_given_route_is_checked_as_given() {
             motion: Motion::Route(poses.clone()),
             threshold,
         }];
-        let plan = plan_fleet(&map, &robots, options()).unwrap();
+        let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
         let robot = &plan.robots[0];
         assert_eq!(robot.planned_by, Some(PlannedBy::Given));
         assert_eq!(robot.arrival_step, Some(84), "42 s in steps of 0.5 s");
@@ -509,7 +524,7 @@ fn a_given_route_is_checked_as_given() {
             motion: Motion::Route(poses),
             threshold: 0.0,
         }];
-        plan_fleet(&map, &robots, options()).unwrap_err().field
+        field_of(plan_fleet(&map, &robots, options(), &Progress::default()).unwrap_err())
     };
     assert_eq!(
         refused(vec![[0.0, 8.5, 1.0], [1.0, 8.5, 1.0]]),
@@ -566,7 +581,7 @@ fn a_planned_robot_never_breaks_a_given_route() {
             },
             trip(point(s1), point(g1), t1),
         ];
-        let plan = plan_fleet(&map, &robots, options()).unwrap();
+        let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
         assert_eq!(plan.robots[0].planned_by, Some(PlannedBy::Given));
         *outcomes
             .entry(format!("{:?}", plan.robots[1].planned_by))
@@ -649,7 +664,7 @@ fn robots_sharing_an_ap_get_their_rates_at_every_step() {
             access: Some(access),
             ..options()
         };
-        let plan = plan_fleet(&map, &robots, options).unwrap();
+        let plan = plan_fleet(&map, &robots, options, &Progress::default()).unwrap();
         assert!(plan.violations.is_empty(), "{:?}", plan.violations);
         let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
         assert!(served >= 3, "{access:?}: {served} served");
@@ -716,7 +731,7 @@ fn a_robot_goes_around_a_given_route() {
         },
         trip([-10.0, 9.0], [10.0, 9.0], -200.0),
     ];
-    let plan = plan_fleet(&map, &robots, options()).unwrap();
+    let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
     let mover = &plan.robots[1];
     assert_eq!(mover.planned_by, Some(PlannedBy::SpaceTime));
     // The straight row takes 40 steps; around the sitting robot costs a few more, far less
@@ -725,4 +740,23 @@ fn a_robot_goes_around_a_given_route() {
     assert!((41..=46).contains(&arrival), "{arrival}");
     assert!(plan.violations.is_empty());
     check_from_scratch(&map, &robots, &plan);
+}
+
+/// A cancelled plan stops with `Cancelled`, before its next robot or within a few thousand
+/// states of a search.
+#[test]
+fn a_cancelled_plan_stops() {
+    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    let map = map_of(&scenario);
+    let progress = Progress::default();
+    progress.cancel();
+    let robots = [trip([-10.0, 0.0], [10.0, 0.0], -80.0)];
+    assert!(matches!(
+        plan_fleet(&map, &robots, options(), &progress),
+        Err(WorkError::Cancelled(_))
+    ));
+    let done = Progress::default();
+    let plan = plan_fleet(&map, &robots, options(), &done).unwrap();
+    assert_eq!((done.cells_done(), done.cells_total()), (1, 1));
+    assert_eq!(plan.robots[0].planned_by, Some(PlannedBy::Alone));
 }

@@ -6,8 +6,8 @@ use super::maps::MapRequest;
 use super::paths::map_for_query;
 use super::problem::ApiError;
 use super::{Body, heavy};
-use crate::app::App;
 use crate::app::identity::Caller;
+use crate::app::{App, Error};
 use crate::ids::MapId;
 use axum::extract::State;
 use axum::http::header;
@@ -15,7 +15,7 @@ use axum::response::{IntoResponse, Response};
 use irs_answers::fleet::{self, FleetQuery, RobotSpec};
 use irs_answers::timing::Timed;
 use irs_model::input::present;
-use irs_model::radiomap::Unit;
+use irs_model::radiomap::{Unit, WorkError};
 use irs_model::rate::Access;
 use serde::Deserialize;
 use std::time::Instant;
@@ -61,10 +61,14 @@ pub(super) async fn plan_fleet(
     // Each robot's search touches at most every cell a bounded number of times.
     let work = map.grid.cells().saturating_mul(query.robots.len().max(1));
     let v_max = scenario.mru.v_max_mps;
-    let answer = heavy(&state, "fleet plan", work, move |_| {
-        fleet::plan(&map, v_max, &query)
+    let answer = heavy(&state, "fleet plan", work, move |progress| {
+        fleet::plan(&map, v_max, &query, progress)
     })
-    .await??;
+    .await?
+    .map_err(|e| match e {
+        WorkError::Invalid(e) => Error::from(e),
+        WorkError::Cancelled(c) => Error::internal(c.to_string()),
+    })?;
     let steps = answer.plan.timeline.len();
     let phases = answer
         .plan
