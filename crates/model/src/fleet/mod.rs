@@ -632,20 +632,18 @@ fn given_track(
         return Err(FieldError::new(
             field,
             format!("expected 1 to {MAX_ROUTE_POSES} poses, got {}", poses.len()),
-        )
-        .into());
+        ));
     }
     for (k, p) in poses.iter().enumerate() {
         let here = format!("{field}[{k}]");
         if !p.iter().all(|v| v.is_finite()) {
-            return Err(FieldError::new(here, "x, y and t must be finite").into());
+            return Err(FieldError::new(here, "x, y and t must be finite"));
         }
         if grid.snap(p[0], p[1]).is_none() {
             return Err(FieldError::new(
                 here,
                 format!("({}, {}) lies outside the room", p[0], p[1]),
-            )
-            .into());
+            ));
         }
         let after = if k == 0 {
             p[2] >= 0.0
@@ -656,8 +654,7 @@ fn given_track(
             return Err(FieldError::new(
                 here,
                 "t must be at least 0 and increase strictly from pose to pose",
-            )
-            .into());
+            ));
         }
     }
     let last_t = poses[poses.len() - 1][2];
@@ -666,8 +663,7 @@ fn given_track(
         return Err(FieldError::new(
             field,
             format!("it ends at {last_t} s, {steps} steps of {dt_s} s: more than {MAX_STEPS}"),
-        )
-        .into());
+        ));
     }
     let mut at = Vec::with_capacity(steps as usize + 1);
     let mut segment = 0;
