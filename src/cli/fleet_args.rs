@@ -46,14 +46,13 @@ pub fn run_fleet(args: &FleetArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.map.source)?;
     let map = build_map(&args.map, &scenario)?;
     let started = Instant::now();
-    let answer = fleet::plan(&map, scenario.mru.v_max_mps, &query, &Progress::default()).map_err(
-        |e| match e {
+    let answer =
+        fleet::plan(&scenario, &map, &query, &Progress::default()).map_err(|e| match e {
             WorkError::Invalid(e) => {
                 Failure::input(format!("--robots {file}: {}: {}", e.field, e.reason))
             }
             WorkError::Cancelled(c) => Failure::runtime(c.to_string()),
-        },
-    )?;
+        })?;
     write_png(
         &args.map,
         &map,

@@ -6,6 +6,7 @@ use irs_model::fleet::{self, FleetOptions, FleetPlan, Motion, RobotRequest};
 use irs_model::input::{FieldError, present};
 use irs_model::radiomap::{Progress, RadioMap, Unit, WorkError};
 use irs_model::rate::Access;
+use irs_model::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -91,11 +92,12 @@ pub struct TimedWaypoint {
 /// from those reported (computed before rounding) by less than 10⁻⁶ dB.
 const PHASE_STEP_RAD: f64 = 1e-4;
 
-/// Plans `query` on `map` at V_max = `v_max_mps` (the scenario's robot). Errors name the field
-/// (`robots[2].start`, `unit`, `dt_s`, …); cancelling `progress` stops the search.
+/// Plans `query` on `map`, the gain map of `scenario`, whose robot's V_max every robot drives
+/// at and whose SRUs take part with `access`. Errors name the field (`robots[2].start`, `unit`,
+/// `dt_s`, …); cancelling `progress` stops the search.
 pub fn plan(
+    scenario: &Scenario,
     map: &RadioMap,
-    v_max_mps: f64,
     query: &FleetQuery,
     progress: &Progress,
 ) -> Result<FleetAnswer, WorkError> {
@@ -158,12 +160,12 @@ pub fn plan(
     }
     let options = FleetOptions {
         unit: query.unit.unwrap_or(map.native_unit()),
-        v_max_mps,
+        v_max_mps: scenario.mru.v_max_mps,
         dt_s: query.dt_s,
         horizon_s: query.horizon_s,
         access: query.access,
     };
-    let mut plan = fleet::plan_fleet(map, &robots, options, progress)?;
+    let mut plan = fleet::plan_fleet(map, &scenario.srus, &robots, options, progress)?;
     for instant in &mut plan.timeline {
         for theta in instant.phases.iter_mut().flatten() {
             let rounded = (*theta / PHASE_STEP_RAD).round() * PHASE_STEP_RAD;

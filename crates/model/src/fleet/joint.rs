@@ -86,12 +86,17 @@ impl JointChannel {
         self.surfaces.iter().map(|&(_, n)| n).collect()
     }
 
-    /// The channel at point (x, y) through AP `ap`.
+    /// The channel at point (x, y), at the robots' antenna height, through AP `ap`.
     pub fn link(&self, ap: usize, [x, y]: [f64; 2]) -> Link {
+        self.link_at(ap, [x, y, self.height_m])
+    }
+
+    /// The channel at an antenna at `position` (x, y, z) through AP `ap`.
+    pub fn link_at(&self, ap: usize, position: [f64; 3]) -> Link {
         let model = &self.models[ap];
         let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
         let with_irs = self.mode != PhaseMode::None;
-        let direct = model.evaluate([x, y, self.height_m], with_irs, &mut w);
+        let direct = model.evaluate(position, with_irs, &mut w);
         let reach = self
             .surfaces
             .iter()

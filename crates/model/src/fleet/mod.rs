@@ -23,7 +23,7 @@ use crate::input::FieldError;
 use crate::planner::{DEFAULT_FRAME, Endpoint, Infeasible};
 use crate::radiomap::{Cancelled, CellSolutions, Progress, RadioMap, Unit, WorkError};
 use crate::rate::Access;
-use crate::scenario::Grid;
+use crate::scenario::{Grid, Sru};
 use joint::{JointChannel, Link};
 use search::{Track, World};
 use serde::Serialize;
@@ -199,12 +199,26 @@ pub struct Instant {
     pub step: usize,
     /// k·Δt (s).
     pub time_s: f64,
-    /// Per surface, the robot it served (request index), or `None`.
-    pub served: Vec<Option<usize>>,
+    /// Per surface, whom it served (a robot or an SRU), or `None`.
+    pub served: Vec<Option<Party>>,
     /// θ per surface (rad, in [0, 2π)): the one configuration every robot sees.
     pub phases: Vec<Vec<f64>>,
     /// Per robot (request order), where it is and what it gets; `None` for a robot not served.
     pub robots: Vec<Option<RobotInstant>>,
+    /// With `access`, per SRU of the scenario (its order), what it gets where it stands (x and
+    /// y are its position, i and j its cell).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub srus: Vec<RobotInstant>,
+}
+
+/// Who takes part in a fleet instant: a robot of the request or an SRU of the scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Party {
+    /// A robot, by its request index.
+    Robot(usize),
+    /// A static robot of the scenario, by its index in `srus`.
+    Sru(usize),
 }
 
 /// Where one robot is at one step and what it gets.
@@ -238,8 +252,9 @@ pub struct RobotInstant {
 /// A requirement not met.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Violation {
-    /// The robot (request index).
-    pub robot: usize,
+    /// Whose requirement: `{"robot": r}` or `{"sru": k}`.
+    #[serde(flatten)]
+    pub party: Party,
     /// The step.
     pub step: usize,
     /// Its time (s).
@@ -285,12 +300,16 @@ impl<'m> Requirements<'m> {
     /// The configuration at one step for `robots` at `cells`, and what each gets.
     fn instant(&mut self, robots: &[usize], cells: &[usize]) -> Evaluated {
         let ids: Vec<usize> = cells.iter().map(|&c| self.link(c)).collect();
-        let links: Vec<&Link> = ids.iter().map(|&k| &self.store[k]).collect();
-        let need: Vec<f64> = robots
+        let statics: &[Static] = self.sharing.as_ref().map_or(&[], |s| &s.statics);
+        let mut links: Vec<&Link> = ids.iter().map(|&k| &self.store[k]).collect();
+        let mut need: Vec<f64> = robots
             .iter()
             .zip(&links)
             .map(|(&r, l)| self.need[r][l.ap])
             .collect();
+        links.extend(statics.iter().map(|s| &s.link));
+        need.extend(statics.iter().map(|s| s.need));
+        let parties = links.len();
         let config = self.joint.configure(&links, &need);
         let Some(sharing) = &self.sharing else {
             let met = config
@@ -302,21 +321,24 @@ impl<'m> Requirements<'m> {
             return Evaluated {
                 config,
                 met,
-                shares: vec![None; robots.len()],
+                shares: vec![None; parties],
             };
         };
-        let mut met = vec![false; robots.len()];
-        let mut shares = vec![None; robots.len()];
+        let mut met = vec![false; parties];
+        let mut shares = vec![None; parties];
         let aps: Vec<usize> = links.iter().map(|l| l.ap).collect();
         for ap in 0..sharing.rho.len() {
-            let group: Vec<usize> = (0..robots.len()).filter(|&k| aps[k] == ap).collect();
+            let group: Vec<usize> = (0..parties).filter(|&k| aps[k] == ap).collect();
             if group.is_empty() {
                 continue;
             }
             let gains: Vec<f64> = group.iter().map(|&k| config.gains[k]).collect();
             let rates: Vec<f64> = group
                 .iter()
-                .map(|&k| sharing.rates[robots[k]][ap])
+                .map(|&k| match robots.get(k) {
+                    Some(&r) => sharing.rates[r][ap],
+                    None => statics[k - robots.len()].rate,
+                })
                 .collect();
             if let Some(share) = sharing::share(sharing.access, sharing.rho[ap], &gains, &rates) {
                 for (g, &k) in group.iter().enumerate() {
@@ -334,15 +356,29 @@ impl<'m> Requirements<'m> {
     }
 }
 
-/// One step evaluated.
+/// One step evaluated, per party: the robots asked for, then (with `access`) the scenario's
+/// SRUs.
 pub(crate) struct Evaluated {
-    /// What the IRSs hold and each robot's gain.
+    /// What the IRSs hold and each party's gain.
     pub config: Configuration,
-    /// Per robot, whether its requirement is met.
+    /// Per party, whether its requirement is met.
     pub met: Vec<bool>,
-    /// With `access`, per robot whose AP serves its group: its share of the AP's power and,
+    /// With `access`, per party whose AP serves its group: its share of the AP's power and,
     /// with NOMA, its place in the SIC order.
     pub shares: Vec<Option<(f64, Option<usize>)>>,
+}
+
+/// A static robot of the scenario (an SRU, paper Section II-B): always there, needing its rate.
+struct Static {
+    link: Link,
+    /// Its antenna (x, y, z) (m).
+    position: [f64; 3],
+    /// r̄_s (bit/s/Hz).
+    rate: f64,
+    /// The gain its rate needs alone with all of its AP's power (linear), for the policy.
+    need: f64,
+    /// Its cell, which no robot enters.
+    cell: usize,
 }
 
 /// How robots of one AP share it, and what they need.
@@ -352,14 +388,19 @@ struct Sharing {
     rho: Vec<f64>,
     /// Per robot, its rate (bit/s/Hz) through each AP.
     rates: Vec<Vec<f64>>,
+    /// The scenario's SRUs.
+    statics: Vec<Static>,
 }
 
-/// Plans `robots` on a gain map, in order (docs/model.md §6.5). Errors name the request's
-/// field: `robots` (too many, an end off the floor), `unit`, `dt_s`, `horizon_s`, `map`.
+/// Plans `robots` on a gain map, in order (docs/model.md §6.5); with `access`, the scenario's
+/// static robots `srus` take part, each needing its rate where it stands. Errors name the
+/// request's field: `robots` (too many, an end off the floor), `unit`, `dt_s`, `horizon_s`,
+/// `map`.
 /// `progress` counts robots planned; cancelling it stops the search within a few thousand
 /// states.
 pub fn plan_fleet(
     map: &RadioMap,
+    srus: &[Sru],
     robots: &[RobotRequest],
     options: FleetOptions,
     progress: &Progress,
@@ -372,8 +413,8 @@ pub fn plan_fleet(
     else {
         return Err(FieldError::new(
             "map",
-            "fleet plans run on gain maps (robots sharing an AP are given `access`; the \
-             scenario's static SRUs take no part)",
+            "fleet plans run on gain maps (robots sharing an AP, and the scenario's SRUs, are \
+             given `access`)",
         )
         .into());
     };
@@ -502,6 +543,7 @@ pub fn plan_fleet(
                 .collect()
         })
         .collect();
+    let joint = JointChannel::new(models.clone(), *antenna_height_m, map.key.phases);
     let sharing = match options.access {
         None => None,
         Some(access) => {
@@ -535,10 +577,29 @@ pub fn plan_fleet(
                             .collect()
                     })
                     .collect(),
+                statics: srus
+                    .iter()
+                    .enumerate()
+                    .map(|(k, sru)| {
+                        let [x, y, _] = sru.position;
+                        let (i, j) = grid.snap(x, y).ok_or_else(|| {
+                            FieldError::new(format!("srus[{k}].position"), "lies outside the room")
+                        })?;
+                        let cell = grid.index(i, j);
+                        let ap = map.serving_ap(cell);
+                        let rate = sru.min_rate_bps_hz;
+                        Ok(Static {
+                            link: joint.link_at(ap, sru.position),
+                            position: sru.position,
+                            rate,
+                            need: 10f64.powf(links[ap].gain_db_for(Unit::BpsHz, rate) / 10.0),
+                            cell,
+                        })
+                    })
+                    .collect::<Result<_, FieldError>>()?,
             })
         }
     };
-    let joint = JointChannel::new(models.clone(), *antenna_height_m, map.key.phases);
     let mut req = Requirements {
         map,
         joint,
@@ -548,7 +609,10 @@ pub fn plan_fleet(
         store: Vec::new(),
     };
 
-    let mut world = World::new(graph, move_steps, horizon_steps, progress);
+    let occupied_by_srus: Vec<u32> = req.sharing.as_ref().map_or(Vec::new(), |s| {
+        s.statics.iter().map(|s| s.cell as u32).collect()
+    });
+    let mut world = World::new(graph, move_steps, horizon_steps, progress, occupied_by_srus);
     progress.start(robots.len());
     // Given routes are fixed first, then the trips are planned in request order.
     let order: Vec<usize> = (0..robots.len())

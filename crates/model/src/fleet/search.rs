@@ -7,7 +7,7 @@
 //! one layer of the search: the states stay within cells × (last arrival + 2).
 
 use super::{Instant, MAX_EXPANSIONS, MAX_PLAN_EXPANSIONS, PlannedBy, Requirements};
-use super::{RobotInstant, RobotPlan};
+use super::{Party, RobotInstant, RobotPlan};
 use super::{Unserved, Violation};
 use crate::planner::CellGraph;
 use crate::radiomap::Unit;
@@ -109,6 +109,8 @@ pub(crate) struct World<'m> {
     /// States the plan may still expand ([`MAX_PLAN_EXPANSIONS`] at first).
     budget: usize,
     progress: &'m Progress,
+    /// Cells of the scenario's SRUs taking part: no robot enters them.
+    statics: Vec<u32>,
 }
 
 /// A state's key: its cell and step, every step after the last arrival being one.
@@ -123,6 +125,7 @@ impl<'m> World<'m> {
         move_steps: [usize; 2],
         horizon: usize,
         progress: &'m Progress,
+        statics: Vec<u32>,
     ) -> World<'m> {
         World {
             graph,
@@ -135,6 +138,7 @@ impl<'m> World<'m> {
             base: HashMap::new(),
             budget: MAX_PLAN_EXPANSIONS,
             progress,
+            statics,
         }
     }
 
@@ -159,7 +163,7 @@ impl<'m> World<'m> {
     ) -> bool {
         let mine = [cell, also];
         let taken = |c: u32| c != NONE && mine.contains(&c);
-        if self.parked.iter().any(|&p| taken(p)) {
+        if self.parked.iter().chain(&self.statics).any(|&p| taken(p)) {
             return false;
         }
         if self.fixed.iter().any(|(_, t)| {
@@ -204,21 +208,21 @@ impl<'m> World<'m> {
             .map(|(_, t)| t.state(k).0 as usize)
             .collect();
         let layer = self.layer(k);
+        // Parties: the fixed robots, then (with `access`) the scenario's SRUs; with this
+        // robot, it comes between the two.
         let base = self
             .base
             .entry(layer)
-            .or_insert_with(|| {
-                if robots.is_empty() {
-                    Vec::new()
-                } else {
-                    req.instant(&robots, &cells).met
-                }
-            })
+            .or_insert_with(|| req.instant(&robots, &cells).met)
             .clone();
+        let fixed = robots.len();
         robots.push(r);
         cells.push(cell);
         let met = req.instant(&robots, &cells).met;
-        met[robots.len() - 1] && base.iter().zip(&met).all(|(&was, &is)| !was || is)
+        let kept = |(&was, &is): (&bool, &bool)| !was || is;
+        met[fixed]
+            && base[..fixed].iter().zip(&met[..fixed]).all(kept)
+            && base[fixed..].iter().zip(&met[fixed + 1..]).all(kept)
     }
 
     /// True when a fixed robot goes from `to` to `from` while this one goes from `from` to
@@ -387,28 +391,43 @@ impl<'m> World<'m> {
                 config,
                 met,
                 shares,
-            } = if robots.is_empty() {
-                super::Evaluated {
-                    config: req.joint.configure(&[], &[]),
-                    met: Vec::new(),
-                    shares: Vec::new(),
-                }
-            } else {
-                req.instant(&robots, &cells)
-            };
+            } = req.instant(&robots, &cells);
+            let statics: &[super::Static] = req.sharing.as_ref().map_or(&[], |s| &s.statics);
             let mut states = vec![None; plans.len()];
-            for (slot, &r) in robots.iter().enumerate() {
-                let cell = cells[slot];
+            let mut srus = Vec::with_capacity(statics.len());
+            for slot in 0..met.len() {
+                let (party, x, y, cell, required) = match robots.get(slot) {
+                    Some(&r) => {
+                        let cell = cells[slot];
+                        let (i, j) = grid.cell_of(cell);
+                        let [x, y] = grid.centre(i, j);
+                        (Party::Robot(r), x, y, cell, plans[r].threshold)
+                    }
+                    None => {
+                        let sru = &statics[slot - robots.len()];
+                        let [x, y, _] = sru.position;
+                        let required = match unit {
+                            Unit::Mbps => {
+                                sru.rate
+                                    * req.map.links[sru.link.ap].bandwidth_mhz.unwrap_or(f64::NAN)
+                            }
+                            _ => sru.rate,
+                        };
+                        (Party::Sru(slot - robots.len()), x, y, sru.cell, required)
+                    }
+                };
                 let (i, j) = grid.cell_of(cell);
-                let [x, y] = grid.centre(i, j);
-                let ap = req.store[req.links[cell] as usize].ap;
+                let ap = match party {
+                    Party::Robot(_) => req.store[req.links[cell] as usize].ap,
+                    Party::Sru(k) => statics[k].link.ap,
+                };
                 let gain_db = 10.0 * config.gains[slot].log10();
                 let value = if unit == Unit::GainDb {
                     gain_db
                 } else {
                     req.map.links[ap].convert_gain_db(unit, gain_db)
                 };
-                states[r] = Some(RobotInstant {
+                let state = RobotInstant {
                     x,
                     y,
                     i,
@@ -418,29 +437,34 @@ impl<'m> World<'m> {
                     met: met[slot],
                     power_share: shares[slot].map(|(f, _)| f),
                     decoded: shares[slot].and_then(|(_, place)| place),
-                });
+                };
+                match party {
+                    Party::Robot(r) => states[r] = Some(state),
+                    Party::Sru(_) => srus.push(state),
+                }
                 if !met[slot] {
                     violations.push(Violation {
-                        robot: r,
+                        party,
                         step: k,
                         time_s,
                         x,
                         y,
                         value,
-                        required: plans[r].threshold,
+                        required,
                     });
                 }
             }
+            let party = |slot: usize| match robots.get(slot) {
+                Some(&r) => Party::Robot(r),
+                None => Party::Sru(slot - robots.len()),
+            };
             timeline.push(Instant {
                 step: k,
                 time_s,
-                served: config
-                    .served
-                    .iter()
-                    .map(|s| s.map(|slot| robots[slot]))
-                    .collect(),
+                served: config.served.iter().map(|s| s.map(party)).collect(),
                 phases: crate::radiomap::per_surface(&config.phases, &lengths),
                 robots: states,
+                srus,
             });
         }
         (timeline, violations)

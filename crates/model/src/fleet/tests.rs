@@ -122,6 +122,7 @@ fn one_robot_plans_the_single_robot_path() {
     let single = single_path(&map, start, goal, Threshold::Value(threshold));
     let plan = plan_fleet(
         &map,
+        &[],
         &[trip(start, goal, threshold)],
         options(),
         &Progress::default(),
@@ -218,7 +219,7 @@ fn a_plan_holds_when_every_step_is_recomputed() {
             trip(start, goal, widest.threshold.unwrap() - 0.5)
         })
         .collect();
-    let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
+    let plan = plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap();
     assert!(plan.violations.is_empty(), "{:?}", plan.violations);
     let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
     assert!(served >= 6, "only {served} of 8 served");
@@ -229,11 +230,11 @@ fn a_plan_holds_when_every_step_is_recomputed() {
             .any(|r| r.planned_by == Some(PlannedBy::SpaceTime) && r.waited_steps > 0)
     );
     // Some surface served a robot other than the first: the robots did share it.
-    assert!(
-        plan.timeline
+    assert!(plan.timeline.iter().any(|i| {
+        i.served
             .iter()
-            .any(|i| i.served.iter().any(|s| s.is_some_and(|r| r != 0)))
-    );
+            .any(|s| s.is_some_and(|r| r != Party::Robot(0)))
+    }));
 }
 
 /// The earliest arrival of robot `r` found by breadth-first search over (cell, step), written
@@ -418,6 +419,7 @@ fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
         ];
         let plan = plan_fleet(
             &map,
+            &[],
             &robots,
             FleetOptions {
                 horizon_s: Some(horizon as f64),
@@ -505,7 +507,7 @@ fn a_given_route_is_checked_as_given() {
             motion: Motion::Route(poses.clone()),
             threshold,
         }];
-        let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
+        let plan = plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap();
         let robot = &plan.robots[0];
         assert_eq!(robot.planned_by, Some(PlannedBy::Given));
         assert_eq!(robot.arrival_step, Some(84), "42 s in steps of 0.5 s");
@@ -524,7 +526,7 @@ fn a_given_route_is_checked_as_given() {
             motion: Motion::Route(poses),
             threshold: 0.0,
         }];
-        field_of(plan_fleet(&map, &robots, options(), &Progress::default()).unwrap_err())
+        field_of(plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap_err())
     };
     assert_eq!(
         refused(vec![[0.0, 8.5, 1.0], [1.0, 8.5, 1.0]]),
@@ -581,7 +583,7 @@ fn a_planned_robot_never_breaks_a_given_route() {
             },
             trip(point(s1), point(g1), t1),
         ];
-        let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
+        let plan = plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap();
         assert_eq!(plan.robots[0].planned_by, Some(PlannedBy::Given));
         *outcomes
             .entry(format!("{:?}", plan.robots[1].planned_by))
@@ -635,7 +637,9 @@ fn a_planned_robot_never_breaks_a_given_route() {
 /// each step fit the AP's power.
 #[test]
 fn robots_sharing_an_ap_get_their_rates_at_every_step() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
+    // The paper's multi-user floor: its static robot (SRU) takes part, needing its rate.
+    let scenario = Scenario::builtin("paper-multi-user").unwrap();
+    assert_eq!(scenario.srus.len(), 1);
     let map = map_of(&scenario);
     let (models, height) = models(&map);
     let rho = 10f64.powf((map.links[0].offset_dbm - map.links[0].noise_dbm) / 10.0);
@@ -664,29 +668,41 @@ fn robots_sharing_an_ap_get_their_rates_at_every_step() {
             access: Some(access),
             ..options()
         };
-        let plan = plan_fleet(&map, &robots, options, &Progress::default()).unwrap();
+        let plan =
+            plan_fleet(&map, &scenario.srus, &robots, options, &Progress::default()).unwrap();
         assert!(plan.violations.is_empty(), "{:?}", plan.violations);
         let served = plan.robots.iter().filter(|r| r.unserved.is_none()).count();
         assert!(served >= 3, "{access:?}: {served} served");
         for instant in &plan.timeline {
             let theta = instant.phases.concat();
-            let present: Vec<(usize, RobotInstant)> = instant
+            // The robots, then the SRU (its requirement after theirs), at its own antenna height.
+            let mut present: Vec<(usize, RobotInstant)> = instant
                 .robots
                 .iter()
                 .enumerate()
                 .filter_map(|(r, at)| at.map(|a| (r, a)))
                 .collect();
+            assert_eq!(instant.srus.len(), 1);
+            present.push((robots.len(), instant.srus[0]));
+            let required = |r: usize| match robots.get(r) {
+                Some(robot) => robot.threshold,
+                None => scenario.srus[0].min_rate_bps_hz,
+            };
+            let height_of = |r: usize| match r < robots.len() {
+                true => height,
+                false => scenario.srus[0].position[2],
+            };
             let n = present.len() as f64;
-            let gain = |a: &RobotInstant| {
+            let gain_at = |r: usize, a: &RobotInstant| {
                 let model = &models[a.ap];
                 let mut w = vec![C64::new(0.0, 0.0); model.subsurfaces()];
-                let direct = model.evaluate([a.x, a.y, height], true, &mut w);
+                let direct = model.evaluate([a.x, a.y, height_of(r)], true, &mut w);
                 expected_gain(&direct, &w, &theta)
             };
             let total: f64 = present.iter().map(|(_, a)| a.power_share.unwrap()).sum();
             assert!(total <= 1.0 + 1e-9, "step {}: shares {total}", instant.step);
             for (r, a) in &present {
-                let (lambda, f) = (gain(a), a.power_share.unwrap());
+                let (lambda, f) = (gain_at(*r, a), a.power_share.unwrap());
                 let rate = match access {
                     Access::Oma => (1.0 + n * lambda * rho * f).log2() / n,
                     Access::Noma => {
@@ -700,16 +716,19 @@ fn robots_sharing_an_ap_get_their_rates_at_every_step() {
                     }
                 };
                 assert!(
-                    rate >= robots[*r].threshold - 1e-7,
-                    "{access:?} step {} robot {r}: {rate} < {}",
+                    rate >= required(*r) - 1e-7,
+                    "{access:?} step {} party {r}: {rate} < {}",
                     instant.step,
-                    robots[*r].threshold
+                    required(*r)
                 );
+                if *r < robots.len() {
+                    assert_ne!((a.i, a.j), (instant.srus[0].i, instant.srus[0].j));
+                }
                 if access == Access::Noma {
                     // SIC decodes the weaker first.
-                    for (_, b) in &present {
+                    for (q, b) in &present {
                         if b.decoded.unwrap() > a.decoded.unwrap() {
-                            assert!(gain(b) >= lambda * (1.0 - 1e-12));
+                            assert!(gain_at(*q, b) >= lambda * (1.0 - 1e-12));
                         }
                     }
                 }
@@ -731,7 +750,7 @@ fn a_robot_goes_around_a_given_route() {
         },
         trip([-10.0, 9.0], [10.0, 9.0], -200.0),
     ];
-    let plan = plan_fleet(&map, &robots, options(), &Progress::default()).unwrap();
+    let plan = plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap();
     let mover = &plan.robots[1];
     assert_eq!(mover.planned_by, Some(PlannedBy::SpaceTime));
     // The straight row takes 40 steps; around the sitting robot costs a few more, far less
@@ -752,11 +771,11 @@ fn a_cancelled_plan_stops() {
     progress.cancel();
     let robots = [trip([-10.0, 0.0], [10.0, 0.0], -80.0)];
     assert!(matches!(
-        plan_fleet(&map, &robots, options(), &progress),
+        plan_fleet(&map, &[], &robots, options(), &progress),
         Err(WorkError::Cancelled(_))
     ));
     let done = Progress::default();
-    let plan = plan_fleet(&map, &robots, options(), &done).unwrap();
+    let plan = plan_fleet(&map, &[], &robots, options(), &done).unwrap();
     assert_eq!((done.cells_done(), done.cells_total()), (1, 1));
     assert_eq!(plan.robots[0].planned_by, Some(PlannedBy::Alone));
 }

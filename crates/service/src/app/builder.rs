@@ -165,8 +165,16 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
         tokio::select! {
             _ = job.finished() => break,
             _ = tokio::time::sleep(HEARTBEAT) => {
+                // A job that has just ended is recorded once, below: a shared record saying
+                // "cancelled" while the shutdown hands the build over would end it for every
+                // waiter on the other replicas (seen in CI when the heartbeat won the race).
+                // The record is taken first, so the state checked is the state written.
+                let record = job.record();
+                if record.view.state.is_terminal() {
+                    continue;
+                }
                 cluster.heartbeat(&build).await;
-                let _ = cluster.put_job(&build.job_id, &job.record()).await;
+                let _ = cluster.put_job(&build.job_id, &record).await;
                 if cluster.cancel_requested(&build.job_id).await {
                     state.jobs().cancel_local(&job);
                 }

@@ -60,9 +60,8 @@ pub(super) async fn plan_fleet(
     };
     // Each robot's search touches at most every cell a bounded number of times.
     let work = map.grid.cells().saturating_mul(query.robots.len().max(1));
-    let v_max = scenario.mru.v_max_mps;
     let answer = heavy(&state, "fleet plan", work, move |progress| {
-        fleet::plan(&map, v_max, &query, progress)
+        fleet::plan(&scenario, &map, &query, progress)
     })
     .await?
     .map_err(|e| match e {
