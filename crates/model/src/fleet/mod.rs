@@ -485,14 +485,17 @@ pub fn plan_fleet(
         })
         .collect::<Result<Vec<_>, FieldError>>()?;
     let graph = crate::planner::graph(map, &values);
-    // Each planned robot's route alone: the first try of the planner and the default horizon.
+    // Each robot's route on its own: a given route as given, a trip's shortest path alone (the
+    // planner's first try); the longest sets the default horizon.
     let alone: Vec<Result<Track, Infeasible>> = robots
         .iter()
         .zip(&ends)
-        .map(|(robot, ((s, _), (g, _)))| {
-            graph
+        .zip(&given)
+        .map(|((robot, ((s, _), (g, _))), given)| match given {
+            Some(track) => Ok(track.clone()),
+            None => graph
                 .shortest_path(*s, *g, robot.threshold)
-                .map(|p| search::timed(grid, &p.cells, move_steps))
+                .map(|p| search::timed(grid, &p.cells, move_steps)),
         })
         .collect();
     let horizon_steps = match options.horizon_s {
@@ -509,10 +512,7 @@ pub fn plan_fleet(
         None => {
             let longest = alone
                 .iter()
-                .zip(&given)
-                .filter(|(_, g)| g.is_none())
-                .filter_map(|(a, _)| a.as_ref().ok())
-                .chain(given.iter().flatten())
+                .filter_map(|a| a.as_ref().ok())
                 .map(|t| t.at.len())
                 .max()
                 .unwrap_or(0);

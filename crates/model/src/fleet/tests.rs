@@ -9,6 +9,24 @@ use crate::radiomap::{MapKey, build};
 use crate::scenario::Scenario;
 use std::collections::HashSet;
 
+/// The paper's single-user floor and its continuous gain map.
+fn paper_map() -> RadioMap {
+    map_of(&Scenario::builtin("paper-single-user").unwrap())
+}
+
+/// The free cells of a map (flat indices).
+fn free_cells(map: &RadioMap) -> Vec<usize> {
+    (0..map.grid.cells())
+        .filter(|&c| !map.occupied[c])
+        .collect()
+}
+
+/// The centre of cell `c` (flat index).
+fn centre(map: &RadioMap, c: usize) -> [f64; 2] {
+    let (i, j) = map.grid.cell_of(c);
+    map.grid.centre(i, j)
+}
+
 fn map_of(scenario: &Scenario) -> RadioMap {
     let key = MapKey::gain("x", scenario, PhaseMode::Continuous).unwrap();
     build(scenario, &key, "x".into(), &Default::default()).unwrap()
@@ -65,8 +83,7 @@ fn single_path(
 /// With one robot a surface serves it alone: eq. 12's gain, the map's, at every cell.
 #[test]
 fn one_robot_gets_the_closed_form_gain() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let (models, height) = models(&map);
     let joint = JointChannel::new(models, height, PhaseMode::Continuous);
     let mut checked = 0;
@@ -92,8 +109,7 @@ fn one_robot_gets_the_closed_form_gain() {
 /// gets its best gain while the other gets less than its own best.
 #[test]
 fn a_surface_serves_the_robot_of_largest_deficit() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let (models, height) = models(&map);
     let joint = JointChannel::new(models, height, PhaseMode::Continuous);
     let (a, b) = (joint.link(0, [-6.0, -8.0]), joint.link(0, [6.0, -8.0]));
@@ -112,8 +128,7 @@ fn a_surface_serves_the_robot_of_largest_deficit() {
 /// One robot's plan is the single-robot path, cell for cell, with the map's values.
 #[test]
 fn one_robot_plans_the_single_robot_path() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let (start, goal) = ([-10.0, 0.0], [10.0, 0.0]);
     let threshold = single_path(&map, start, goal, Threshold::Max)
         .threshold
@@ -149,15 +164,9 @@ fn one_robot_plans_the_single_robot_path() {
 
 /// Cells of the paper floor that are free, spread over it.
 fn free_points(map: &RadioMap, count: usize, seed: usize) -> Vec<[f64; 2]> {
-    let free: Vec<usize> = (0..map.grid.cells())
-        .filter(|&c| !map.occupied[c])
-        .collect();
+    let free = free_cells(map);
     (0..count)
-        .map(|k| {
-            let c = free[(seed + k * 7919) % free.len()];
-            let (i, j) = map.grid.cell_of(c);
-            map.grid.centre(i, j)
-        })
+        .map(|k| centre(map, free[(seed + k * 7919) % free.len()]))
         .collect()
 }
 
@@ -209,8 +218,7 @@ fn check_from_scratch(map: &RadioMap, robots: &[RobotRequest], plan: &FleetPlan)
 /// plan, re-evaluated from scratch, meets every requirement at every step.
 #[test]
 fn a_plan_holds_when_every_step_is_recomputed() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let points = free_points(&map, 16, 11);
     let robots: Vec<RobotRequest> = (0..8)
         .map(|r| {
@@ -388,20 +396,8 @@ fn brute_force(
 /// early as the search's.
 #[test]
 fn the_planner_finds_a_route_whenever_one_exists_within_the_horizon() {
-    let scenario = Scenario::builtin_with("small-test", |v| {
-        v["grid"]["resolution_m"] = 1.0.into();
-        v["mru"]["v_max_mps"] = 1.0.into();
-    })
-    .unwrap()
-    .unwrap();
-    let map = map_of(&scenario);
-    let free: Vec<usize> = (0..map.grid.cells())
-        .filter(|&c| !map.occupied[c])
-        .collect();
-    let point = |c: usize| {
-        let (i, j) = map.grid.cell_of(c);
-        map.grid.centre(i, j)
-    };
+    let map = tiny_map();
+    let (free, point) = (free_cells(&map), |c: usize| centre(&map, c));
     let horizon = 16;
     let mut outcomes = std::collections::BTreeMap::new();
     for case in 0..120usize {
@@ -498,8 +494,7 @@ fn tiny_map() -> RadioMap {
 /// checked, its failures reported as violations rather than planned away.
 #[test]
 fn a_given_route_is_checked_as_given() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     // Along y = 8.5, free from wall to wall, at 0.5 m/s from t = 2 s.
     let poses = vec![[-10.0, 8.5, 2.0], [0.0, 8.5, 22.0], [10.0, 8.5, 42.0]];
     for (threshold, failing) in [(-200.0, false), (100.0, true)] {
@@ -549,13 +544,7 @@ fn a_given_route_is_checked_as_given() {
 #[test]
 fn a_planned_robot_never_breaks_a_given_route() {
     let map = tiny_map();
-    let free: Vec<usize> = (0..map.grid.cells())
-        .filter(|&c| !map.occupied[c])
-        .collect();
-    let point = |c: usize| {
-        let (i, j) = map.grid.cell_of(c);
-        map.grid.centre(i, j)
-    };
+    let (free, point) = (free_cells(&map), |c: usize| centre(&map, c));
     let (models, height) = models(&map);
     let joint = JointChannel::new(models, height, PhaseMode::Continuous);
     let mut outcomes = std::collections::BTreeMap::new();
@@ -741,8 +730,7 @@ fn robots_sharing_an_ap_get_their_rates_at_every_step() {
 /// waits) in space and time, and never shares its cell.
 #[test]
 fn a_robot_goes_around_a_given_route() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let robots = [
         RobotRequest {
             motion: Motion::Route(vec![[0.0, 9.0, 0.0], [0.0, 9.0, 15.0], [0.0, 8.5, 15.5]]),
@@ -765,8 +753,7 @@ fn a_robot_goes_around_a_given_route() {
 /// states of a search.
 #[test]
 fn a_cancelled_plan_stops() {
-    let scenario = Scenario::builtin("paper-single-user").unwrap();
-    let map = map_of(&scenario);
+    let map = paper_map();
     let progress = Progress::default();
     progress.cancel();
     let robots = [trip([-10.0, 0.0], [10.0, 0.0], -80.0)];
