@@ -2873,6 +2873,23 @@ async fn tenants_see_and_touch_only_their_own() {
     let sweep =
         json!({"map_id": mid, "start": [0.5, 0.5], "goal": [5.5, 0.5], "thresholds": [-90, -80]});
     let fleet = json!({"map_id": mid, "robots": [{"start": [0.5, 0.5], "goal": [5.5, 0.5], "threshold": -120}]});
+    // A fleet plan asked for as a job (`Prefer: respond-async`), behind her rate map on the
+    // one worker.
+    let response = server
+        .client
+        .post(format!("{}/v1/fleet-plans", server.base))
+        .bearer_auth(ALICE)
+        .header("content-type", "application/json")
+        .header("prefer", "respond-async")
+        .body(fleet.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::ACCEPTED);
+    let fid = response.json::<Value>().await.unwrap()["job_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
     /// What a route is to the matrix: everybody's, a listing, a registration, or a route on
     /// (or naming) alice's objects.
     #[derive(Debug, PartialEq)]
@@ -2960,6 +2977,9 @@ async fn tenants_see_and_touch_only_their_own() {
                 ("post", "/v1/paths") => (Class::Alices, route.clone(), Some(path_query.clone())),
                 ("post", "/v1/sweeps") => (Class::Alices, route.clone(), Some(sweep.clone())),
                 ("post", "/v1/fleet-plans") => (Class::Alices, route.clone(), Some(fleet.clone())),
+                ("get", "/v1/fleet-plans/{plan_id}") => {
+                    (Class::Alices, format!("/v1/fleet-plans/{fid}"), None)
+                }
                 other => panic!("{other:?}: a route the tenants' matrix does not know; add it"),
             };
         let method = method.to_uppercase();
@@ -2997,6 +3017,12 @@ async fn tenants_see_and_touch_only_their_own() {
                     if path.starts_with("/v1/checks/") && status == StatusCode::CONFLICT =>
                 {
                     assert_eq!(answer["code"], "check_not_ready", "{answer}");
+                    continue;
+                }
+                (Class::Alices, Who::Alice)
+                    if path.starts_with("/v1/fleet-plans/") && status == StatusCode::CONFLICT =>
+                {
+                    assert_eq!(answer["code"], "fleet_plan_not_ready", "{answer}");
                     continue;
                 }
                 (Class::Registration, _) | (Class::Alices, Who::Alice) => {
@@ -3424,4 +3450,131 @@ async fn fleets_are_planned_over_http() {
         );
         assert_eq!(problem_body["field"], field, "{problem_body}");
     }
+}
+
+/// A fleet plan over robots × cells beyond 4 × `--sync-cells` runs as a job (202, kind
+/// `fleet`, progress in robots) whose plan, read at its `result_href`, is the plan a request
+/// that waits gets; a bad field is still a 422 before any job; `Prefer: respond-async` asks for
+/// a job whatever the size, and the job can be cancelled.
+#[tokio::test]
+async fn large_fleet_plans_run_as_jobs() {
+    // The paper floor (1 681 cells) as a map answered at once; 3 robots × 1 681 > 4 × 1 200.
+    let server = start(&["--sync-cells", "1200", "--workers", "1"]);
+    let waiting = start(&[]);
+    let map_request =
+        json!({"scenario": scenario("paper-single-user.json", |_| {}), "kind": "gain"});
+    let robots = json!([
+        {"name": "first", "start": [-10, 0], "goal": [10, 0], "threshold": -75},
+        {"start": [10, -9], "goal": [-10, -9], "threshold": -80},
+        {"start": [-9, 9], "goal": [9, 9], "threshold": -70},
+    ]);
+    let (s, direct) = waiting
+        .post(
+            "/v1/fleet-plans",
+            json!({"map": map_request.clone(), "robots": robots.clone()}),
+        )
+        .await;
+    assert_eq!(s, StatusCode::OK, "{direct}");
+
+    let (s, map) = server.post("/v1/maps", map_request).await;
+    assert_eq!(
+        s,
+        StatusCode::ACCEPTED,
+        "the map itself is a job here: {map}"
+    );
+    let map_job = server.wait_job(map["job_id"].as_str().unwrap()).await;
+    assert_eq!(map_job["state"], "done", "{map_job}");
+    let mid = map_job["map_id"].as_str().unwrap();
+    for (body, field) in [
+        (
+            json!({"map_id": mid, "robots": [{"start": [50, 0], "goal": [0, 0], "threshold": -80}, {"start": [0, 9], "goal": [0, -9], "threshold": -80}, {"start": [1, 9], "goal": [1, -9], "threshold": -80}]}),
+            "robots[0].start",
+        ),
+        (
+            json!({"map_id": mid, "horizon_s": -1, "robots": robots.clone()}),
+            "horizon_s",
+        ),
+    ] {
+        let (s, problem_body) = server.post("/v1/fleet-plans", body).await;
+        problem(
+            s,
+            &problem_body,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_field",
+        );
+        assert_eq!(problem_body["field"], field, "{problem_body}");
+    }
+    let (s, job) = server
+        .post(
+            "/v1/fleet-plans",
+            json!({"map_id": mid, "robots": robots.clone()}),
+        )
+        .await;
+    assert_eq!(s, StatusCode::ACCEPTED, "{job}");
+    assert_eq!(job["kind"], "fleet");
+    let job_id = job["job_id"].as_str().unwrap();
+    assert_eq!(job["result_href"], format!("/v1/fleet-plans/{job_id}"));
+    let done = server.wait_job(job_id).await;
+    assert_eq!(done["state"], "done", "{done}");
+    assert_eq!(
+        (done["cells_done"].as_u64(), done["cells_total"].as_u64()),
+        (Some(3), Some(3))
+    );
+    let (s, mut planned) = server.get(&format!("/v1/fleet-plans/{job_id}")).await;
+    assert_eq!(s, StatusCode::OK, "{planned}");
+    assert!(planned["took_ms"].as_f64().unwrap() >= 0.0);
+    let mut direct = direct;
+    for answer in [&mut planned, &mut direct] {
+        answer.as_object_mut().unwrap().remove("took_ms");
+    }
+    assert_eq!(
+        planned, direct,
+        "the job's plan is the plan answered at once"
+    );
+
+    // Asked for as a job: 202 however small, and the preference said applied. A job queued
+    // behind a long one on the single worker is cancelled before it runs.
+    let slow = server
+        .post(
+            "/v1/maps",
+            long_rate_request(fine_multi_user("a long build ahead"), "noma"),
+        )
+        .await;
+    assert_eq!(slow.0, StatusCode::ACCEPTED, "{}", slow.1);
+    let one = json!({"map_id": mid, "robots": [robots[0].clone()]});
+    let response = server
+        .client
+        .post(format!("{}/v1/fleet-plans", server.base))
+        .header("content-type", "application/json")
+        .header("prefer", "wait=10, respond-async")
+        .body(one.to_string())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::ACCEPTED);
+    assert_eq!(response.headers()["preference-applied"], "respond-async");
+    let queued: Value = response.json().await.unwrap();
+    let queued_id = queued["job_id"].as_str().unwrap();
+    let (s, not_ready) = server.get(&format!("/v1/fleet-plans/{queued_id}")).await;
+    problem(s, &not_ready, StatusCode::CONFLICT, "fleet_plan_not_ready");
+    let (s, _) = server
+        .send_as(None, "DELETE", &format!("/v1/jobs/{queued_id}"), None)
+        .await;
+    assert!(s.is_success(), "{s}");
+    assert_eq!(server.wait_job(queued_id).await["state"], "cancelled");
+    let (s, finished) = server.get(&format!("/v1/fleet-plans/{queued_id}")).await;
+    problem(s, &finished, StatusCode::CONFLICT, "job_finished");
+    let (s, missing) = server
+        .get("/v1/fleet-plans/00000000000000000000000000000000")
+        .await;
+    problem(s, &missing, StatusCode::NOT_FOUND, "not_found");
+    let (s, _) = server
+        .send_as(
+            None,
+            "DELETE",
+            &format!("/v1/jobs/{}", slow.1["job_id"].as_str().unwrap()),
+            None,
+        )
+        .await;
+    assert!(s.is_success(), "{s}");
 }

@@ -101,70 +101,8 @@ pub fn plan(
     query: &FleetQuery,
     progress: &Progress,
 ) -> Result<FleetAnswer, WorkError> {
-    let mut robots = Vec::with_capacity(query.robots.len());
-    let mut names = Vec::with_capacity(query.robots.len());
-    for (r, spec) in query.robots.iter().enumerate() {
-        let field = |f: &str| format!("robots[{r}].{f}");
-        let motion = match (spec.start, spec.goal, &spec.route) {
-            (Some(start), Some(goal), None) => {
-                for (name, p) in [("start", start), ("goal", goal)] {
-                    if !p.iter().all(|v| v.is_finite()) {
-                        return Err(
-                            FieldError::new(field(name), "coordinates must be finite").into()
-                        );
-                    }
-                }
-                Motion::Trip { start, goal }
-            }
-            (None, None, Some(route)) => Motion::Route(route.clone()),
-            (_, _, Some(_)) => {
-                return Err(FieldError::new(
-                    field("route"),
-                    "give either a route or a start and a goal, not both",
-                )
-                .into());
-            }
-            (None, _, None) => {
-                return Err(
-                    FieldError::new(field("start"), "give a start and a goal, or a route").into(),
-                );
-            }
-            (Some(_), None, None) => {
-                return Err(
-                    FieldError::new(field("goal"), "give a start and a goal, or a route").into(),
-                );
-            }
-        };
-        if !spec.threshold.is_finite() {
-            return Err(FieldError::new(field("threshold"), "must be a finite number").into());
-        }
-        let name = match &spec.name {
-            Some(n) if n.is_empty() || n.chars().count() > MAX_NAME_CHARS => {
-                return Err(FieldError::new(
-                    field("name"),
-                    format!("must have 1 to {MAX_NAME_CHARS} characters"),
-                )
-                .into());
-            }
-            Some(n) => n.clone(),
-            None => format!("robot-{r}"),
-        };
-        if names.contains(&name) {
-            return Err(FieldError::new(field("name"), format!("{name:?} is taken")).into());
-        }
-        names.push(name);
-        robots.push(RobotRequest {
-            motion,
-            threshold: spec.threshold,
-        });
-    }
-    let options = FleetOptions {
-        unit: query.unit.unwrap_or(map.native_unit()),
-        v_max_mps: scenario.mru.v_max_mps,
-        dt_s: query.dt_s,
-        horizon_s: query.horizon_s,
-        access: query.access,
-    };
+    let (robots, names) = requests(query)?;
+    let options = options(scenario, map, query);
     let mut plan = fleet::plan_fleet(map, &scenario.srus, &robots, options, progress)?;
     for instant in &mut plan.timeline {
         for theta in instant.phases.iter_mut().flatten() {
@@ -179,6 +117,87 @@ pub fn plan(
         waypoints,
         plan,
     })
+}
+
+/// Every check [`plan`] makes before its search ([`fleet::check_fleet`]): a service runs it
+/// before it admits a plan as a job.
+pub fn check(scenario: &Scenario, map: &RadioMap, query: &FleetQuery) -> Result<(), FieldError> {
+    let (robots, _) = requests(query)?;
+    fleet::check_fleet(map, &scenario.srus, &robots, options(scenario, map, query))
+}
+
+/// The plan's options: the query's, with the scenario's V_max.
+fn options(scenario: &Scenario, map: &RadioMap, query: &FleetQuery) -> FleetOptions {
+    FleetOptions {
+        unit: query.unit.unwrap_or(map.native_unit()),
+        v_max_mps: scenario.mru.v_max_mps,
+        dt_s: query.dt_s,
+        horizon_s: query.horizon_s,
+        access: query.access,
+    }
+}
+
+/// The robots as the model takes them, and their names (unique; `robot-<index>` by default).
+fn requests(query: &FleetQuery) -> Result<(Vec<RobotRequest>, Vec<String>), FieldError> {
+    let mut robots = Vec::with_capacity(query.robots.len());
+    let mut names = Vec::with_capacity(query.robots.len());
+    for (r, spec) in query.robots.iter().enumerate() {
+        let field = |f: &str| format!("robots[{r}].{f}");
+        let motion = match (spec.start, spec.goal, &spec.route) {
+            (Some(start), Some(goal), None) => {
+                for (name, p) in [("start", start), ("goal", goal)] {
+                    if !p.iter().all(|v| v.is_finite()) {
+                        return Err(FieldError::new(field(name), "coordinates must be finite"));
+                    }
+                }
+                Motion::Trip { start, goal }
+            }
+            (None, None, Some(route)) => Motion::Route(route.clone()),
+            (_, _, Some(_)) => {
+                return Err(FieldError::new(
+                    field("route"),
+                    "give either a route or a start and a goal, not both",
+                ));
+            }
+            (None, _, None) => {
+                return Err(FieldError::new(
+                    field("start"),
+                    "give a start and a goal, or a route",
+                ));
+            }
+            (Some(_), None, None) => {
+                return Err(FieldError::new(
+                    field("goal"),
+                    "give a start and a goal, or a route",
+                ));
+            }
+        };
+        if !spec.threshold.is_finite() {
+            return Err(FieldError::new(
+                field("threshold"),
+                "must be a finite number",
+            ));
+        }
+        let name = match &spec.name {
+            Some(n) if n.is_empty() || n.chars().count() > MAX_NAME_CHARS => {
+                return Err(FieldError::new(
+                    field("name"),
+                    format!("must have 1 to {MAX_NAME_CHARS} characters"),
+                ));
+            }
+            Some(n) => n.clone(),
+            None => format!("robot-{r}"),
+        };
+        if names.contains(&name) {
+            return Err(FieldError::new(field("name"), format!("{name:?} is taken")));
+        }
+        names.push(name);
+        robots.push(RobotRequest {
+            motion,
+            threshold: spec.threshold,
+        });
+    }
+    Ok((robots, names))
 }
 
 /// Robot `r`'s steps from its start to its arrival, with headings.

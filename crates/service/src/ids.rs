@@ -109,9 +109,4 @@ impl JobId {
     pub fn placement_href(&self) -> String {
         format!("/v1/placements/{self}")
     }
-
-    /// Where a Monte Carlo check job's answer (the checked path) is read.
-    pub fn check_href(&self) -> String {
-        format!("/v1/checks/{self}")
-    }
 }

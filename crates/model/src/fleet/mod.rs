@@ -20,7 +20,7 @@ mod sharing;
 pub use joint::Configuration;
 
 use crate::input::FieldError;
-use crate::planner::{DEFAULT_FRAME, Endpoint, Infeasible};
+use crate::planner::{CellGraph, DEFAULT_FRAME, Endpoint, Infeasible};
 use crate::radiomap::{Cancelled, CellSolutions, Progress, RadioMap, Unit, WorkError};
 use crate::rate::Access;
 use crate::scenario::{Grid, Sru};
@@ -125,6 +125,26 @@ pub struct FleetPlan {
     pub timeline: Vec<Instant>,
     /// Every (robot, step) whose requirement is not met: empty for a plan this module made.
     pub violations: Vec<Violation>,
+    /// Every pair of given routes that share a cell at a step or swap cells between two:
+    /// planned robots never do, but routes given as poses are checked, not moved.
+    pub conflicts: Vec<Conflict>,
+}
+
+/// Two given routes that meet: they share a cell at a step, or swap cells between two.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Conflict {
+    /// The two robots (request order, the earlier first).
+    pub robots: [usize; 2],
+    /// The first step at which they meet.
+    pub step: usize,
+    /// Its time (s).
+    pub time_s: f64,
+    /// x of the cell where they first meet (m): the shared one, or the first robot's next.
+    pub x: f64,
+    /// y of that cell (m).
+    pub y: f64,
+    /// How many steps they meet at in all.
+    pub steps: usize,
 }
 
 /// One robot's part of a plan.
@@ -405,6 +425,46 @@ pub fn plan_fleet(
     options: FleetOptions,
     progress: &Progress,
 ) -> Result<FleetPlan, WorkError> {
+    checked(map, srus, robots, options, |problem| problem.plan(progress))?
+}
+
+/// Every check [`plan_fleet`] makes before its search, and nothing after: what a service runs
+/// before it admits a plan as a job, so a bad field is a 422 at once, not a failed job. It
+/// costs each robot's route alone (one shortest-path search each).
+pub fn check_fleet(
+    map: &RadioMap,
+    srus: &[Sru],
+    robots: &[RobotRequest],
+    options: FleetOptions,
+) -> Result<(), FieldError> {
+    checked(map, srus, robots, options, |_| ())
+}
+
+/// A fleet problem checked and ready to search: borrowing what [`checked`] derived.
+struct Problem<'m> {
+    robots: &'m [RobotRequest],
+    options: FleetOptions,
+    grid: &'m Grid,
+    dt_s: f64,
+    move_steps: [usize; 2],
+    horizon_steps: usize,
+    given: Vec<Option<Track>>,
+    ends: Vec<((usize, Endpoint), (usize, Endpoint))>,
+    alone: Vec<Result<Track, Infeasible>>,
+    graph: CellGraph<'m>,
+    req: Requirements<'m>,
+}
+
+/// Checks the request (each error names its field) and derives what the search needs, then
+/// hands it to `then`. The problem borrows values derived here (the map's values in the
+/// request's unit), hence a continuation rather than a returned struct.
+fn checked<R>(
+    map: &RadioMap,
+    srus: &[Sru],
+    robots: &[RobotRequest],
+    options: FleetOptions,
+    then: impl FnOnce(Problem<'_>) -> R,
+) -> Result<R, FieldError> {
     let CellSolutions::Gain {
         models,
         antenna_height_m,
@@ -600,7 +660,7 @@ pub fn plan_fleet(
             })
         }
     };
-    let mut req = Requirements {
+    let req = Requirements {
         map,
         joint,
         need,
@@ -608,79 +668,132 @@ pub fn plan_fleet(
         links: vec![NO_LINK; grid.cells()],
         store: Vec::new(),
     };
-
-    let occupied_by_srus: Vec<u32> = req.sharing.as_ref().map_or(Vec::new(), |s| {
-        s.statics.iter().map(|s| s.cell as u32).collect()
-    });
-    let mut world = World::new(graph, move_steps, horizon_steps, progress, occupied_by_srus);
-    progress.start(robots.len());
-    // Given routes are fixed first, then the trips are planned in request order.
-    let order: Vec<usize> = (0..robots.len())
-        .filter(|&r| given[r].is_some())
-        .chain((0..robots.len()).filter(|&r| given[r].is_none()))
-        .collect();
-    let mut plans: Vec<Option<RobotPlan>> = vec![None; robots.len()];
-    for (position, &r) in order.iter().enumerate() {
-        if progress.is_cancelled() {
-            return Err(Cancelled.into());
-        }
-        let robot = &robots[r];
-        let ((start, start_end), (goal, goal_end)) = ends[r].clone();
-        let outcome = if let Some(track) = &given[r] {
-            Ok((track.clone(), PlannedBy::Given))
-        } else {
-            // The trips after this one wait at their starts meanwhile.
-            let parked: Vec<usize> = order[position + 1..].iter().map(|&q| ends[q].0.0).collect();
-            match &alone[r] {
-                Err(why) => Err(Unserved::Alone { why: *why }),
-                Ok(route) => {
-                    world.plan(&mut req, r, robot.threshold, route, start, goal, &parked)?
-                }
-            }
-        };
-        progress.advance(1);
-        let mut plan = RobotPlan {
-            start: start_end,
-            goal: goal_end,
-            threshold: robot.threshold,
-            planned_by: None,
-            unserved: None,
-            arrival_step: None,
-            waited_steps: 0,
-            distance_m: 0.0,
-            cells: Vec::new(),
-        };
-        match outcome {
-            Ok((track, by)) => {
-                plan.planned_by = Some(by);
-                plan.arrival_step = Some(track.at.len() - 1);
-                (plan.waited_steps, plan.distance_m) = match &robot.motion {
-                    Motion::Route(poses) => (0, polyline_length(poses)),
-                    Motion::Trip { .. } => (
-                        track.waited(),
-                        track.distance_cells(grid) * grid.resolution_m,
-                    ),
-                };
-                plan.cells = track.at.iter().map(|&c| c as usize).collect();
-                world.fix(r, track);
-            }
-            Err(why) => plan.unserved = Some(why),
-        }
-        plans[r] = Some(plan);
-    }
-    let plans: Vec<RobotPlan> = plans.into_iter().map(|p| p.expect("every robot")).collect();
-    let (timeline, violations) = world.timeline(&mut req, &plans, options.unit, dt_s);
-    Ok(FleetPlan {
-        unit: options.unit,
-        access: options.access,
+    Ok(then(Problem {
+        robots,
+        options,
+        grid,
         dt_s,
         move_steps,
         horizon_steps,
-        frame: DEFAULT_FRAME,
-        robots: plans,
-        timeline,
-        violations,
-    })
+        given,
+        ends,
+        alone,
+        graph,
+        req,
+    }))
+}
+
+impl Problem<'_> {
+    /// Plans the robots in order (given routes first) and writes the timeline.
+    fn plan(self, progress: &Progress) -> Result<FleetPlan, WorkError> {
+        let Problem {
+            robots,
+            options,
+            grid,
+            dt_s,
+            move_steps,
+            horizon_steps,
+            given,
+            ends,
+            alone,
+            graph,
+            mut req,
+        } = self;
+        let occupied_by_srus: Vec<u32> = req.sharing.as_ref().map_or(Vec::new(), |s| {
+            s.statics.iter().map(|s| s.cell as u32).collect()
+        });
+        let mut world = World::new(graph, move_steps, horizon_steps, progress, occupied_by_srus);
+        progress.start(robots.len());
+        // Given routes are fixed first, then the trips are planned in request order.
+        let order: Vec<usize> = (0..robots.len())
+            .filter(|&r| given[r].is_some())
+            .chain((0..robots.len()).filter(|&r| given[r].is_none()))
+            .collect();
+        let mut plans: Vec<Option<RobotPlan>> = vec![None; robots.len()];
+        for (position, &r) in order.iter().enumerate() {
+            if progress.is_cancelled() {
+                return Err(Cancelled.into());
+            }
+            let robot = &robots[r];
+            let ((start, start_end), (goal, goal_end)) = ends[r].clone();
+            let outcome = if let Some(track) = &given[r] {
+                Ok((track.clone(), PlannedBy::Given))
+            } else {
+                // The trips after this one wait at their starts meanwhile.
+                let parked: Vec<usize> =
+                    order[position + 1..].iter().map(|&q| ends[q].0.0).collect();
+                match &alone[r] {
+                    Err(why) => Err(Unserved::Alone { why: *why }),
+                    Ok(route) => {
+                        world.plan(&mut req, r, robot.threshold, route, start, goal, &parked)?
+                    }
+                }
+            };
+            progress.advance(1);
+            let mut plan = RobotPlan {
+                start: start_end,
+                goal: goal_end,
+                threshold: robot.threshold,
+                planned_by: None,
+                unserved: None,
+                arrival_step: None,
+                waited_steps: 0,
+                distance_m: 0.0,
+                cells: Vec::new(),
+            };
+            match outcome {
+                Ok((track, by)) => {
+                    plan.planned_by = Some(by);
+                    plan.arrival_step = Some(track.at.len() - 1);
+                    (plan.waited_steps, plan.distance_m) = match &robot.motion {
+                        Motion::Route(poses) => (0, polyline_length(poses)),
+                        Motion::Trip { .. } => (
+                            track.waited(),
+                            track.distance_cells(grid) * grid.resolution_m,
+                        ),
+                    };
+                    plan.cells = track.at.iter().map(|&c| c as usize).collect();
+                    world.fix(r, track);
+                }
+                Err(why) => plan.unserved = Some(why),
+            }
+            plans[r] = Some(plan);
+        }
+        let plans: Vec<RobotPlan> = plans.into_iter().map(|p| p.expect("every robot")).collect();
+        let (timeline, violations) = world.timeline(&mut req, &plans, options.unit, dt_s);
+        let tracks: Vec<(usize, &Track)> = given
+            .iter()
+            .enumerate()
+            .filter_map(|(r, t)| Some((r, t.as_ref()?)))
+            .collect();
+        let conflicts = search::meetings(&tracks)
+            .into_iter()
+            .map(|m| {
+                let (i, j) = grid.cell_of(m.cell as usize);
+                let [x, y] = grid.centre(i, j);
+                Conflict {
+                    robots: m.robots,
+                    step: m.step,
+                    time_s: m.step as f64 * dt_s,
+                    x,
+                    y,
+                    steps: m.steps,
+                }
+            })
+            .collect();
+        Ok(FleetPlan {
+            unit: options.unit,
+            access: options.access,
+            dt_s,
+            move_steps,
+            horizon_steps,
+            frame: DEFAULT_FRAME,
+            robots: plans,
+            timeline,
+            violations,
+            conflicts,
+        })
+    }
 }
 
 /// A given route's track: at step k the cell of its position at time k·Δt. Errors name the

@@ -80,6 +80,51 @@ pub(crate) fn timed(grid: &Grid, cells: &[usize], move_steps: [usize; 2]) -> Tra
     track
 }
 
+/// Where two tracks first meet, and how often.
+pub(crate) struct Meeting {
+    pub robots: [usize; 2],
+    pub step: usize,
+    pub cell: u32,
+    pub steps: usize,
+}
+
+/// Every pair of `tracks` (robot, track) that share a cell at a step, or swap cells between
+/// two, each tracked until both have arrived (a robot stays at its goal after).
+pub(crate) fn meetings(tracks: &[(usize, &Track)]) -> Vec<Meeting> {
+    let mut out = Vec::new();
+    for (a, (ra, ta)) in tracks.iter().enumerate() {
+        for (rb, tb) in &tracks[a + 1..] {
+            let end = ta.at.len().max(tb.at.len());
+            let mut first: Option<(usize, u32)> = None;
+            let mut steps = 0;
+            for k in 0..end {
+                let (ca, cb) = (ta.state(k).0, tb.state(k).0);
+                let (na, nb) = (ta.state(k + 1).0, tb.state(k + 1).0);
+                let place = if ca == cb {
+                    Some((k, ca))
+                } else if na == cb && nb == ca {
+                    Some((k, na))
+                } else {
+                    None
+                };
+                if let Some(p) = place {
+                    first.get_or_insert(p);
+                    steps += 1;
+                }
+            }
+            if let Some((step, cell)) = first {
+                out.push(Meeting {
+                    robots: [*ra.min(rb), *ra.max(rb)],
+                    step,
+                    cell,
+                    steps,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// Appends a move from `from` to `to` of `d` steps (a wait when they are equal).
 fn push_move(track: &mut Track, from: u32, to: u32, d: usize) {
     for _ in 1..d {

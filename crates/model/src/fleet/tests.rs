@@ -539,6 +539,68 @@ fn a_given_route_is_checked_as_given() {
     );
 }
 
+/// Given routes that meet are reported, each pair once with its first step, place and count:
+/// against a step-by-step oracle on the sampled poses.
+#[test]
+fn given_routes_that_meet_are_reported() {
+    let map = paper_map();
+    let given = |poses: Vec<[f64; 3]>| RobotRequest {
+        motion: Motion::Route(poses),
+        threshold: -200.0,
+    };
+    // 0 drives east along y = 0.5 and 1 west along it: they swap or share a cell mid-way.
+    // 2 crosses y = 0.5 from south to north at x = 5.5 long after they have passed, then
+    // parks at (5.5, 3.5) where 3 arrives later and stays.
+    let robots = [
+        given(vec![[-4.5, 0.5, 0.0], [4.5, 0.5, 18.0]]),
+        given(vec![[4.5, 0.5, 0.0], [-4.5, 0.5, 18.0]]),
+        given(vec![[5.5, -3.5, 20.0], [5.5, 3.5, 34.0]]),
+        given(vec![[9.5, 3.5, 0.0], [5.5, 3.5, 40.0]]),
+    ];
+    let plan = plan_fleet(&map, &[], &robots, options(), &Progress::default()).unwrap();
+    // The oracle: every pair, every step, from the timeline's positions (a robot stays at its
+    // goal once arrived).
+    let last = plan.timeline.len() - 1;
+    let at = |r: usize, k: usize| {
+        let i = &plan.timeline[k.min(last)];
+        i.robots[r].map(|p| (p.x, p.y)).unwrap()
+    };
+    let mut expected = Vec::new();
+    for a in 0..robots.len() {
+        for b in a + 1..robots.len() {
+            let meets: Vec<usize> = (0..=last)
+                .filter(|&k| {
+                    at(a, k) == at(b, k) || (at(a, k + 1) == at(b, k) && at(b, k + 1) == at(a, k))
+                })
+                .collect();
+            if let Some(&first) = meets.first() {
+                expected.push((a, b, first, meets.len()));
+            }
+        }
+    }
+    let got: Vec<_> = plan
+        .conflicts
+        .iter()
+        .map(|c| (c.robots[0], c.robots[1], c.step, c.steps))
+        .collect();
+    assert_eq!(got, expected);
+    assert_eq!(
+        got.iter().map(|g| (g.0, g.1)).collect::<Vec<_>>(),
+        [(0, 1), (2, 3)],
+        "the east and west robots meet, and the last two at the parking cell"
+    );
+    let parking = &plan.conflicts[1];
+    assert_eq!((parking.x, parking.y), (5.5, 3.5));
+    assert!((parking.time_s - parking.step as f64 * plan.dt_s).abs() < 1e-12);
+    // Planned robots never meet anyone: a plan of trips has none.
+    let trips = [
+        trip([-9.5, 0.5], [9.5, 0.5], -200.0),
+        trip([9.5, 0.5], [-9.5, 0.5], -200.0),
+    ];
+    let plan = plan_fleet(&map, &[], &trips, options(), &Progress::default()).unwrap();
+    assert!(plan.conflicts.is_empty());
+}
+
 /// A robot planned after a given route never makes it fail where it met its requirement on
 /// its own, and never shares its cell; the given route is checked, not moved.
 #[test]

@@ -81,6 +81,9 @@ pub(crate) enum Error {
     /// The Monte Carlo check is still running.
     #[error("check {job_id} is still running; poll /v1/jobs/{job_id}")]
     CheckNotReady { job_id: JobId },
+    /// The fleet plan is still running.
+    #[error("fleet plan {job_id} is still running; poll /v1/jobs/{job_id}")]
+    FleetPlanNotReady { job_id: JobId },
     /// The job ended already (`state`: done, failed or cancelled).
     #[error("job {job_id} is already {state}")]
     JobFinished { job_id: JobId, state: JobState },

@@ -114,6 +114,11 @@ pub fn route_table() -> Vec<(&'static str, &'static [&'static str], MethodRouter
         ),
         ("/v1/paths", &["post"], post(paths::plan_path)),
         ("/v1/fleet-plans", &["post"], post(fleet::plan_fleet)),
+        (
+            "/v1/fleet-plans/{plan_id}",
+            &["get"],
+            get(fleet::get_fleet_plan),
+        ),
         ("/v1/checks/{check_id}", &["get"], get(paths::get_check)),
         ("/v1/sweeps", &["post"], post(paths::sweep)),
     ]

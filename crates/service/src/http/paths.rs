@@ -9,7 +9,7 @@ use crate::app::App;
 use crate::app::Error;
 use crate::app::answers::{OpenAnswer, PathQuery};
 use crate::app::identity::Caller;
-use crate::app::jobs::{SYNC_CHECK_S, Work};
+use crate::app::jobs::{AnswerKind, JobKind, SYNC_CHECK_S};
 use crate::app::maps::{Obtained, check_budget};
 use crate::ids::{JobId, MapId, ScenarioId};
 use axum::Json;
@@ -374,9 +374,11 @@ pub(super) async fn plan_path(
                 // Longer than a request should wait: a job with progress and cancel, its
                 // answer (this body with the report) at the job's `result_href`.
                 let scenario_id = ScenarioId::of_key(&map.key);
-                let job = state
-                    .jobs()
-                    .check(scenario_id, caller.owner(), move |progress| {
+                let job = state.jobs().answer(
+                    AnswerKind::Check,
+                    scenario_id,
+                    caller.owner(),
+                    move |progress| {
                         let started = Instant::now();
                         let report = path::check(&scenario, &map, &path, draws, seed, progress)?;
                         let checked = CheckedPath {
@@ -387,7 +389,8 @@ pub(super) async fn plan_path(
                         answer["took_ms"] =
                             serde_json::json!(started.elapsed().as_secs_f64() * 1e3);
                         Ok(answer)
-                    })?;
+                    },
+                )?;
                 return Ok(accepted(job.view()));
             }
             let (scenario, map, path) = (scenario.clone(), map.clone(), path.clone());
@@ -488,9 +491,9 @@ pub(super) async fn get_check(
     let job = state
         .jobs()
         .get(&check_id)
-        .filter(|j| matches!(j.work, Work::Check { .. }) && j.visible_to(&caller))
+        .filter(|j| j.kind() == JobKind::Check && j.visible_to(&caller))
         .ok_or_else(|| Error::not_found("check", &check_id))?;
-    match job.check() {
+    match job.answer(AnswerKind::Check) {
         Some(outcome) => Ok(Json(&outcome.answer).into_response()),
         None if job.state().is_terminal() => Err(Error::JobFinished {
             job_id: job.id.clone(),

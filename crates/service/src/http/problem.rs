@@ -311,6 +311,13 @@ impl From<app::Error> for ApiError {
                 detail,
             )
             .with_job(job_id),
+            E::FleetPlanNotReady { job_id } => Self::new(
+                StatusCode::CONFLICT,
+                "fleet_plan_not_ready",
+                "Fleet plan not ready",
+                detail,
+            )
+            .with_job(job_id),
             E::JobFinished { .. } => Self::new(
                 StatusCode::CONFLICT,
                 "job_finished",

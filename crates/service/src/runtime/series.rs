@@ -120,12 +120,12 @@ pub(crate) const SERIES: &[(&str, Kind, &str)] = &[
     (
         "irs_job_seconds",
         Histogram,
-        "Run time of the jobs that ended [kind: map, placement or check]",
+        "Run time of the jobs that ended [kind: map, placement, check or fleet]",
     ),
     (
         "irs_jobs_waiting",
         Gauge,
-        "Jobs (map builds, placements, checks) waiting for a worker on this replica (bounded by --queue)",
+        "Jobs (map builds, placements, checks, fleet plans) waiting for a worker on this replica (bounded by --queue)",
     ),
     (
         "irs_jobs_running",
@@ -146,6 +146,11 @@ pub(crate) const SERIES: &[(&str, Kind, &str)] = &[
         "irs_checks_total",
         Counter,
         "Monte Carlo path checks started as jobs",
+    ),
+    (
+        "irs_fleet_plans_total",
+        Counter,
+        "Fleet plans started as jobs",
     ),
     (
         "irs_store_map_bytes",

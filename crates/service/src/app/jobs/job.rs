@@ -1,7 +1,7 @@
 //! One job: its state, its kind, what it does ([`Work`]), its times and error, how a map job
 //! delivers its map to the requests waiting for it, and waiting for it to end.
 
-use super::checks::CheckOutcome;
+use super::answers::{AnswerKind, AnswerOutcome};
 use super::placements::PlacementOutcome;
 use crate::app::identity::{Caller, Owner, Owners};
 use crate::ids::{JobId, MapId, ScenarioId};
@@ -82,16 +82,24 @@ pub enum JobKind {
     Placement,
     /// Checks a path's bounds by Monte Carlo.
     Check,
+    /// Plans a fleet.
+    Fleet,
 }
 
 impl JobKind {
-    const ALL: [JobKind; 3] = [JobKind::Map, JobKind::Placement, JobKind::Check];
+    const ALL: [JobKind; 4] = [
+        JobKind::Map,
+        JobKind::Placement,
+        JobKind::Check,
+        JobKind::Fleet,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
             JobKind::Map => "map",
             JobKind::Placement => "placement",
             JobKind::Check => "check",
+            JobKind::Fleet => "fleet",
         }
     }
 }
@@ -132,9 +140,10 @@ pub enum Work {
     Placement {
         outcome: OnceLock<Arc<PlacementOutcome>>,
     },
-    /// Checks a path by Monte Carlo; the path answer with its report is kept here once done.
-    Check {
-        outcome: OnceLock<Arc<CheckOutcome>>,
+    /// Computes one JSON answer (a path's Monte Carlo check, a fleet plan), kept here once done.
+    Answer {
+        kind: AnswerKind,
+        outcome: OnceLock<Arc<AnswerOutcome>>,
     },
 }
 
@@ -253,7 +262,7 @@ impl Job {
         match &self.work {
             Work::Map { .. } => JobKind::Map,
             Work::Placement { .. } => JobKind::Placement,
-            Work::Check { .. } => JobKind::Check,
+            Work::Answer { kind, .. } => kind.job_kind(),
         }
     }
 
@@ -261,7 +270,7 @@ impl Job {
     pub(super) fn checkpoint(&self) -> Option<&Arc<Checkpoint>> {
         match &self.work {
             Work::Map { checkpoint, .. } => Some(checkpoint),
-            Work::Placement { .. } | Work::Check { .. } => None,
+            Work::Placement { .. } | Work::Answer { .. } => None,
         }
     }
 
@@ -269,7 +278,7 @@ impl Job {
     pub fn map_id(&self) -> Option<&MapId> {
         match &self.work {
             Work::Map { map_id, .. } => Some(map_id),
-            Work::Placement { .. } | Work::Check { .. } => None,
+            Work::Placement { .. } | Work::Answer { .. } => None,
         }
     }
 
@@ -329,14 +338,15 @@ impl Job {
     pub fn placement(&self) -> Option<Arc<PlacementOutcome>> {
         match &self.work {
             Work::Placement { outcome } => outcome.get().cloned(),
-            Work::Map { .. } | Work::Check { .. } => None,
+            Work::Map { .. } | Work::Answer { .. } => None,
         }
     }
 
-    /// A Monte Carlo check's outcome, once it is done.
-    pub fn check(&self) -> Option<Arc<CheckOutcome>> {
+    /// The answer of a job of `kind`, once it is done.
+    pub fn answer(&self, kind: AnswerKind) -> Option<Arc<AnswerOutcome>> {
         match &self.work {
-            Work::Check { outcome } => outcome.get().cloned(),
+            Work::Answer { kind: k, outcome } if *k == kind => outcome.get().cloned(),
+            Work::Answer { .. } => None,
             Work::Map { .. } | Work::Placement { .. } => None,
         }
     }
@@ -345,7 +355,10 @@ impl Job {
     pub(super) fn answer_bytes(&self) -> usize {
         self.placement()
             .map(|o| o.bytes)
-            .or_else(|| self.check().map(|o| o.bytes))
+            .or_else(|| match &self.work {
+                Work::Answer { outcome, .. } => outcome.get().map(|o| o.bytes),
+                _ => None,
+            })
             .unwrap_or(0)
     }
 

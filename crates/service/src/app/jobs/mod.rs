@@ -1,19 +1,19 @@
-//! Jobs: map builds, placement searches and Monte Carlo checks. Every job runs on tokio's blocking pool (never on
+//! Jobs: map builds, placement searches, Monte Carlo checks and fleet plans. Every job runs on tokio's blocking pool (never on
 //! the async runtime's threads), at most `workers` at once behind one semaphore, with at most
 //! `queue` more waiting. This file holds the table of jobs (admission, running, history,
 //! listing, cancellation); [`job`] one job, [`record`] its view and record, [`maps`] the map
-//! builds' single flight, [`placements`] the placement searches, [`checks`] the Monte Carlo
-//! checks of paths.
+//! builds' single flight, [`placements`] the placement searches, [`answers`] the jobs with
+//! one JSON answer (Monte Carlo checks of paths, fleet plans).
 
-mod checks;
+mod answers;
 mod job;
 mod maps;
 mod placements;
 mod record;
 
-pub use checks::SYNC_CHECK_S;
+pub use answers::{AnswerKind, SYNC_CHECK_S};
 use job::JobTimes;
-pub use job::{Job, JobState, Withdrawn, Work};
+pub use job::{Job, JobKind, JobState, Withdrawn, Work};
 pub use maps::MapRequestOutcome;
 pub(crate) use maps::SharedBuild;
 pub use placements::{PlacementOutcome, PlacementSearch};

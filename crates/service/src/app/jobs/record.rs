@@ -2,7 +2,7 @@
 //! ([`JobRecord`], persisted: records written by earlier releases must stay readable, so a
 //! field added must default when absent); and a [`Job`] turned into each and back.
 
-use super::checks::CheckOutcome;
+use super::answers::{AnswerKind, AnswerOutcome};
 use super::job::{Job, JobKind, JobState, JobTimes, MapDelivery, Work, from_unix, unix};
 use super::placements::PlacementOutcome;
 use crate::app::identity::{Owner, Owners};
@@ -61,7 +61,8 @@ impl Serialize for JobView {
         let map_id = self.key.as_ref().map(MapId::of);
         let result_href = match (self.kind(), &map_id) {
             (JobKind::Map, Some(map_id)) => map_id.href(),
-            (JobKind::Check, _) => self.job_id.check_href(),
+            (JobKind::Check, _) => AnswerKind::Check.href(&self.job_id),
+            (JobKind::Fleet, _) => AnswerKind::Fleet.href(&self.job_id),
             _ => self.job_id.placement_href(),
         };
         let mut job = serializer.serialize_struct("JobView", 15)?;
@@ -106,6 +107,9 @@ pub(crate) struct JobRecord {
     /// Check jobs that finished: the checked path's answer. Absent from older records.
     #[serde(default)]
     pub check: Option<serde_json::Value>,
+    /// Fleet-plan jobs that finished: the plan. Absent from older records.
+    #[serde(default)]
+    pub fleet: Option<serde_json::Value>,
 }
 
 impl JobRecord {
@@ -130,6 +134,7 @@ impl JobRecord {
             owners: owner.map(|o| o.to_string()).into_iter().collect(),
             placement: None,
             check: None,
+            fleet: None,
         }
     }
 
@@ -152,7 +157,7 @@ impl Job {
             scenario_id: self.scenario_id.clone(),
             key: match &self.work {
                 Work::Map { key, .. } => Some(key.clone()),
-                Work::Placement { .. } | Work::Check { .. } => None,
+                Work::Placement { .. } | Work::Answer { .. } => None,
             },
             state: self.state(),
             cells_done: self.progress.cells_done(),
@@ -184,7 +189,12 @@ impl Job {
             placement: self
                 .placement()
                 .map(|outcome| (outcome.answer.clone(), outcome.registered)),
-            check: self.check().map(|outcome| outcome.answer.clone()),
+            check: self
+                .answer(AnswerKind::Check)
+                .map(|outcome| outcome.answer.clone()),
+            fleet: self
+                .answer(AnswerKind::Fleet)
+                .map(|outcome| outcome.answer.clone()),
         }
     }
 
@@ -208,33 +218,36 @@ impl Job {
             seq,
             placement,
             check,
+            fleet,
             ..
         } = record;
         if !view.state.is_terminal() {
             return None;
         }
-        let work = match (view.kind(), view.key, placement, check) {
-            (JobKind::Map, Some(key), None, None) => Work::Map {
+        let answered = |kind, answer: Option<serde_json::Value>| {
+            let outcome = OnceLock::new();
+            if let Some(answer) = answer {
+                let _ = outcome.set(Arc::new(AnswerOutcome::new(answer)));
+            }
+            Work::Answer { kind, outcome }
+        };
+        let work = match (view.kind(), view.key, placement, check, fleet) {
+            (JobKind::Map, Some(key), None, None, None) => Work::Map {
                 map_id: MapId::of(&key),
                 key,
                 delivery: Mutex::new(MapDelivery::default()),
                 resumable: false,
                 checkpoint: Arc::default(),
             },
-            (JobKind::Placement, None, placement, None) => {
+            (JobKind::Placement, None, placement, None, None) => {
                 let outcome = OnceLock::new();
                 if let Some((answer, registered)) = placement {
                     let _ = outcome.set(Arc::new(PlacementOutcome::new(answer, registered)));
                 }
                 Work::Placement { outcome }
             }
-            (JobKind::Check, None, None, check) => {
-                let outcome = OnceLock::new();
-                if let Some(answer) = check {
-                    let _ = outcome.set(Arc::new(CheckOutcome::new(answer)));
-                }
-                Work::Check { outcome }
-            }
+            (JobKind::Check, None, None, check, None) => answered(AnswerKind::Check, check),
+            (JobKind::Fleet, None, None, None, fleet) => answered(AnswerKind::Fleet, fleet),
             _ => return None,
         };
         let progress = Progress::default();
@@ -273,6 +286,9 @@ mod tests {
 
     /// A finished Monte Carlo check's record: records carry their kind since checks exist.
     const CHECK_RECORD: &str = r#"{"job_id":"00112233445566778899aabbccddeeff","seq":9,"owner":null,"owners":[],"scenario_id":"5c3na410","kind":"check","key":null,"state":"done","cells_done":5,"cells_total":5,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":1700000009.0,"error":null,"placement":null,"check":{"feasible":true}}"#;
+
+    /// A finished fleet plan's record.
+    const FLEET_RECORD: &str = r#"{"job_id":"ffeeddccbbaa99887766554433221100","seq":10,"owner":null,"owners":[],"scenario_id":"5c3na410","kind":"fleet","key":null,"state":"done","cells_done":3,"cells_total":3,"created_at":1700000000.0,"started_at":1700000001.0,"finished_at":1700000002.0,"error":null,"placement":null,"check":null,"fleet":{"robots":[]}}"#;
 
     /// A record reads back as the record it was, and carries every field of today's format
     /// (so the release before this one reads it too).
@@ -321,10 +337,25 @@ mod tests {
         let job = Job::restore(check).unwrap();
         assert_eq!(serde_json::to_string(&job.view()).unwrap(), expected);
         assert_eq!(
-            job.check().unwrap().answer,
+            job.answer(AnswerKind::Check).unwrap().answer,
             serde_json::json!({"feasible": true})
         );
         round_trip(&job.record(), CHECK_RECORD);
+
+        let fleet: JobRecord = serde_json::from_str(FLEET_RECORD).unwrap();
+        let job = Job::restore(fleet).unwrap();
+        let view = serde_json::to_value(job.view()).unwrap();
+        assert_eq!(view["kind"], "fleet");
+        assert_eq!(
+            view["result_href"],
+            "/v1/fleet-plans/ffeeddccbbaa99887766554433221100"
+        );
+        assert_eq!(
+            job.answer(AnswerKind::Fleet).unwrap().answer,
+            serde_json::json!({"robots": []})
+        );
+        assert!(job.answer(AnswerKind::Check).is_none());
+        round_trip(&job.record(), FLEET_RECORD);
     }
 
     /// A record whose kind and contents disagree is not restored.
@@ -333,6 +364,8 @@ mod tests {
         let odd = CHECK_RECORD.replace(r#""kind":"check""#, r#""kind":"map""#);
         assert!(Job::restore(serde_json::from_str(&odd).unwrap()).is_none());
         let odd = PLACEMENT_RECORD.replace(r#""placement":"#, r#""kind":"check","placement":"#);
+        assert!(Job::restore(serde_json::from_str(&odd).unwrap()).is_none());
+        let odd = FLEET_RECORD.replace(r#""kind":"fleet""#, r#""kind":"check""#);
         assert!(Job::restore(serde_json::from_str(&odd).unwrap()).is_none());
     }
 }
