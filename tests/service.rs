@@ -3452,6 +3452,111 @@ async fn fleets_are_planned_over_http() {
     }
 }
 
+/// `GET /v1/maps/{id}?unit=u`: the values and statistics in another unit, each the map's own
+/// through the serving AP's link budget (dBm: gain + P_tx, one offset for one AP); a rate map
+/// answers rates only; a map of two APs names the serving AP of every free cell.
+#[tokio::test]
+async fn map_bodies_answer_in_any_unit_with_the_serving_ap() {
+    let server = start(&[]);
+    let doc = scenario("paper-single-user.json", |_| {});
+    let (s, map) = server
+        .post("/v1/maps", json!({"scenario": doc.clone(), "kind": "gain"}))
+        .await;
+    assert_eq!(s, StatusCode::OK, "{map}");
+    let mid = map["map_id"].as_str().unwrap();
+    let (_, gain) = server.get(&format!("/v1/maps/{mid}")).await;
+    let (s, dbm) = server.get(&format!("/v1/maps/{mid}?unit=dbm")).await;
+    assert_eq!(s, StatusCode::OK, "{dbm}");
+    assert_eq!(
+        (gain["unit"].as_str(), dbm["unit"].as_str()),
+        (Some("dB"), Some("dBm"))
+    );
+    assert!(gain.get("serving_ap").is_none(), "one AP: no serving grid");
+    let p_tx = doc["ap"]["tx_power_dbm"].as_f64().unwrap();
+    let (g, d) = (
+        gain["values"].as_array().unwrap(),
+        dbm["values"].as_array().unwrap(),
+    );
+    let mut compared = 0;
+    for (gr, dr) in g.iter().zip(d) {
+        for (gv, dv) in gr.as_array().unwrap().iter().zip(dr.as_array().unwrap()) {
+            match (gv.as_f64(), dv.as_f64()) {
+                (Some(gv), Some(dv)) => {
+                    assert!((dv - (gv + p_tx)).abs() < 1e-9, "{gv} dB, {dv} dBm");
+                    compared += 1;
+                }
+                (None, None) => {}
+                other => panic!("null in one unit only: {other:?}"),
+            }
+        }
+    }
+    assert_eq!(
+        compared,
+        gain["stats"]["valued_cells"].as_u64().unwrap() as usize
+    );
+    let shift = dbm["stats"]["max"].as_f64().unwrap() - gain["stats"]["max"].as_f64().unwrap();
+    assert!(
+        (shift - p_tx).abs() < 1e-9,
+        "the statistics are in the unit too"
+    );
+    let (s, body) = server.get(&format!("/v1/maps/{mid}?unit=furlongs")).await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert_eq!(body["field"], "unit");
+    let (s, body) = server.get(&format!("/v1/maps/{mid}?units=dbm")).await;
+    assert!(s.is_client_error(), "{s} {body}");
+    assert_eq!(body["field"], "units");
+
+    // Two APs, one in each half of the room: the serving one is the stronger, as the maps of
+    // each AP alone say.
+    let with_aps = |aps: Vec<[f64; 3]>| {
+        scenario("paper-single-user.json", move |v| {
+            let ap = v.as_object_mut().unwrap().remove("ap").unwrap();
+            v["aps"] = aps
+                .iter()
+                .map(|p| {
+                    let mut ap = ap.clone();
+                    ap["position"] = json!(p);
+                    ap
+                })
+                .collect();
+        })
+    };
+    let (west, east) = ([-9.0, 0.0, 2.0], [9.0, 0.0, 2.0]);
+    let mut bodies = Vec::new();
+    for aps in [vec![west, east], vec![west], vec![east]] {
+        let (s, map) = server
+            .post(
+                "/v1/maps",
+                json!({"scenario": with_aps(aps), "kind": "gain"}),
+            )
+            .await;
+        assert_eq!(s, StatusCode::OK, "{map}");
+        let (_, body) = server
+            .get(&format!("/v1/maps/{}", map["map_id"].as_str().unwrap()))
+            .await;
+        bodies.push(body);
+    }
+    let serving = bodies[0]["serving_ap"].as_array().unwrap();
+    assert!(bodies[1].get("serving_ap").is_none());
+    let mut served = [0, 0];
+    for (i, row) in serving.iter().enumerate() {
+        for (j, ap) in row.as_array().unwrap().iter().enumerate() {
+            let value = |b: usize| bodies[b]["values"][i][j].as_f64();
+            let Some(ap) = ap.as_u64() else {
+                assert!(value(0).is_none(), "({i}, {j}) has a value but no AP");
+                continue;
+            };
+            let (w, e) = (value(1).unwrap(), value(2).unwrap());
+            if (w - e).abs() > 1e-9 {
+                assert_eq!(ap, u64::from(e > w), "({i}, {j}): {w} dB west, {e} dB east");
+            }
+            assert!((value(0).unwrap() - w.max(e)).abs() < 1e-9);
+            served[ap as usize] += 1;
+        }
+    }
+    assert!(served[0] > 100 && served[1] > 100, "{served:?}");
+}
+
 /// A fleet plan over robots × cells beyond 4 × `--sync-cells` runs as a job (202, kind
 /// `fleet`, progress in robots) whose plan, read at its `result_href`, is the plan a request
 /// that waits gets; a bad field is still a 422 before any job; `Prefer: respond-async` asks for

@@ -2,12 +2,14 @@
 //! `irs-planner map` prints and `GET /v1/maps/{id}` returns.
 
 use crate::scenario::{ScenarioDocument, hash_hex};
+use irs_model::input::FieldError;
 use irs_model::placement::Naming;
 use irs_model::radiomap::{
-    self, Cancelled, CertificateSummary, ClosedPassage, MapKey, MapStats, Progress, RadioMap,
+    self, Cancelled, CertificateSummary, ClosedPassage, MapKey, MapStats, Progress, RadioMap, Unit,
 };
 use irs_model::scenario::{Grid, Scenario};
 use serde::Serialize;
+use std::borrow::Cow;
 
 /// The JSON body of a map (CLI `map` and `GET /v1/maps/{id}`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -16,7 +18,8 @@ pub struct MapBody<'a> {
     pub map_id: String,
     /// What defines the map.
     pub key: MapKey,
-    /// The unit of `values`: `dB` (gain maps) or `bit/s/Hz` (rate maps).
+    /// The symbol of the unit of `values`: the map's own, `dB` (gain maps) or `bit/s/Hz`
+    /// (rate maps), unless another was asked for ([`body_in`]).
     pub unit: &'static str,
     /// The grid `values` are laid on (room bounds, Δ, nx × ny).
     pub grid: Grid,
@@ -35,14 +38,31 @@ pub struct MapBody<'a> {
     /// Rate maps: the SDR upper bound per cell, laid out like `values`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub upper_bound: Option<Rows<'a>>,
+    /// Gain maps of several APs: the AP serving each cell (the strongest), laid out like
+    /// `values`, null where occupied.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub serving_ap: Option<ServingRows>,
+}
+
+/// The serving AP per cell, written as rows of the grid like [`Rows`], null where occupied.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServingRows {
+    serving: Vec<Option<usize>>,
+    ny: usize,
+}
+
+impl Serialize for ServingRows {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.serving.chunks(self.ny))
+    }
 }
 
 /// Flat per-cell data written as rows of the grid (`[i][j]`), null where not finite, straight
 /// from the map's own vector: a copy as nested vectors was a quarter of `irs-planner map`'s
 /// time on a million cells.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Rows<'a> {
-    data: &'a [f64],
+    data: Cow<'a, [f64]>,
     ny: usize,
 }
 
@@ -67,20 +87,37 @@ impl Serialize for Rows<'_> {
 
 /// The map's body.
 pub fn body(map: &RadioMap) -> MapBody<'_> {
-    MapBody {
-        map_id: map.id.clone(),
-        key: map.key.clone(),
-        unit: map.key.unit(),
-        grid: map.grid,
-        stats: map.stats(),
-        closed_passages: map.closed_passages.listed.clone(),
-        values: rows(map, &map.values),
-        certificate: map.certificate_summary(),
-        upper_bound: map.upper_bound().map(|bound| rows(map, bound)),
-    }
+    body_in(map, map.native_unit()).expect("a map answers its own unit")
 }
 
-fn rows<'a>(map: &RadioMap, data: &'a [f64]) -> Rows<'a> {
+/// The map's body with its values and statistics in `unit` ([`RadioMap::values_in`]: a gain
+/// map answers every unit, a rate map `bps_hz` and `mbps`); errors name `unit`.
+pub fn body_in(map: &RadioMap, unit: Unit) -> Result<MapBody<'_>, FieldError> {
+    let values = map.values_in(unit)?;
+    let serving_ap =
+        (map.links.len() > 1 && map.key.kind == radiomap::MapKind::Gain).then(|| ServingRows {
+            serving: (0..map.grid.cells())
+                .map(|c| (!map.occupied[c]).then(|| map.serving_ap(c)))
+                .collect(),
+            ny: map.grid.ny,
+        });
+    Ok(MapBody {
+        map_id: map.id.clone(),
+        key: map.key.clone(),
+        unit: unit.symbol(),
+        grid: map.grid,
+        stats: map.stats_of(&values),
+        closed_passages: map.closed_passages.listed.clone(),
+        values: rows(map, values),
+        certificate: map.certificate_summary(),
+        upper_bound: map
+            .upper_bound()
+            .map(|bound| rows(map, Cow::Borrowed(bound))),
+        serving_ap,
+    })
+}
+
+fn rows<'a>(map: &RadioMap, data: Cow<'a, [f64]>) -> Rows<'a> {
     Rows {
         data,
         ny: map.grid.ny,

@@ -45,12 +45,13 @@ pub struct CertificateSummary {
 impl RadioMap {
     /// Summary statistics over the free cells with a finite value.
     pub fn stats(&self) -> MapStats {
-        let mut finite: Vec<f64> = self
-            .values
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .collect();
+        self.stats_of(&self.values)
+    }
+
+    /// [`RadioMap::stats`] of `values`, this map's values in another unit
+    /// ([`RadioMap::values_in`]).
+    pub fn stats_of(&self, values: &[f64]) -> MapStats {
+        let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
         let free = self.free_cells();
         let (min, max, sum) = finite.iter().fold(
             (f64::INFINITY, f64::NEG_INFINITY, 0.0),
@@ -58,9 +59,9 @@ impl RadioMap {
         );
         let some = !finite.is_empty();
         MapStats {
-            cells: self.values.len(),
+            cells: values.len(),
             free_cells: free,
-            occupied_cells: self.values.len() - free,
+            occupied_cells: values.len() - free,
             closed_passages: self.closed_passages.total,
             valued_cells: finite.len(),
             min: some.then_some(min),

@@ -3,7 +3,7 @@
 //! export handlers share (a map by id, or by the request defining it).
 
 use super::problem::ApiError;
-use super::{Body, Page, accepted, heavy};
+use super::{Body, Page, accepted, heavy, only_query};
 use crate::app::App;
 use crate::app::Error;
 use crate::app::identity::Caller;
@@ -17,7 +17,7 @@ use axum::response::{IntoResponse, Response};
 use irs_answers::timing::Timed;
 use irs_model::input::present;
 use irs_model::phases::PhaseMode;
-use irs_model::radiomap::{MapKey, MapKind, MapStats, RadioMap};
+use irs_model::radiomap::{MapKey, MapKind, MapStats, RadioMap, Unit};
 use irs_model::rate::Access;
 use irs_model::solver::SolverKind;
 use serde::{Deserialize, Serialize};
@@ -144,14 +144,21 @@ pub(super) async fn get_map(
     State(state): State<App>,
     caller: Caller,
     Path(map_id): Path<MapId>,
+    Query(query): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
     let started = Instant::now();
+    only_query(&query, &["unit"])?;
+    let unit = query
+        .get("unit")
+        .map(|text| text.parse::<Unit>().map_err(|e| Error::invalid("unit", e)))
+        .transpose()?;
     let map = state.map(&caller, &map_id).await?;
     let cells = map.grid.cells();
     let bytes = heavy(&state, "map body", cells, move |_| {
-        serde_json::to_vec(&Timed::since(started, irs_answers::map::body(&map)))
+        let body = irs_answers::map::body_in(&map, unit.unwrap_or(map.native_unit()))?;
+        Ok::<_, Error>(serde_json::to_vec(&Timed::since(started, body)))
     })
-    .await?;
+    .await??;
     let bytes = bytes.map_err(|e| Error::internal(format!("serialising the map: {e}")))?;
     Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
 }
