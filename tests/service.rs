@@ -895,6 +895,78 @@ async fn a_full_queue_answers_503_with_retry_after() {
     }
 }
 
+/// Registration has its own body limit (`--max-scenario-body-kb`), where floor plans travel:
+/// a body between the two limits registers, and is refused everywhere else, declared or
+/// streamed; over the larger one registration is refused too, each 413 naming its limit.
+#[tokio::test]
+async fn scenarios_have_a_larger_body_limit_for_floor_plans() {
+    let server = start(&["--max-body-kb", "16", "--max-scenario-body-kb", "64"]);
+    // The document padded with whitespace to the size wanted (still the same document).
+    let padded = |bytes: usize| {
+        let doc = scenario("small-test.json", |v| v["name"] = "padded".into()).to_string();
+        format!("{}{}", " ".repeat(bytes - doc.len()), doc)
+    };
+    let send = |path: &'static str, body: String, chunked: bool| {
+        let (client, base) = (server.client.clone(), server.base.clone());
+        async move {
+            if !chunked {
+                let response = client
+                    .post(format!("{base}{path}"))
+                    .header("content-type", "application/json")
+                    .body(body)
+                    .send()
+                    .await
+                    .unwrap();
+                let status = response.status();
+                return (status, response.json::<Value>().await.unwrap());
+            }
+            // Streamed: no length declared, the body in chunks.
+            use tokio::io::{AsyncReadExt, AsyncWriteExt};
+            let mut stream = tokio::net::TcpStream::connect(base.trim_start_matches("http://"))
+                .await
+                .unwrap();
+            let head = format!(
+                "POST {path} HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n\
+                 transfer-encoding: chunked\r\nconnection: close\r\n\r\n"
+            );
+            stream.write_all(head.as_bytes()).await.unwrap();
+            for chunk in body.as_bytes().chunks(4096) {
+                let framed = [format!("{:x}\r\n", chunk.len()).as_bytes(), chunk, b"\r\n"].concat();
+                if stream.write_all(&framed).await.is_err() {
+                    break; // answered and closed before the end
+                }
+            }
+            let _ = stream.write_all(b"0\r\n\r\n").await;
+            let mut answer = Vec::new();
+            let _ = stream.read_to_end(&mut answer).await;
+            let text = String::from_utf8_lossy(&answer);
+            let status: u16 = text[9..12].parse().unwrap();
+            let json = text
+                .find("\r\n\r\n")
+                .map(|at| &text[at + 4..])
+                .and_then(|rest| {
+                    // The body may come chunked: the JSON object between the first { and last }.
+                    let (a, b) = (rest.find('{')?, rest.rfind('}')?);
+                    serde_json::from_str(&rest[a..=b]).ok()
+                })
+                .unwrap_or(Value::Null);
+            (StatusCode::from_u16(status).unwrap(), json)
+        }
+    };
+    let (s, body) = send("/v1/scenarios", padded(40_000), false).await;
+    assert!(s.is_success(), "{s} {body}");
+    let (s, body) = send("/v1/scenarios", padded(40_000), true).await;
+    assert!(s.is_success(), "streamed: {s} {body}");
+    for chunked in [false, true] {
+        let (s, body) = send("/v1/maps", padded(40_000), chunked).await;
+        problem(s, &body, StatusCode::PAYLOAD_TOO_LARGE, "body_too_large");
+        assert_eq!(body["limit"], 16 * 1024);
+        let (s, body) = send("/v1/scenarios", padded(70_000), chunked).await;
+        problem(s, &body, StatusCode::PAYLOAD_TOO_LARGE, "body_too_large");
+        assert_eq!(body["limit"], 64 * 1024);
+    }
+}
+
 #[tokio::test]
 async fn every_error_is_a_problem_naming_its_field() {
     let server = start(&["--max-body-kb", "16", "--max-scenarios", "4"]);

@@ -60,6 +60,11 @@ pub struct ServeArgs {
     /// base64: the warehouse's 1200 × 800 PGM is 1.3 MB of it, a 4096² map 22 MB.
     #[arg(long, env = "IRS_MAX_BODY_KB", default_value_t = 8192)]
     pub max_body_kb: usize,
+    /// Largest body of `POST /v1/scenarios` in KiB (413 above; never below `--max-body-kb`):
+    /// registering a scenario is how a floor plan up to the model's 4096² pixels arrives,
+    /// 22.4 MB of base64 for an 8-bit PGM. Inline scenarios elsewhere keep `--max-body-kb`.
+    #[arg(long, env = "IRS_MAX_SCENARIO_BODY_KB", default_value_t = 24 * 1024)]
+    pub max_scenario_body_kb: usize,
     /// Largest number of registered scenarios (507 above).
     #[arg(long, env = "IRS_MAX_SCENARIOS", default_value_t = 1000)]
     pub max_scenarios: usize,

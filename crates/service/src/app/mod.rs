@@ -43,6 +43,8 @@ use std::time::Duration;
 #[derive(Debug, Clone)]
 pub(crate) struct Limits {
     pub max_body_bytes: usize,
+    /// The body limit of `POST /v1/scenarios`, where floor plans travel.
+    pub max_scenario_body_bytes: usize,
     pub sync_cells: usize,
     pub max_rate_cells: usize,
     pub max_sweep: usize,
@@ -152,6 +154,10 @@ impl App {
             inner: Arc::new(Inner {
                 limits: Limits {
                     max_body_bytes: args.max_body_kb.saturating_mul(1024),
+                    max_scenario_body_bytes: args
+                        .max_scenario_body_kb
+                        .max(args.max_body_kb)
+                        .saturating_mul(1024),
                     sync_cells: args.sync_cells,
                     max_rate_cells: args.max_rate_cells,
                     max_sweep: args.max_sweep,

@@ -159,7 +159,21 @@ impl<T: serde::de::DeserializeOwned + Send + 'static> FromRequest<App> for Body<
                 "expected application/json, got {ct:?}"
             )));
         }
-        let limit = state.limits().max_body_bytes;
+        // Registration carries floor plans: its own, larger limit; the layer's limit is the
+        // larger of the two, so every other route is held to its own here, by its declared
+        // length before reading and by what arrived after.
+        let limit = if req.method() == Method::POST && req.uri().path() == "/v1/scenarios" {
+            state.limits().max_scenario_body_bytes
+        } else {
+            state.limits().max_body_bytes
+        };
+        let declared = req
+            .headers()
+            .get(header::CONTENT_LENGTH)
+            .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+        if declared.is_some_and(|n| n > limit as u64) {
+            return Err(ApiError::body_too_large(limit as u64));
+        }
         let timeout = state.limits().body_timeout;
         let read = axum::body::Bytes::from_request(req, state);
         let bytes = tokio::time::timeout(timeout, read)
@@ -172,6 +186,9 @@ impl<T: serde::de::DeserializeOwned + Send + 'static> FromRequest<App> for Body<
                     ApiError::malformed_json(rejection.body_text())
                 }
             })?;
+        if bytes.len() > limit {
+            return Err(ApiError::body_too_large(limit as u64));
+        }
         let parsed = state
             .queries()
             .run_sized("body", bytes.len(), move || parse_json(&bytes))
@@ -313,7 +330,10 @@ pub(crate) fn app(
     cors_origins: Vec<HeaderValue>,
     answers: delivery::Budget,
 ) -> axum::Router {
-    let max_body = state.limits().max_body_bytes;
+    let max_body = state
+        .limits()
+        .max_body_bytes
+        .max(state.limits().max_scenario_body_bytes);
     let cors = (!cors_origins.is_empty()).then(|| {
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(cors_origins))

@@ -241,12 +241,34 @@ function withDevices(aps, irss, srus) {
 // Registers an edited scenario and shows it (its map rebuilt); the path's ends are kept.
 async function applyScenario(doc, what) {
   const started = performance.now();
-  const { data } = await api("POST", "/v1/scenarios", doc);
+  const data = await registerMounting(doc);
   await loadScenarioList(data.id);
   await chooseScenario(data.id, { keepPath: true });
   if (state.start && state.goal) await planPath();
   $("map").dataset.editMs = String(Math.round(performance.now() - started));
   say(`${what}: scenario ${data.id.slice(0, 8)} registered and its map shown.`);
+}
+
+// Registers `doc`. A surface with `mount_within_m` is mounted by the service on the nearest
+// face that faces the way its normal does; where none does (a floor plan's walls face
+// anywhere), the other three axis directions are tried in turn.
+async function registerMounting(doc) {
+  const tried = new Map();
+  for (;;) {
+    try {
+      return (await api("POST", "/v1/scenarios", doc)).data;
+    } catch (error) {
+      const m = /^(irs|irss\[(\d+)\])\.mount_within_m$/.exec(error.field || "");
+      if (!m) throw error;
+      const irs = m[2] === undefined ? doc.irs : doc.irss[Number(m[2])];
+      const seen = tried.get(irs) || [];
+      seen.push(irs.normal.join());
+      tried.set(irs, seen);
+      const next = [[0, 1, 0], [-1, 0, 0], [0, -1, 0], [1, 0, 0]].find((n) => !seen.includes(n.join()));
+      if (!next) throw error;
+      irs.normal = next;
+    }
+  }
 }
 
 // ------------------------------------------------------------------ editing devices
@@ -305,6 +327,9 @@ async function placeDevice(kind, index, x, y) {
     const template = irss[0] || { center: [0, 0, 2], normal: [0, 1, 0], nx_sub: 10, nz_sub: 6, elements_per_sub: 20, sub_pitch_m: 0.0075, grouping: "coherent" };
     const irs = adding ? structuredClone(template) : irss[index];
     Object.assign(irs, snapToWall(x, y, irs.center[2]));
+    // On a floor plan the walls are pixels the viewer does not know: the service mounts the
+    // surface on the nearest face (the room's and the boxes' faces are exact already).
+    if (state.scenario.floor_plan) Object.assign(irs, { center: [round6(x), round6(y), irs.center[2]], mount_within_m: 5 });
     if (adding) irss.push(irs);
   } else {
     const template = srus[0] || { position: [0, 0, 1], min_rate_bps_hz: 1 };
@@ -385,16 +410,43 @@ function readMapYaml(text) {
   return out;
 }
 
-// Width and height of a PGM (P2/P5) or PNG image, read from its header.
-function imageSize(bytes) {
+// The grey pixels of a PGM (P2/P5, 8-bit) or PNG image, row 0 the top, as map_server reads
+// them: { width, height, grey }.
+async function greyPixels(bytes, file) {
   if (bytes[0] === 0x89 && bytes[1] === 0x50) {
-    const view = new DataView(bytes.buffer, bytes.byteOffset);
-    return [view.getUint32(16), view.getUint32(20)];
+    const bitmap = await createImageBitmap(file);
+    const canvas = Object.assign(document.createElement("canvas"), { width: bitmap.width, height: bitmap.height });
+    const ctx = canvas.getContext("2d");
+    ctx.drawImage(bitmap, 0, 0);
+    const rgba = ctx.getImageData(0, 0, bitmap.width, bitmap.height).data;
+    const grey = new Uint8Array(bitmap.width * bitmap.height);
+    for (let k = 0; k < grey.length; k++) grey[k] = rgba[4 * k];
+    return { width: bitmap.width, height: bitmap.height, grey };
   }
-  const head = new TextDecoder("latin1").decode(bytes.subarray(0, 512)).replace(/#[^\n]*\n/g, " ");
-  const m = /^P[25]\s+(\d+)\s+(\d+)/.exec(head);
-  if (!m) throw new Error("the image is neither a PGM (P2/P5) nor a PNG");
-  return [Number(m[1]), Number(m[2])];
+  // The header: magic, width, height, maxval, each after whitespace and comments.
+  let at = 0;
+  const token = () => {
+    for (;;) {
+      while (at < bytes.length && /\s/.test(String.fromCharCode(bytes[at]))) at++;
+      if (bytes[at] !== 0x23) break;
+      while (at < bytes.length && bytes[at] !== 0x0a) at++;
+    }
+    const from = at;
+    while (at < bytes.length && !/\s/.test(String.fromCharCode(bytes[at]))) at++;
+    return new TextDecoder("latin1").decode(bytes.subarray(from, at));
+  };
+  const magic = token();
+  if (magic !== "P5" && magic !== "P2") throw new Error("the image is neither a PGM (P2/P5) nor a PNG");
+  const [width, height, maxval] = [token(), token(), token()].map(Number);
+  if (!(width > 0 && height > 0 && maxval > 0 && maxval < 256)) throw new Error("the PGM's header is not that of an 8-bit image");
+  const grey = new Uint8Array(width * height);
+  if (magic === "P5") {
+    grey.set(bytes.subarray(at + 1, at + 1 + grey.length));
+  } else {
+    for (let k = 0; k < grey.length; k++) grey[k] = Number(token());
+  }
+  if (maxval !== 255) for (let k = 0; k < grey.length; k++) grey[k] = Math.round((grey[k] * 255) / maxval);
+  return { width, height, grey };
 }
 
 function base64(bytes) {
@@ -403,8 +455,40 @@ function base64(bytes) {
   return btoa(text);
 }
 
+// The pixel nearest (x, y) that is free, with free pixels all around it (so the service's own
+// occupancy, which a grid cell rounds outwards, finds it free too): Nav2's trinary reading,
+// occ = (255 − p)/255 (p/255 when negated), free below free_thresh.
+function nearestFree(image, meta, x, y) {
+  const { width, height, grey } = image;
+  const freeBelow = meta.free_thresh ?? 0.196;
+  const free = (u, v) => {
+    if (u < 0 || v < 0 || u >= width || v >= height) return false;
+    const p = grey[v * width + u] / 255;
+    return (meta.negate ? p : 1 - p) < freeBelow;
+  };
+  const clear = (u, v) => {
+    for (let du = -3; du <= 3; du++) for (let dv = -3; dv <= 3; dv++) if (!free(u + du, v + dv)) return false;
+    return true;
+  };
+  const [ox, oy] = meta.origin;
+  const u0 = Math.floor((x - ox) / meta.resolution);
+  const v0 = height - 1 - Math.floor((y - oy) / meta.resolution);
+  for (let ring = 0; ring < Math.max(width, height); ring++) {
+    for (let du = -ring; du <= ring; du++) {
+      for (const dv of Math.abs(du) === ring ? range(-ring, ring) : [-ring, ring]) {
+        const [u, v] = [u0 + du, v0 + dv];
+        if (clear(u, v)) return [round6(ox + (u + 0.5) * meta.resolution), round6(oy + (height - v - 0.5) * meta.resolution)];
+      }
+    }
+  }
+  throw new Error("the map has no free space to put a device in");
+}
+
+const range = (a, b) => Array.from({ length: b - a + 1 }, (_, k) => a + k);
+
 // A new scenario on the ROS map: the room is the map's extent, the grid and channel this
-// scenario's, its APs, IRSs and SRUs moved inside (IRSs onto the nearest wall).
+// scenario's; its devices keep their place relative to the room, each AP and SRU moved to the
+// nearest free space and each IRS mounted by the service on the nearest wall face.
 async function importRosMap(files) {
   fieldError("ros-files", "");
   const list = Array.from(files);
@@ -414,40 +498,47 @@ async function importRosMap(files) {
   const wanted = String(meta.image).split(/[\\/]/).pop();
   const imageFile = list.find((f) => f.name === wanted) || list.find((f) => f !== yamlFile);
   if (!imageFile) throw Object.assign(new Error(`Choose the image map.yaml names (${wanted}) too.`), { input: "ros-files" });
+  say(`Reading ${imageFile.name}…`);
   const bytes = new Uint8Array(await imageFile.arrayBuffer());
-  const [width, height] = imageSize(bytes);
+  const image = await greyPixels(bytes, imageFile);
   const [ox, oy] = meta.origin;
   const old = state.scenario.room;
   const room = {
-    x_min: ox, x_max: round6(ox + width * meta.resolution),
-    y_min: oy, y_max: round6(oy + height * meta.resolution),
+    x_min: ox, x_max: round6(ox + image.width * meta.resolution),
+    y_min: oy, y_max: round6(oy + image.height * meta.resolution),
     ceiling_m: old.ceiling_m,
   };
   const floorPlan = { image: base64(bytes), resolution: meta.resolution, origin: meta.origin };
   for (const key of ["negate", "occupied_thresh", "free_thresh", "mode"]) {
     if (meta[key] !== undefined) floorPlan[key] = meta[key];
   }
-  // Positions scaled from the old room into the new one, so the layout's shape survives.
   const scale = ([x, y]) => [
-    round6(room.x_min + ((x - old.x_min) / (old.x_max - old.x_min)) * (room.x_max - room.x_min)),
-    round6(room.y_min + ((y - old.y_min) / (old.y_max - old.y_min)) * (room.y_max - room.y_min)),
+    room.x_min + ((x - old.x_min) / (old.x_max - old.x_min)) * (room.x_max - room.x_min),
+    room.y_min + ((y - old.y_min) / (old.y_max - old.y_min)) * (room.y_max - room.y_min),
   ];
-  const doc = structuredClone(state.scenario);
-  doc.name = `${imageFile.name.replace(/\.\w+$/, "")} (imported)`;
+  const previous = state.scenario;
+  const doc = structuredClone(previous);
   doc.room = room;
   doc.floor_plan = floorPlan;
   delete doc.obstacles;
+  delete doc.walls;
   delete doc.route_graph;
-  const previous = state.scenario;
   state.scenario = doc;
-  const move = (p) => [...scale(p), p[2]];
-  const aps = accessPoints(previous).map((ap) => ({ ...ap, position: move(ap.position) }));
-  const irss = surfaces(previous).map((irs) => ({ ...irs, ...snapToWall(...scale(irs.center), irs.center[2]) }));
-  const srus = (previous.srus || []).map((s) => ({ ...s, position: move(s.position) }));
-  const edited = withDevices(aps, irss, srus);
-  edited.name = doc.name;
-  state.scenario = previous;
-  await applyScenario(edited, `ROS map ${imageFile.name} imported (${width} × ${height} px)`);
+  try {
+    const aps = accessPoints(previous).map((ap) => ({ ...ap, position: [...nearestFree(image, meta, ...scale(ap.position)), ap.position[2]] }));
+    const srus = (previous.srus || []).map((sru) => ({ ...sru, position: [...nearestFree(image, meta, ...scale(sru.position)), sru.position[2]] }));
+    const irss = surfaces(previous).map((irs) => {
+      const [x, y] = scale(irs.center);
+      const { normal } = snapToWall(x, y, irs.center[2]);
+      return { ...irs, center: [round6(x), round6(y), irs.center[2]], normal, mount_within_m: 5 };
+    });
+    const edited = withDevices(aps, irss, srus);
+    edited.name = `${imageFile.name.replace(/\.\w+$/, "")} (imported)`;
+    state.scenario = previous;
+    await applyScenario(edited, `ROS map ${imageFile.name} imported (${image.width} × ${image.height} px)`);
+  } finally {
+    state.scenario = state.scenario === doc ? previous : state.scenario;
+  }
 }
 
 // ------------------------------------------------------------------ maps and jobs
