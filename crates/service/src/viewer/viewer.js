@@ -25,8 +25,9 @@ const DIVERGING = table([[33, 102, 172], [146, 197, 222], [247, 247, 247], [244,
 const CATEGORICAL = [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75], [227, 119, 194], [188, 189, 34]];
 // Cells below the threshold keep 30 % of their colour, as in the PNG.
 const DIM = 0.3;
-// Margins around the plot (px): tick labels left and below, the colour bar right.
-const MARGIN = { left: 58, top: 24, right: 96, bottom: 44 };
+// Margins around the plot (px): tick labels left and below, the colour bar right; narrower on
+// a phone, where every pixel of width is the map's.
+const margins = (width) => (width < 520 ? { left: 40, top: 24, right: 76, bottom: 40 } : { left: 58, top: 24, right: 96, bottom: 44 });
 // Largest zoom: a cell at most this many pixels.
 const MAX_CELL_PX = 96;
 // Pointer travel (px) below which a press is a click, not a drag.
@@ -1011,11 +1012,12 @@ async function applyCandidate(c) {
 
 function plotArea() {
   const canvas = $("map");
+  const m = margins(canvas.width);
   return {
-    x: MARGIN.left,
-    y: MARGIN.top,
-    w: Math.max(40, canvas.width - MARGIN.left - MARGIN.right),
-    h: Math.max(40, canvas.height - MARGIN.top - MARGIN.bottom),
+    x: m.left,
+    y: m.top,
+    w: Math.max(40, canvas.width - m.left - m.right),
+    h: Math.max(40, canvas.height - m.top - m.bottom),
   };
 }
 
@@ -1306,7 +1308,7 @@ function drawAxes(ctx) {
 
 function drawColourBar(ctx, layer, threshold) {
   const A = state.layout.area;
-  const x0 = A.x + A.w + 18;
+  const x0 = A.x + A.w + (A.x < 50 ? 10 : 18);
   const h = A.h;
   const { low, high, unit } = layer;
   ctx.fillStyle = "#000";
