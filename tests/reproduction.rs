@@ -165,6 +165,7 @@ fn noma_map_is_certified_within_the_targets() {
     for (k, v) in map.values.iter().enumerate() {
         let bound = body
             .upper_bound
+            .as_ref()
             .unwrap()
             .get(k / map.grid.ny, k % map.grid.ny);
         if v.is_finite() {
