@@ -475,15 +475,13 @@ fn checked<R>(
             "map",
             "fleet plans run on gain maps (robots sharing an AP, and the scenario's SRUs, are \
              given `access`)",
-        )
-        .into());
+        ));
     };
     if robots.is_empty() || robots.len() > MAX_ROBOTS {
         return Err(FieldError::new(
             "robots",
             format!("expected 1 to {MAX_ROBOTS} robots, got {}", robots.len()),
-        )
-        .into());
+        ));
     }
     let values = map.values_in(options.unit)?;
     let grid = &map.grid;
@@ -494,8 +492,7 @@ fn checked<R>(
         return Err(FieldError::new(
             "dt_s",
             format!("must be a positive number of seconds, got {dt_s}"),
-        )
-        .into());
+        ));
     }
     let steps_of = |length_m: f64| {
         ((length_m / (options.v_max_mps * dt_s)) - 1e-9)
@@ -511,8 +508,7 @@ fn checked<R>(
                 std::f64::consts::SQRT_2 * grid.resolution_m,
                 options.v_max_mps
             ),
-        )
-        .into());
+        ));
     }
     let move_steps = [
         steps_of(grid.resolution_m),
@@ -564,8 +560,7 @@ fn checked<R>(
                 return Err(FieldError::new(
                     "horizon_s",
                     format!("must be a positive number of seconds, got {h}"),
-                )
-                .into());
+                ));
             }
             (h / dt_s).floor() as usize
         }
@@ -590,8 +585,7 @@ fn checked<R>(
                 "the horizon is {horizon_steps} steps of {dt_s} s, more than {MAX_STEPS}: \
                  shorten horizon_s or lengthen dt_s"
             ),
-        )
-        .into());
+        ));
     }
     let links = &map.links;
     let need: Vec<Vec<f64>> = robots
@@ -614,8 +608,7 @@ fn checked<R>(
                         "with access {access}, requirements are rates: bps_hz or mbps, got {}",
                         options.unit.name()
                     ),
-                )
-                .into());
+                ));
             }
             Some(Sharing {
                 access,
