@@ -3578,6 +3578,47 @@ async fn map_bodies_answer_in_any_unit_with_the_serving_ap() {
     assert!(s.is_client_error(), "{s} {body}");
     assert_eq!(body["field"], "units");
 
+    // A rate map answers rates only; in Mbit/s its bound and certificate are too.
+    let rated = scenario("small-test.json", |v| v["ap"]["bandwidth_mhz"] = 20.into());
+    let (s, job) = server
+        .post(
+            "/v1/maps",
+            json!({"scenario": rated, "kind": "rate", "access": "noma"}),
+        )
+        .await;
+    let rid = match s {
+        StatusCode::ACCEPTED => server.wait_job(job["job_id"].as_str().unwrap()).await["map_id"]
+            .as_str()
+            .unwrap()
+            .to_string(),
+        _ => job["map_id"].as_str().unwrap().to_string(),
+    };
+    let (_, own) = server.get(&format!("/v1/maps/{rid}")).await;
+    let (s, mbps) = server.get(&format!("/v1/maps/{rid}?unit=mbps")).await;
+    assert_eq!(s, StatusCode::OK, "{mbps}");
+    assert_eq!(mbps["unit"], "Mbit/s");
+    for field in ["values", "upper_bound"] {
+        for (a, b) in own[field]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(mbps[field].as_array().unwrap())
+        {
+            for (a, b) in a.as_array().unwrap().iter().zip(b.as_array().unwrap()) {
+                match (a.as_f64(), b.as_f64()) {
+                    (Some(a), Some(b)) => assert!((b - 20.0 * a).abs() < 1e-9, "{field}: {a} {b}"),
+                    (None, None) => {}
+                    other => panic!("{field}: {other:?}"),
+                }
+            }
+        }
+    }
+    let gap = |body: &Value| body["certificate"]["max_gap"].as_f64().unwrap();
+    assert!((gap(&mbps) - 20.0 * gap(&own)).abs() < 1e-9);
+    let (s, body) = server.get(&format!("/v1/maps/{rid}?unit=dbm")).await;
+    assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert_eq!(body["field"], "unit");
+
     // Two APs, one in each half of the room: the serving one is the stronger, as the maps of
     // each AP alone say.
     let with_aps = |aps: Vec<[f64; 3]>| {

@@ -37,12 +37,12 @@ import irs_testkit as kit  # noqa: E402
 from irs_planner_client import Client  # noqa: E402
 from irs_planner_client.api.default import (  # noqa: E402
     cancel_job, delete_scenario, get_check, get_coverage, get_job, get_map, get_map_image,
-    get_map_values_npy, get_nav_2_mask, get_placement, list_scenarios, place, plan_path,
-    register_scenario, request_map, sweep)
+    get_map_values_npy, get_nav_2_mask, get_placement, list_scenarios, place, plan_fleet,
+    plan_path, register_scenario, request_map, sweep)
 from irs_planner_client.models import (  # noqa: E402
-    Coverage, Job, JobState, MapBody, MapRequestById, MapSummary, PathAnswer, PathRequestByMap,
-    PathRequestByMapId, Placement, PlacementRequest, Problem, Reason, Scenario, ScenarioDocument,
-    SweepAnswer, SweepRequestByMapId, Unit)
+    Coverage, FleetPlan, FleetRequestByMap, Job, JobState, MapBody, MapRequestById, MapSummary,
+    PathAnswer, PathRequestByMap, PathRequestByMapId, Placement, PlacementRequest, Problem, Reason,
+    Scenario, ScenarioDocument, SweepAnswer, SweepRequestByMapId, Unit)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 # The contract, with the server under test as its server (openapi.yaml names the default one).
@@ -244,6 +244,21 @@ try:
     check(False, "an unknown job is an error", get_placement_answer)
 except irs_planner.ApiError as error:
     check(error.problem.status == 404, "an unknown job raises ApiError with the problem", error)
+
+# A fleet plan asked for as a job whatever its size (Prefer: respond-async), its plan read by
+# the helper at result_href.
+r = plan_fleet.sync_detailed(client=helper, body=FleetRequestByMap.from_dict(
+    {"map": {"scenario_id": paper, "kind": "gain"}, "robots": [
+        {"name": "east", "start": [-10, 0], "goal": [10, 0], "threshold": -75},
+        {"name": "west", "start": [10, -9], "goal": [-10, -9], "threshold": -80}]}),
+    prefer="respond-async")
+check(r.status_code == 202 and isinstance(r.parsed, Job) and r.parsed.kind.value == "fleet"
+      and r.headers.get("preference-applied") == "respond-async",
+      "a fleet plan asked for as a job (202, the preference applied)", r.status_code)
+plan = irs_planner.result(helper, r.parsed)
+check(isinstance(plan, FleetPlan) and plan.names == ["east", "west"] and plan.violations == []
+      and all(robot.planned_by is not None for robot in plan.robots),
+      "the fleet plan, read at its result_href", plan)
 
 # Clean up.
 r = delete_scenario.sync_detailed(client=client, scenario_id=scenario_id)

@@ -5,7 +5,8 @@ nothing of.
 
     import irs_planner
     client = irs_planner.connect("http://127.0.0.1:8080")
-    job = ...                      # a 202 answer's Job (a rate map, a placement, a long check)
+    job = ...                      # a 202 answer's Job (a rate map, a placement, a long check,
+                                   # a large fleet plan)
     answer = irs_planner.result(client, job)   # waits, then reads its result_href
     grid = irs_planner.values(client, map_id, unit="dbm")   # a numpy array (extra [numpy])
     for scenario in irs_planner.every(list_scenarios, client):   # every page
@@ -20,7 +21,7 @@ from typing import Any, Callable, Iterator
 
 from irs_planner_client import AuthenticatedClient, Client
 from irs_planner_client.api.default import (
-    get_check, get_job, get_map, get_map_values_npy, get_placement)
+    get_check, get_fleet_plan, get_job, get_map, get_map_values_npy, get_placement)
 from irs_planner_client.models import Job, JobKind, JobState, Problem, Unit
 from irs_planner_client.types import UNSET
 
@@ -84,12 +85,14 @@ def wait(client: Client | AuthenticatedClient, job: Job, timeout: float = 600.0,
 
 def result(client: Client | AuthenticatedClient, job: Job, **wait_args: Any) -> Any:
     """Waits for `job` ([`wait`]) and reads what its `result_href` serves: the map body of a map
-    job, the ranking of a placement, the checked path of a Monte Carlo check."""
+    job, the ranking of a placement, the checked path of a Monte Carlo check, a fleet plan."""
     job = wait(client, job, **wait_args)
     if job.kind == JobKind.MAP:
         return _checked(get_map.sync(client=client, map_id=job.map_id))
     if job.kind == JobKind.PLACEMENT:
         return _checked(get_placement.sync(client=client, placement_id=job.job_id))
+    if job.kind == JobKind.FLEET:
+        return _checked(get_fleet_plan.sync(client=client, plan_id=job.job_id))
     return _checked(get_check.sync(client=client, check_id=job.job_id))
 
 

@@ -32,10 +32,10 @@ pub struct MapBody<'a> {
     /// values[i][j] is the cell at (x_min + i·Δ, y_min + j·Δ); null where occupied (or, on rate
     /// maps, where no configuration serves every SRU).
     pub values: Rows<'a>,
-    /// Rate maps: the certificate summary.
+    /// Rate maps: the certificate summary, in the unit of `values`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub certificate: Option<CertificateSummary>,
-    /// Rate maps: the SDR upper bound per cell, laid out like `values`.
+    /// Rate maps: the SDR upper bound per cell, laid out like `values`, in their unit.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub upper_bound: Option<Rows<'a>>,
     /// Gain maps of several APs: the AP serving each cell (the strongest), laid out like
@@ -101,6 +101,25 @@ pub fn body_in(map: &RadioMap, unit: Unit) -> Result<MapBody<'_>, FieldError> {
                 .collect(),
             ny: map.grid.ny,
         });
+    // A rate map's bound and certificate are rates too: in Mbit/s when the values are.
+    let scale = match (map.key.kind, unit) {
+        (radiomap::MapKind::Rate, Unit::Mbps) => map.links[0].bandwidth_mhz.unwrap_or(f64::NAN),
+        _ => 1.0,
+    };
+    let certificate = map.certificate_summary().map(|c| CertificateSummary {
+        median_gap: c.median_gap.map(|g| g * scale),
+        mean_gap: c.mean_gap.map(|g| g * scale),
+        max_gap: c.max_gap.map(|g| g * scale),
+        ..c
+    });
+    let upper_bound = map.upper_bound().map(|bound| {
+        let bound = if scale == 1.0 {
+            Cow::Borrowed(bound)
+        } else {
+            Cow::Owned(bound.iter().map(|b| b * scale).collect())
+        };
+        rows(map, bound)
+    });
     Ok(MapBody {
         map_id: map.id.clone(),
         key: map.key.clone(),
@@ -109,10 +128,8 @@ pub fn body_in(map: &RadioMap, unit: Unit) -> Result<MapBody<'_>, FieldError> {
         stats: map.stats_of(&values),
         closed_passages: map.closed_passages.listed.clone(),
         values: rows(map, values),
-        certificate: map.certificate_summary(),
-        upper_bound: map
-            .upper_bound()
-            .map(|bound| rows(map, Cow::Borrowed(bound))),
+        certificate,
+        upper_bound,
         serving_ap,
     })
 }

@@ -88,7 +88,7 @@ pub(super) async fn plan_fleet(
     })
     .await??;
     let asked = prefers_async(&headers);
-    if asked || work > SYNC_FLEET_MAPS * state.limits().sync_cells {
+    if asked || work > SYNC_FLEET_MAPS.saturating_mul(state.limits().sync_cells) {
         let scenario_id = ScenarioId::of_key(&map.key);
         let job = state.jobs().answer(
             AnswerKind::Fleet,

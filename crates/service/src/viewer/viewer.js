@@ -56,6 +56,8 @@ const state = {
   drag: null, // a device being dragged: { kind, index, x, y }
   candidates: [], // placement answer's candidates
   image: null, // the rendered cells (an offscreen canvas, one pixel per cell) and what it shows
+  layerCache: null, // what the cells show (values, gap, serving AP or difference) and its key
+  request: 0, // the latest map request: an answer to an earlier one is dropped
 };
 
 // ------------------------------------------------------------------ API
@@ -442,6 +444,7 @@ async function greyPixels(bytes, file) {
   if (!(width > 0 && height > 0 && maxval > 0 && maxval < 256)) throw new Error("the PGM's header is not that of an 8-bit image");
   const grey = new Uint8Array(width * height);
   if (magic === "P5") {
+    if (bytes.length < at + 1 + grey.length) throw new Error(`the PGM holds ${bytes.length - at - 1} of its ${grey.length} pixels`);
     grey.set(bytes.subarray(at + 1, at + 1 + grey.length));
   } else {
     for (let k = 0; k < grey.length; k++) grey[k] = Number(token());
@@ -456,33 +459,56 @@ function base64(bytes) {
   return btoa(text);
 }
 
-// The pixel nearest (x, y) that is free, with free pixels all around it (so the service's own
-// occupancy, which a grid cell rounds outwards, finds it free too): Nav2's trinary reading,
-// occ = (255 − p)/255 (p/255 when negated), free below free_thresh.
-function nearestFree(image, meta, x, y) {
+// Where a device can stand on a ROS map: free pixels (Nav2's reading: occ = (255 − p)/255, or
+// p/255 negated, free below free_thresh; `raw` maps are free where the value is 0) with free
+// pixels within `clearance` all around (so the service's own occupancy, which inflates cells by
+// the robot's radius, finds the place free too). One pass along rows and one along columns.
+function standingMask(image, meta, clearance) {
   const { width, height, grey } = image;
   const freeBelow = meta.free_thresh ?? 0.196;
-  const free = (u, v) => {
-    if (u < 0 || v < 0 || u >= width || v >= height) return false;
-    const p = grey[v * width + u] / 255;
-    return (meta.negate ? p : 1 - p) < freeBelow;
+  const free = new Uint8Array(width * height);
+  for (let k = 0; k < free.length; k++) {
+    const p = grey[k];
+    free[k] = meta.mode === "raw" ? p === 0 : (meta.negate ? p / 255 : 1 - p / 255) < freeBelow;
+  }
+  // A pixel is kept when the window of ±clearance around it, along a row, then along a column,
+  // lies inside the image and holds no blocked pixel: prefix counts of blocked pixels per line.
+  const pass = (src, length, lines, at) => {
+    const out = new Uint8Array(src.length);
+    const blocked = new Int32Array(length + 1);
+    for (let line = 0; line < lines; line++) {
+      for (let k = 0; k < length; k++) blocked[k + 1] = blocked[k] + (src[at(line, k)] ? 0 : 1);
+      for (let k = clearance; k < length - clearance; k++) {
+        out[at(line, k)] = blocked[k + clearance + 1] === blocked[k - clearance] ? 1 : 0;
+      }
+    }
+    return out;
   };
-  const clear = (u, v) => {
-    for (let du = -3; du <= 3; du++) for (let dv = -3; dv <= 3; dv++) if (!free(u + du, v + dv)) return false;
-    return true;
-  };
+  const rows = pass(free, width, height, (v, u) => v * width + u);
+  return pass(rows, height, width, (u, v) => v * width + u);
+}
+
+// The standing pixel nearest (x, y) in metres (Euclidean), as the point at its centre.
+function nearestFree(image, meta, mask, x, y) {
+  const { width, height } = image;
   const [ox, oy] = meta.origin;
   const u0 = Math.floor((x - ox) / meta.resolution);
   const v0 = height - 1 - Math.floor((y - oy) / meta.resolution);
-  for (let ring = 0; ring < Math.max(width, height); ring++) {
+  let best = null;
+  // Square rings outwards; once one holds a candidate at distance d, rings up to d still may
+  // hold a nearer one (a ring r is at least r away).
+  for (let ring = 0; ring < Math.max(width, height) && (!best || ring <= best.d); ring++) {
     for (let du = -ring; du <= ring; du++) {
       for (const dv of Math.abs(du) === ring ? range(-ring, ring) : [-ring, ring]) {
         const [u, v] = [u0 + du, v0 + dv];
-        if (clear(u, v)) return [round6(ox + (u + 0.5) * meta.resolution), round6(oy + (height - v - 0.5) * meta.resolution)];
+        if (u < 0 || v < 0 || u >= width || v >= height || !mask[v * width + u]) continue;
+        const d = Math.hypot(du, dv);
+        if (!best || d < best.d) best = { d, u, v };
       }
     }
   }
-  throw new Error("the map has no free space to put a device in");
+  if (!best) throw new Error("the map has no free space to put a device in");
+  return [round6(ox + (best.u + 0.5) * meta.resolution), round6(oy + (height - best.v - 0.5) * meta.resolution)];
 }
 
 const range = (a, b) => Array.from({ length: b - a + 1 }, (_, k) => a + k);
@@ -526,8 +552,12 @@ async function importRosMap(files) {
   delete doc.route_graph;
   state.scenario = doc;
   try {
-    const aps = accessPoints(previous).map((ap) => ({ ...ap, position: [...nearestFree(image, meta, ...scale(ap.position)), ap.position[2]] }));
-    const srus = (previous.srus || []).map((sru) => ({ ...sru, position: [...nearestFree(image, meta, ...scale(sru.position)), sru.position[2]] }));
+    // Clear by the robot's radius and half a cell, at least a pixel.
+    const clearance = Math.max(1, Math.ceil(((previous.mru?.radius_m ?? 0) + previous.grid.resolution_m / 2) / meta.resolution));
+    const mask = standingMask(image, meta, Math.min(clearance, 64));
+    const free = (p) => [...nearestFree(image, meta, mask, ...scale(p)), p[2]];
+    const aps = accessPoints(previous).map((ap) => ({ ...ap, position: free(ap.position) }));
+    const srus = (previous.srus || []).map((sru) => ({ ...sru, position: free(sru.position) }));
     const irss = surfaces(previous).map((irs) => {
       const [x, y] = scale(irs.center);
       const { normal } = snapToWall(x, y, irs.center[2]);
@@ -565,36 +595,43 @@ async function buildMap() {
   if (!state.scenarioId) return;
   $("access").disabled = $("kind").value !== "rate";
   say("Requesting the map…");
+  const request = ++state.request;
+  // A build still followed is superseded: its map is not this request's.
+  state.job = null;
+  $("job").hidden = true;
   setBuilding(true);
   try {
     const { status, data } = await api("POST", "/v1/maps", mapRequest());
+    if (request !== state.request) return;
     if (status === 202) {
       state.job = data;
-      await followJob();
+      await followJob(request);
     } else {
       await showMap(data.map_id);
     }
   } finally {
-    if (!state.job) setBuilding(false);
+    if (request === state.request && !state.job) setBuilding(false);
   }
 }
 
-async function followJob() {
+async function followJob(request) {
   $("job").hidden = false;
   const mine = state.job;
+  const current = () => request === state.request && state.job && state.job.job_id === mine.job_id;
   try {
     const job = await waitJob(mine, (job) => {
-      if (state.job && state.job.job_id === mine.job_id) state.job = job;
+      if (!current()) return;
+      state.job = job;
       $("job-progress").value = job.progress;
       $("job-text").textContent = `${job.cells_done} / ${job.cells_total} cells (${job.state})`;
     });
-    if (!state.job || state.job.job_id !== mine.job_id) return;
+    if (!current()) return;
     state.job = null;
     if (job.state === "done") return showMap(job.map_id);
     setBuilding(false);
     say(`The build ${job.state}${job.error ? ": " + job.error : ""}.`, job.state === "failed");
   } finally {
-    if (!state.job) $("job").hidden = true;
+    if (request === state.request && !state.job) $("job").hidden = true;
   }
 }
 
@@ -623,12 +660,18 @@ async function showMap(mapId) {
   const sameGrid = state.map && sameGrids(state.map.grid, data.grid);
   state.map = data;
   state.image = null;
+  state.layerCache = null;
+  // The comparison is fetched again for this map (its unit, its grid) below.
+  state.compare = null;
+  if (state.layer === "difference") state.layer = "value";
   setBuilding(false);
   if (!sameGrid) fitView();
   for (const option of $("unit").options) {
     option.disabled = data.key.kind === "rate" && !["", "bps_hz", "mbps"].includes(option.value);
   }
-  const { min, max } = data.stats;
+  // A map with no value anywhere (a rate map whose SRUs no cell serves) still shows.
+  const min = data.stats.min ?? 0;
+  const max = data.stats.max ?? 1;
   const range = $("threshold-range");
   range.min = Math.floor(min * 10) / 10;
   range.max = Math.ceil(max * 10) / 10;
@@ -647,7 +690,8 @@ async function showMap(mapId) {
   const label = `${state.scenarioName} · ${data.key.kind} · ${data.key.phases}`;
   if (!state.history.some((h) => h.mapId === mapId)) state.history.push({ mapId, label });
   updateCompareOptions();
-  if (state.compare) await refreshComparison();
+  if ($("compare").value) await refreshComparison();
+  else $("layer-difference").disabled = true;
   say(`Map ${mapId.slice(0, 8)}: ${data.stats.valued_cells} cells with a value, built in the API's cache.`);
   await refresh();
 }
@@ -673,26 +717,29 @@ function updateCompareOptions() {
 async function refreshComparison() {
   const choice = $("compare").value;
   fieldError("compare", "");
-  if (!choice) {
+  const drop = (message) => {
     state.compare = null;
+    state.layerCache = null;
     $("layer-difference").disabled = true;
     if (state.layer === "difference") setLayer("value");
-    return;
-  }
+    if (message) fieldError("compare", message);
+  };
+  if (!choice) return drop();
   let mapId = choice;
   let label = $("compare").selectedOptions[0].text;
   if (choice === "no-irs") {
-    if (state.map.key.kind !== "gain") {
-      fieldError("compare", "Without IRS compares gain maps: show a gain map first.");
-      return;
-    }
-    const { status, data } = await api("POST", "/v1/maps", mapRequest("none"));
-    if (status === 202) {
-      const job = await waitJob(data, () => {});
-      if (job.state !== "done") throw new Error(`The map without IRS ${job.state}.`);
-      mapId = job.map_id;
-    } else {
-      mapId = data.map_id;
+    if (state.map.key.kind !== "gain") return drop("Without IRS compares gain maps: show a gain map first.");
+    try {
+      const { status, data } = await api("POST", "/v1/maps", mapRequest("none"));
+      if (status === 202) {
+        const job = await waitJob(data, () => {});
+        if (job.state !== "done") return drop(`The map without IRS ${job.state}.`);
+        mapId = job.map_id;
+      } else {
+        mapId = data.map_id;
+      }
+    } catch (error) {
+      return drop(error.message);
     }
     label = "without IRS";
   }
@@ -700,15 +747,13 @@ async function refreshComparison() {
   try {
     other = (await api("GET", `/v1/maps/${mapId}${unitQuery()}`)).data;
   } catch (error) {
-    fieldError("compare", error.message);
-    return;
+    return drop(error.message);
   }
-  if (!sameGrids(other.grid, state.map.grid)) {
-    fieldError("compare", "That map has another grid: only maps of one floor and grid compare.");
-    return;
-  }
+  if (!sameGrids(other.grid, state.map.grid)) return drop("That map has another grid: only maps of one floor and grid compare.");
+  if (other.unit !== state.map.unit) return drop(`That map is in ${other.unit}, this one in ${state.map.unit}: only maps of one unit compare.`);
   state.compare = { label, map: other };
   state.image = null;
+  state.layerCache = null;
   $("layer-difference").disabled = false;
   setLayer("difference");
   say(`Difference: this map − ${label} (${other.unit}).`);
@@ -1119,6 +1164,14 @@ function niceTicks(low, high, target) {
 // What the cells show: values, the certificate gap, the serving AP or the difference against
 // another map, with the colour table and range of the colour bar.
 function layerValues() {
+  const key = `${state.map.map_id}|${state.unit}|${state.layer}|${state.compare ? state.compare.map.map_id : ""}`;
+  if (state.layerCache && state.layerCache.key === key) return state.layerCache.layer;
+  const layer = computeLayer();
+  state.layerCache = { key, layer };
+  return layer;
+}
+
+function computeLayer() {
   const map = state.map;
   const grid = (f) => {
     let low = Infinity;
@@ -1140,7 +1193,9 @@ function layerValues() {
     return { ...g, low: 0, high: g.high || 1e-12, unit: `gap, ${map.unit}`, colours: VIRIDIS };
   }
   if (state.layer === "serving" && map.serving_ap) {
-    return { values: map.serving_ap, low: 0, high: Math.max(1, ...map.serving_ap.flat().filter((v) => v !== null)), unit: "serving AP", categorical: true };
+    let high = 1;
+    for (const row of map.serving_ap) for (const v of row) if (v !== null && v > high) high = v;
+    return { values: map.serving_ap, low: 0, high, unit: "serving AP", categorical: true };
   }
   if (state.layer === "difference" && state.compare) {
     const other = state.compare.map.values;
@@ -1616,6 +1671,7 @@ function choose(cell, exact = cellCentre(cell)) {
 function onWheel(event) {
   if (!state.map) return;
   event.preventDefault();
+  if (event.deltaY === 0) return;
   const [px, py] = pointer(event);
   zoomAt(event.deltaY < 0 ? 1.25 : 0.8, px, py);
 }
@@ -1665,6 +1721,7 @@ function setLayer(layer) {
   state.layer = layer;
   document.querySelector(`input[name=layer][value=${layer}]`).checked = true;
   state.image = null;
+  state.layerCache = null;
   draw();
 }
 
@@ -1710,9 +1767,16 @@ function wire() {
   $("build").addEventListener("click", guard(buildMap));
   $("cancel").addEventListener("click", guard(cancelJob));
   $("unit").addEventListener("change", guard(async (e) => {
+    const before = { unit: state.unit, threshold: state.threshold };
     state.unit = e.target.value;
     state.threshold = null;
-    if (state.map) await showMap(state.map.map_id);
+    try {
+      if (state.map) await showMap(state.map.map_id);
+    } catch (error) {
+      Object.assign(state, before);
+      e.target.value = before.unit;
+      throw error;
+    }
     if (state.start && state.goal) await planPath();
   }));
   $("threshold-range").addEventListener("input", (e) => setThreshold(Number(e.target.value)));
