@@ -23,8 +23,6 @@ import json
 import pathlib
 import sys
 
-from selenium import webdriver
-from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
 from selenium.webdriver.common.by import By
@@ -33,6 +31,8 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
 import irs_testkit as kit  # noqa: E402
+
+import chromium  # noqa: E402  (tests/browser/chromium.py, beside this file)
 
 BASE = sys.argv[1].rstrip("/")
 ARTIFACTS = pathlib.Path(sys.argv[2])
@@ -48,14 +48,7 @@ def api(method, path, body=None):
     return kit.request(BASE, method, path, body, timeout=60, raise_for_status=True).body
 
 
-options = webdriver.ChromeOptions()
-for flag in ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-             "--disable-component-update", "--disable-dev-shm-usage", "--window-size=1280,800",
-             "--no-first-run", "--disable-sync", "--disable-default-apps", "--hide-scrollbars"]:
-    options.add_argument(flag)
-options.binary_location = "/usr/bin/chromium"
-options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
-driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
+driver = chromium.start(1280, 800)
 wait = WebDriverWait(driver, 60)
 js = driver.execute_script
 
@@ -409,16 +402,7 @@ try:
           "two taps plan the route the API answers", by_id("distance").text)
     driver.save_screenshot(str(ARTIFACTS / "phone.png"))
 
-    errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-    check(not errors, "no console errors", json.dumps(errors)[:800])
-    urls = []
-    for entry in driver.get_log("performance"):
-        message = json.loads(entry["message"])["message"]
-        if message["method"] == "Network.requestWillBeSent":
-            urls.append(message["params"]["request"]["url"])
-    foreign = [u for u in urls if not (u.startswith(BASE + "/") or u.startswith(("data:", "blob:")))]
-    check(urls and not foreign, "no request leaves the server's origin",
-          f"{len(urls)} requests" + (f", foreign: {foreign[:5]}" if foreign else ""))
+    chromium.check_console_and_origin(driver, BASE, check)
 except Exception as error:  # noqa: BLE001 - a failed step is a failed check, with the page's state
     driver.save_screenshot(str(ARTIFACTS / "failure.png"))
     check(False, "the walk-through ran to its end",

@@ -10,13 +10,9 @@ keyboard, clicks q_I = (-10, 0) and q_F = (10, 0) on the map, and checks that
 then saves a screenshot. Prints "N passed, 0 failed" and exits 0, or names the failed check.
 """
 
-import json
 import pathlib
 import sys
-import time
 
-from selenium import webdriver
-from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
@@ -24,6 +20,8 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "support"))
 import irs_testkit as kit  # noqa: E402
+
+import chromium  # noqa: E402  (tests/browser/chromium.py, beside this file)
 
 BASE = sys.argv[1].rstrip("/")
 SCREENSHOT = sys.argv[2]
@@ -39,14 +37,7 @@ def api(method, path, body=None):
     return kit.request(BASE, method, path, body, timeout=30, raise_for_status=True).body
 
 
-options = webdriver.ChromeOptions()
-for flag in ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-             "--disable-component-update", "--disable-dev-shm-usage", "--window-size=1500,1100",
-             "--no-first-run", "--disable-sync", "--disable-default-apps"]:
-    options.add_argument(flag)
-options.binary_location = "/usr/bin/chromium"
-options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
-driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
+driver = chromium.start(1500, 1100)
 wait = WebDriverWait(driver, 30)
 
 try:
@@ -159,16 +150,7 @@ try:
         canvas)
     check(pixels != redrawn, "choosing the gap layer (keyboard) redraws the map")
 
-    errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-    check(not errors, "no console errors", json.dumps(errors)[:500])
-    urls = []
-    for entry in driver.get_log("performance"):
-        message = json.loads(entry["message"])["message"]
-        if message["method"] == "Network.requestWillBeSent":
-            urls.append(message["params"]["request"]["url"])
-    foreign = [u for u in urls if not (u.startswith(BASE + "/") or u.startswith(("data:", "blob:")))]
-    check(urls and not foreign, "no request leaves the server's origin",
-          f"{len(urls)} requests" + (f", foreign: {foreign[:5]}" if foreign else ""))
+    chromium.check_console_and_origin(driver, BASE, check)
 finally:
     driver.quit()
 
