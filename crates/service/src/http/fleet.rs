@@ -80,10 +80,11 @@ pub(super) async fn plan_fleet(
     };
     // Each robot's search touches at most every cell a bounded number of times.
     let work = map.grid.cells().saturating_mul(query.robots.len().max(1));
-    // Every field checked before any search: a bad one is a 422 now, never a failed job.
+    // Every field checked before any search: a bad one is a 422 now, never a failed job. The
+    // checks include each robot's route alone, a search of the map per robot: weighed as such.
     let (checked_scenario, checked_map, checked_query) =
         (scenario.clone(), map.clone(), query.clone());
-    heavy(&state, "fleet check", map.grid.cells(), move |_| {
+    heavy(&state, "fleet check", work, move |_| {
         fleet::check(&checked_scenario, &checked_map, &checked_query)
     })
     .await??;
