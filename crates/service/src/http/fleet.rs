@@ -9,10 +9,9 @@ use super::paths::map_for_query;
 use super::problem::ApiError;
 use super::{Body, accepted, heavy};
 use crate::app::identity::Caller;
-use crate::app::jobs::{AnswerKind, JobKind};
+use crate::app::jobs::AnswerKind;
 use crate::app::{App, Error};
 use crate::ids::{JobId, MapId, ScenarioId};
-use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
@@ -137,21 +136,5 @@ pub(super) async fn get_fleet_plan(
     caller: Caller,
     Path(plan_id): Path<JobId>,
 ) -> Result<Response, ApiError> {
-    let job = state
-        .jobs()
-        .get(&plan_id)
-        .filter(|j| j.kind() == JobKind::Fleet && j.visible_to(&caller))
-        .ok_or_else(|| Error::not_found("fleet plan", &plan_id))?;
-    match job.answer(AnswerKind::Fleet) {
-        Some(outcome) => Ok(Json(&outcome.answer).into_response()),
-        None if job.state().is_terminal() => Err(Error::JobFinished {
-            job_id: job.id.clone(),
-            state: job.state(),
-        }
-        .into()),
-        None => Err(Error::FleetPlanNotReady {
-            job_id: job.id.clone(),
-        }
-        .into()),
-    }
+    super::jobs::answer_of(&state, &caller, &plan_id, AnswerKind::Fleet)
 }

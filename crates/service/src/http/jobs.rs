@@ -4,12 +4,14 @@
 use super::Page;
 use super::problem::ApiError;
 use crate::app::App;
+use crate::app::Error;
 use crate::app::identity::Caller;
-use crate::app::jobs::JobView;
+use crate::app::jobs::{AnswerKind, JobView};
 use crate::ids::JobId;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use std::collections::HashMap;
 
@@ -59,4 +61,32 @@ pub(super) async fn cancel_job(
         StatusCode::ACCEPTED,
         Json(state.cancel_job(&id, &caller).await?),
     ))
+}
+
+/// The answer of a job of `kind` (a Monte Carlo check, a fleet plan) once it is done: 404 for a
+/// job of another kind or another tenant, 409 while it runs or when it ended without one.
+pub(super) fn answer_of(
+    state: &App,
+    caller: &Caller,
+    id: &JobId,
+    kind: AnswerKind,
+) -> Result<Response, ApiError> {
+    let (what, not_ready): (&'static str, fn(JobId) -> Error) = match kind {
+        AnswerKind::Check => ("check", |job_id| Error::CheckNotReady { job_id }),
+        AnswerKind::Fleet => ("fleet plan", |job_id| Error::FleetPlanNotReady { job_id }),
+    };
+    let job = state
+        .jobs()
+        .get(id)
+        .filter(|j| j.kind() == kind.job_kind() && j.visible_to(caller))
+        .ok_or_else(|| Error::not_found(what, id))?;
+    match job.answer(kind) {
+        Some(outcome) => Ok(Json(&outcome.answer).into_response()),
+        None if job.state().is_terminal() => Err(Error::JobFinished {
+            job_id: job.id.clone(),
+            state: job.state(),
+        }
+        .into()),
+        None => Err(not_ready(job.id.clone()).into()),
+    }
 }

@@ -9,7 +9,7 @@ use crate::app::App;
 use crate::app::Error;
 use crate::app::answers::{OpenAnswer, PathQuery};
 use crate::app::identity::Caller;
-use crate::app::jobs::{AnswerKind, JobKind, SYNC_CHECK_S};
+use crate::app::jobs::{AnswerKind, SYNC_CHECK_S};
 use crate::app::maps::{Obtained, check_budget};
 use crate::ids::{JobId, MapId, ScenarioId};
 use axum::Json;
@@ -488,21 +488,5 @@ pub(super) async fn get_check(
     caller: Caller,
     Path(check_id): Path<JobId>,
 ) -> Result<Response, ApiError> {
-    let job = state
-        .jobs()
-        .get(&check_id)
-        .filter(|j| j.kind() == JobKind::Check && j.visible_to(&caller))
-        .ok_or_else(|| Error::not_found("check", &check_id))?;
-    match job.answer(AnswerKind::Check) {
-        Some(outcome) => Ok(Json(&outcome.answer).into_response()),
-        None if job.state().is_terminal() => Err(Error::JobFinished {
-            job_id: job.id.clone(),
-            state: job.state(),
-        }
-        .into()),
-        None => Err(Error::CheckNotReady {
-            job_id: job.id.clone(),
-        }
-        .into()),
-    }
+    super::jobs::answer_of(&state, &caller, &check_id, AnswerKind::Check)
 }

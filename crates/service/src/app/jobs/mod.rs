@@ -13,7 +13,7 @@ mod record;
 
 pub use answers::{AnswerKind, SYNC_CHECK_S};
 use job::JobTimes;
-pub use job::{Job, JobKind, JobState, Withdrawn, Work};
+pub use job::{Job, JobState, Withdrawn, Work};
 pub use maps::MapRequestOutcome;
 pub(crate) use maps::SharedBuild;
 pub use placements::{PlacementOutcome, PlacementSearch};
