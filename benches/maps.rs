@@ -191,6 +191,7 @@ fn floors(c: &mut Criterion) {
     for (name, resolution) in [
         ("decode_and_gain_map_241x161", 0.25),
         ("decode_and_gain_map_601x401", 0.1),
+        ("decode_and_gain_map_1201x801", 0.05),
     ] {
         let document = warehouse_document(resolution);
         group.bench_function(name, |b| {

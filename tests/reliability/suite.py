@@ -725,9 +725,9 @@ def floor(name, resolution=0.05, boxes=0, walls=0, plan=0, clutter=0.0, aps=1, e
 def cpu_budget():
     """The CPU estimate a build is admitted by, against the CPU the build takes, on a grid of
     floors (each term of the estimate driving one of them): within 3× either way. Then the
-    audit's placement of 101 poses over a 4096² floor plan is refused before it starts (it was
-    estimated at 2 s and would take an hour), and a placement over a floor plan stops within a
-    second of its cancel (it took 82 s)."""
+    audit's placement of 101 poses over a 4096² floor plan is refused before it starts by a budget
+    below its cost (it was once estimated at 2 s and took an hour), and a placement over a floor
+    plan stops within a second of its cancel (it took 82 s)."""
     work = tempfile.mkdtemp(prefix="irs-cpu-budget-")
     grid = [
         ("1000 boxes", floor("boxes", boxes=1000), []),
@@ -759,18 +759,23 @@ def cpu_budget():
         expect(1 / 3 <= estimate / measured <= 3,
                f"{name}: estimated {estimate:.2f} s for {measured:.2f} s measured")
 
-    server = Server("--max-body-kb", "32768")
+    south = {"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 0.2}
+    objective = {"kind": "coverage", "threshold": -70}
+    # Under a budget of 5 s of CPU, the audit's search (about a minute) is refused before it starts.
+    server = Server("--max-body-kb", "32768", "--max-build-cpu-s", "5")
     try:
-        south = {"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 0.2}
-        objective = {"kind": "coverage", "threshold": -70}
         status, problem, _ = server.post("/v1/placements", {
             "scenario": floor("audit", plan=4096), "candidates": south, "objective": objective})
         expect(status == 422 and problem.get("code") == "limit_exceeded",
                f"101 poses over a 4096² plan: {status} {str(problem)[:200]}")
         figure("cpu-budget", f"101 poses over a 4096² plan refused before any work: {problem['detail'][:90]}")
+    finally:
+        server.stop()
+
+    server = Server("--max-body-kb", "32768")
+    try:
         status, job, _ = server.post("/v1/placements", {
-            "scenario": floor("cancelled", plan=2048),
-            "candidates": dict(south, step_m=1.0), "objective": objective})
+            "scenario": floor("cancelled", plan=2048), "candidates": south, "objective": objective})
         expect(status == 202, f"a placement over a 2048² plan is a job: {status} {str(job)[:200]}")
         job_id = job["job_id"]
         kit.wait_until("the search scoring", lambda: server.get(f"/v1/jobs/{job_id}").body["cells_done"] > 0, 60)

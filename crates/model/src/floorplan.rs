@@ -267,14 +267,14 @@ pub fn decode(plan: &FloorPlan, file: &[u8], ceiling_m: f64) -> Result<Raster, F
             };
         }
     }
-    Ok(Raster {
-        width: w,
-        height: h,
-        resolution: plan.resolution,
-        origin: [plan.origin[0], plan.origin[1]],
-        obstacle_height: plan.obstacle_height_m.unwrap_or(ceiling_m),
-        occupied,
-    })
+    Ok(Raster::new(
+        w,
+        h,
+        plan.resolution,
+        [plan.origin[0], plan.origin[1]],
+        plan.obstacle_height_m.unwrap_or(ceiling_m),
+        &occupied,
+    ))
 }
 
 /// Checks the fields of a floor plan that do not need the image.
@@ -405,11 +405,11 @@ mod tests {
         let r = decode(&p, IMAGE, 3.0).unwrap();
         assert_eq!((r.width, r.height, r.obstacle_height), (3, 2, 3.0));
         // Map row 0 is the image's bottom row.
-        assert_eq!(r.occupied, [false, false, true, true, false, true]);
+        assert_eq!(r.occupancy(), [false, false, true, true, false, true]);
         p.unknown_as = UnknownAs::Free;
         p.obstacle_height_m = Some(1.25);
         let r = decode(&p, IMAGE, 3.0).unwrap();
-        assert_eq!(r.occupied, [false, false, true, true, false, false]);
+        assert_eq!(r.occupancy(), [false, false, true, true, false, false]);
         assert_eq!(r.obstacle_height, 1.25);
         assert_eq!(r.extent(), [[-1.0, 0.5], [-2.0, -1.0]]);
     }
@@ -482,7 +482,7 @@ mod tests {
         let mut p = plan();
         p.unknown_as = UnknownAs::Free;
         let r = decode(&p, b"P2\n3 1\n100\n100 0 50\n", 2.0).unwrap();
-        assert_eq!(r.occupied, [false, true, false]);
+        assert_eq!(r.occupancy(), [false, true, false]);
     }
 
     #[test]

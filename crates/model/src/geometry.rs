@@ -11,8 +11,8 @@
 //!   edge).
 //!
 //! The raster is tested by walking the pixels the segment's 2D projection crosses, column by
-//! column along its major axis, so a link costs O(pixels crossed) whatever the number of walls
-//! drawn into the image.
+//! column along its major axis and leaping through open floor, so a link costs at most
+//! O(pixels crossed) whatever the number of walls drawn into the image.
 
 use nalgebra::Vector3;
 
@@ -20,7 +20,7 @@ mod nearby;
 mod raster;
 mod sightlines;
 pub use nearby::Nearby;
-pub use raster::Raster;
+pub use raster::{Blocker, Raster};
 pub use sightlines::SightLines;
 
 type P3 = Vector3<f64>;
@@ -426,6 +426,7 @@ impl Obstructions {
         for wall in &self.walls {
             wall.block_row(source, users, targets, blocked);
         }
+        let mut last = raster::Blocker::default();
         for (j, blocked) in blocked.iter_mut().enumerate() {
             let user = || P3::new(users.x, users.ys[j], users.z);
             *blocked = wanted[j]
@@ -433,7 +434,7 @@ impl Obstructions {
                     || self
                         .raster
                         .as_ref()
-                        .is_some_and(|r| r.blocks(source, &user())));
+                        .is_some_and(|r| r.blocks_after(source, &user(), &mut last)));
         }
     }
 
@@ -957,13 +958,10 @@ pub(crate) mod tests {
         ) {
             let mut state = seed | 1;
             let mut next = || { state ^= state << 13; state ^= state >> 7; state ^= state << 17; state };
-            let occupied_px = (0..width * height)
+            let occupied_px: Vec<bool> = (0..width * height)
                 .map(|_| (next() % 1000) as f64 / 1000.0 < occupied_share)
                 .collect();
-            let raster = Raster {
-                width, height, resolution: pixel, origin: [offset, -offset],
-                obstacle_height: 1.0, occupied: occupied_px,
-            };
+            let raster = Raster::new(width, height, pixel, [offset, -offset], 1.0, &occupied_px);
             let scene = Obstructions { boxes: vec![], walls: vec![], raster: Some(std::sync::Arc::new(raster)) };
             let n = ((width.max(height) as f64 * pixel) / resolution) as usize + 2;
             let grid = crate::scenario::Grid { nx: n, ny: n, x_min: 0.0, y_min: -offset, resolution_m: resolution };
@@ -1004,15 +1002,14 @@ pub(crate) mod tests {
             // One height for the raster: keep only boxes of the first box's height.
             let h = boxes.first().map_or(1.0, |b| b.hi[2]);
             let boxes: Vec<Aabb> = boxes.into_iter().filter(|b| b.hi[2] == h).collect();
-            let mut raster = Raster {
-                width, height, resolution, origin, obstacle_height: h,
-                occupied: vec![false; width * height],
-            };
-            for (k, occ) in raster.occupied.iter_mut().enumerate() {
-                let (c, r) = (k % width, k / width);
-                let centre = [origin[0] + (c as f64 + 0.5) * resolution, origin[1] + (r as f64 + 0.5) * resolution];
-                *occ = boxes.iter().any(|b| b.covers(centre[0], centre[1]));
-            }
+            let pixels: Vec<bool> = (0..width * height)
+                .map(|k| {
+                    let (c, r) = (k % width, k / width);
+                    let centre = [origin[0] + (c as f64 + 0.5) * resolution, origin[1] + (r as f64 + 0.5) * resolution];
+                    boxes.iter().any(|b| b.covers(centre[0], centre[1]))
+                })
+                .collect();
+            let raster = Raster::new(width, height, resolution, origin, h, &pixels);
             // Ends on a quarter-pixel lattice (edges and corners included) or jittered off it.
             let point = |(i, j, jitter, z): (u32, u32, bool, u32)| {
                 let off = if jitter { 0.1234567 } else { 0.0 };

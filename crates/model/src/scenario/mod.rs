@@ -326,11 +326,11 @@ impl Scenario {
         }
     }
 
-    /// Bytes of the decoded floor plan (one per pixel), which a registry weighs besides the
+    /// Bytes of the decoded floor plan (one per pixel: its clearance), which a registry weighs besides the
     /// canonical document (numbers and the floor plan's base64 take about as much parsed as
     /// written).
     pub fn raster_bytes(&self) -> usize {
-        self.raster.as_ref().map_or(0, |r| r.occupied.capacity())
+        self.raster.as_ref().map_or(0, |r| r.heap_bytes())
     }
 }
 
