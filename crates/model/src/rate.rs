@@ -161,15 +161,76 @@ impl RateModel {
     /// ordering the gains satisfy), or `None` if some SRU cannot meet its rate.
     /// `lambdas[l]` is user l's expected gain λ_l (linear).
     pub fn best(&self, lambdas: &[f64]) -> Option<PowerSplit> {
-        let mut best: Option<(f64, u8)> = None;
+        self.best_order(lambdas)
+            .map(|(_, k)| self.split(lambdas, k).expect("feasible order"))
+    }
+
+    /// The admissible decoding order with the MRU's best [`Self::mru_score`] at these gains,
+    /// and that score; `None` if no admissible order serves every SRU.
+    ///
+    /// SIC admits only orders along increasing gains, so with distinct gains exactly one of
+    /// the (K+1)! orders is admissible: it is found by sorting the users (O(K²)) and is the
+    /// only one scored. Equal gains admit several orders, and then every order is tried, so
+    /// the answer is always the best over all of them (tested against that search).
+    #[inline]
+    pub fn best_order(&self, lambdas: &[f64]) -> Option<(f64, usize)> {
+        if let Some(k) = self.only_admissible(lambdas) {
+            return self
+                .mru_score_ignoring_ordering(lambdas, k)
+                .map(|score| (score, k));
+        }
+        let mut best: Option<(f64, usize)> = None;
         for k in 0..self.orders.len() {
-            if let Some(r) = self.mru_rate(lambdas, k)
-                && best.is_none_or(|(b, _)| r > b)
+            if let Some(score) = self.mru_score(lambdas, k)
+                && best.is_none_or(|(b, _)| score > b)
             {
-                best = Some((r, k as u8));
+                best = Some((score, k));
             }
         }
-        best.map(|(_, k)| self.split(lambdas, k as usize).expect("feasible order"))
+        best
+    }
+
+    /// The one order SIC admits at these gains: OMA's only order, or under NOMA the users by
+    /// strictly increasing gain, as an index into [`Self::orders`] (which lists the
+    /// permutations in lexicographic order, so the index is the permutation's Lehmer rank).
+    /// `None` when two gains are equal (or NaN), or for more users than it sorts on the stack.
+    #[inline]
+    fn only_admissible(&self, lambdas: &[f64]) -> Option<usize> {
+        const MOST: usize = 8;
+        let n = lambdas.len();
+        if self.access == Access::Oma {
+            return Some(0);
+        }
+        if n > MOST {
+            return None;
+        }
+        // Insertion sort of the user indices by gain.
+        let mut users = [0u8; MOST];
+        for u in 0..n {
+            let mut at = u;
+            while at > 0 && lambdas[users[at - 1] as usize] > lambdas[u] {
+                users[at] = users[at - 1];
+                at -= 1;
+            }
+            users[at] = u as u8;
+        }
+        // Strictly increasing, which also refuses NaN.
+        if !users[..n]
+            .windows(2)
+            .all(|w| lambdas[w[0] as usize] < lambdas[w[1] as usize])
+        {
+            return None;
+        }
+        // Lehmer rank: at each position, the unused users below the one placed there, times
+        // the orders of the positions after it.
+        let mut rank = 0;
+        let mut used = 0u32;
+        for (t, &u) in users[..n].iter().enumerate() {
+            let below = (used & ((1u32 << u) - 1)).count_ones() as usize;
+            rank = rank * (n - t) + (u as usize - below);
+            used |= 1 << u;
+        }
+        Some(rank)
     }
 
     /// The MRU's best rate for one decoding order (NOMA) or for OMA, without allocating.
@@ -457,6 +518,31 @@ mod tests {
                     prop_assert!((need / 0.1 - 1.0).abs() < 1e-9, "required power {need}");
                 }
             }
+        }
+    }
+
+    proptest! {
+        /// The order [`RateModel::best_order`] picks by sorting is the best over every order,
+        /// for 1–4 SRUs, NOMA and OMA, gains drawn from a few values so that ties (several
+        /// admissible orders) are common.
+        #[test]
+        fn the_sorted_order_is_the_best_of_all(
+            srus in 1usize..=4,
+            noma in any::<bool>(),
+            targets in prop::collection::vec(0.05f64..2.0, 4),
+            gains in prop::collection::vec(0usize..6, 5),
+            p_max_dbm in 10.0f64..30.0,
+        ) {
+            let access = if noma { Access::Noma } else { Access::Oma };
+            let model = RateModel::new(access, dbm_to_watts(p_max_dbm), 1e-12, &targets[..srus]);
+            let levels = [1e-9, 3e-9, 1e-8, 2.5e-8, 1e-7, 4e-7];
+            let lambdas: Vec<f64> = gains[..=srus].iter().map(|&g| levels[g]).collect();
+            let scan = (0..model.orders().len())
+                .filter_map(|k| model.mru_score(&lambdas, k).map(|s| (s, k)))
+                .fold(None, |best: Option<(f64, usize)>, (s, k)| {
+                    if best.is_none_or(|(b, _)| s > b) { Some((s, k)) } else { best }
+                });
+            prop_assert_eq!(model.best_order(&lambdas), scan, "{:?}", lambdas);
         }
     }
 

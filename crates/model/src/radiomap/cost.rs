@@ -1,6 +1,7 @@
 //! What a build will cost before it starts: an estimate of its CPU time from the sizes that
-//! drive it (cells × scattering points × APs for gain maps; cells × N² × decoding orders for
-//! rate maps), so a service can refuse work beyond its budget before spending any of it.
+//! drive it (cells × scattering points × APs for gain maps; cells × N × users for rate maps,
+//! × decoding orders for `sdr-sca`), so a service can refuse work beyond its budget before
+//! spending any of it.
 //!
 //! The constants are per-unit times measured with `cargo bench` on the project's 2-core
 //! machine (one core, release build), rounded up: estimates err on the side of refusing.
@@ -21,11 +22,12 @@ const GAIN_S_PER_POINT: f64 = 20e-9;
 /// A `bits` gain map also quantises the phases and sums the channel at them: about twice the
 /// work of the closed form.
 const BITS_FACTOR: f64 = 2.0;
-/// Seconds per (cell · decoding order · N) of a rate map with the `fast` solver and its
-/// certificate, one core: a cold cell of the paper's NOMA map (2 orders) costs 0.5–0.6 ms at
-/// N = 60 and 1.4–2.1 ms at N = 256 (README "Performance"), 4.2–4.6 µs a unit; the warm-started
-/// cells of a map cost less, so 5 µs over-estimates a map, never under.
-const RATE_S_PER_POINT_ORDER: f64 = 5e-6;
+/// Seconds per (cell · user weight · N) of a rate map with the `fast` solver and its
+/// certificate, one core, where K SRUs weigh (K + 1)(K + 2)/3 ([`fast_user_weight`]; 2 for one
+/// SRU): a cold cell of the paper's NOMA map with one SRU costs 0.5–0.6 ms at N = 60 and
+/// 1.4–2.1 ms at N = 256 (README "Performance"), 4.2–4.6 µs a unit; the warm-started cells of
+/// a map cost less, so 5 µs over-estimates a map, never under.
+const RATE_S_PER_POINT_WEIGHT: f64 = 5e-6;
 /// Seconds per (cell · decoding order · (N + 1)³) of `sdr-sca`, which solves SDPs of size N + 1
 /// (interior-point work grows as its cube): 0.22–0.33 s a cell at N = 10 with 2 orders
 /// (`scripts/solver-ratio.sh`), 83–124 µs a unit.
@@ -232,17 +234,26 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
                 .map(|irs| irs.subsurfaces())
                 .sum::<usize>()
                 .max(1) as f64;
-            let orders = (1..=scenario.srus.len() + 1)
-                .map(|k| k as f64)
-                .product::<f64>();
-            let per_order = if key.solver == Some(SolverKind::SdrSca) {
-                (n + 1.0).powi(3) * SDR_SCA_S_PER_CUBE_ORDER
+            let srus = scenario.srus.len();
+            if key.solver == Some(SolverKind::SdrSca) {
+                // Every decoding order's SDPs are solved.
+                let orders = (1..=srus + 1).map(|k| k as f64).product::<f64>();
+                cells * orders * (n + 1.0).powi(3) * SDR_SCA_S_PER_CUBE_ORDER
             } else {
-                n * RATE_S_PER_POINT_ORDER
-            };
-            cells * orders * per_order
+                cells * fast_user_weight(srus) * n * RATE_S_PER_POINT_WEIGHT
+            }
         }
     }
+}
+
+/// How the `fast` solver's work grows with K SRUs, as (K + 1)(K + 2)/3: it searches one
+/// family per SRU and each score weighs every user, while only the one decoding order the
+/// gains admit is scored (`RateModel::best_order`). Fitted to the paper's multi-user floor
+/// with 1–4 SRUs (41², N = 60): 0.77, 1.3–1.5, 2.2–2.5 and 3.8–4.0 s of CPU, ratios 1 : 1.8 :
+/// 3.1 : 5.1 against this weight's 1 : 2 : 3.3 : 5.
+fn fast_user_weight(srus: usize) -> f64 {
+    let k = srus as f64;
+    (k + 1.0) * (k + 2.0) / 3.0
 }
 
 /// Estimated bytes of the built map, as the cache weighs it ([`super::RadioMap::size_bytes`]):

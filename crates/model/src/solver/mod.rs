@@ -112,9 +112,9 @@ pub fn objective(model: &RateModel, lambdas: &[f64]) -> f64 {
 /// orders (−∞ if an SRU cannot be served), the inner objective of the searches.
 #[inline]
 pub fn score(model: &RateModel, lambdas: &[f64]) -> f64 {
-    (0..model.orders().len())
-        .filter_map(|k| model.mru_score(lambdas, k))
-        .fold(f64::NEG_INFINITY, f64::max)
+    model
+        .best_order(lambdas)
+        .map_or(f64::NEG_INFINITY, |(score, _)| score)
 }
 
 /// A solved cell: the phases (v normalised so v_{N+1} = 1) and the certificate.
