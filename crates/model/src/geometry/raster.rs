@@ -353,7 +353,10 @@ const BLOCKER_WINDOW: i64 = 2;
 /// four neighbours already visited plus one, a backward pass the other four; off the map
 /// counts as free and far.
 fn clearance(width: usize, height: usize, occupied: &[bool]) -> Vec<u8> {
-    let mut d: Vec<u8> = occupied.iter().map(|&o| if o { 0 } else { u8::MAX }).collect();
+    let mut d: Vec<u8> = occupied
+        .iter()
+        .map(|&o| if o { 0 } else { u8::MAX })
+        .collect();
     let at = |d: &[u8], c: usize, r: usize| d[r * width + c];
     for r in 0..height {
         for c in 0..width {
@@ -380,7 +383,11 @@ fn clearance(width: usize, height: usize, occupied: &[bool]) -> Vec<u8> {
             if d[k] == 0 {
                 continue;
             }
-            let mut m = if c + 1 < width { at(&d, c + 1, r) } else { u8::MAX };
+            let mut m = if c + 1 < width {
+                at(&d, c + 1, r)
+            } else {
+                u8::MAX
+            };
             if r + 1 < height {
                 m = m.min(at(&d, c, r + 1));
                 if c + 1 < width {
@@ -434,7 +441,9 @@ mod tests {
     #[test]
     fn a_raster_walk_stops_at_its_first_occupied_column() {
         let free = raster(&[], 1.0);
-        let plain = |r: &Raster, a: [f64; 3], b: [f64; 3]| r.trace::<false>(&p(a), &p(b), &mut Blocker::default()).1;
+        let plain = |r: &Raster, a: [f64; 3], b: [f64; 3]| {
+            r.trace::<false>(&p(a), &p(b), &mut Blocker::default()).1
+        };
         assert_eq!(plain(&free, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 4);
         assert_eq!(
             plain(&free, [0.5, 0.5, 0.5], [2.5, 1.5, 0.5]),
@@ -454,8 +463,16 @@ mod tests {
             "above the column"
         );
         let walked = |r: &Raster, a: [f64; 3], b: [f64; 3]| r.columns_walked(&p(a), &p(b));
-        assert_eq!(walked(&free, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 1, "one leap");
-        assert_eq!(walked(&wall, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 2, "no room to leap");
+        assert_eq!(
+            walked(&free, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]),
+            1,
+            "one leap"
+        );
+        assert_eq!(
+            walked(&wall, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]),
+            2,
+            "no room to leap"
+        );
     }
 
     /// Chessboard distances by brute force: the least max(|Δc|, |Δr|) to an occupied pixel.
