@@ -63,6 +63,34 @@ fn slab(p: f64, q: f64, lo: f64, hi: f64) -> (f64, f64) {
     }
 }
 
+/// The users of a row (`ys` ascending) whose segments from p can meet the open slab (lo, hi)
+/// on one axis at a parameter t in `within`: the rest cannot be blocked by it, so a box costs
+/// the cells of its shadow on the row, not the whole row (1 000 small boxes over a map).
+///
+/// y(t) = p + t(y − p) is in (lo, hi) for y in (p + (lo − p)/t, p + (hi − p)/t); as t moves
+/// over `within` both ends move monotonically, so the union of these intervals is spanned by
+/// the ends' values at t_low and t_high. One more user each side absorbs the rounding of that
+/// bound (orders of magnitude below a grid step). A window starting too near t = 0 (the source
+/// inside the slabs) bounds nothing useful: the whole row.
+fn users_reaching(
+    p: f64,
+    lo: f64,
+    hi: f64,
+    within: (f64, f64),
+    ys: &[f64],
+) -> std::ops::Range<usize> {
+    let (t_low, t_high) = within;
+    if t_low < 1e-6 {
+        return 0..ys.len();
+    }
+    let end = |edge: f64, t: f64| p + (edge - p) / t;
+    let y_min = end(lo, t_low).min(end(lo, t_high));
+    let y_max = end(hi, t_low).max(end(hi, t_high));
+    let first = ys.partition_point(|&y| y < y_min).saturating_sub(1);
+    let last = (ys.partition_point(|&y| y <= y_max) + 1).min(ys.len());
+    first..last.max(first)
+}
+
 /// `blocked[j] |= ` the segment from p to ys[j] (one axis) meets the open slab (lo, hi) for more
 /// than [`GRAZE_T`] of the parameter interval `within`, which the other axes left: a grid row's
 /// last slab, vectorised.
@@ -101,7 +129,7 @@ fn rectangle_row(
 }
 
 /// A row of grid users seen from one source, for [`Obstructions::blocks_row`]: the users are
-/// (x, ys[j], z).
+/// (x, ys[j], z), with `ys` ascending (a grid row's order).
 #[derive(Debug, Clone, Copy)]
 pub struct RowOfUsers<'a> {
     /// The row's x (m), the same for every user.
@@ -171,13 +199,14 @@ impl Aabb {
         if t_high - t_low <= GRAZE_T {
             return;
         }
+        let reached = users_reaching(a[1], inside.lo[1], inside.hi[1], (t_low, t_high), ys);
         slab_row(
             a[1],
             inside.lo[1],
             inside.hi[1],
             (t_low, t_high),
-            ys,
-            blocked,
+            &ys[reached.clone()],
+            &mut blocked[reached],
         );
     }
 
@@ -843,6 +872,7 @@ pub(crate) mod tests {
                 xs.extend([b.lo[0], b.hi[0]]);
                 ys.extend([b.lo[1], b.hi[1]]);
             }
+            ys.sort_by(f64::total_cmp);
             let wanted: Vec<bool> = (0..ys.len()).map(|j| j % 7 != 3).collect();
             let (mut targets, mut blocked) = (Vec::new(), vec![true; ys.len()]);
             let source = P3::from(source);
