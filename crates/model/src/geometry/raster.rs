@@ -170,7 +170,7 @@ impl Raster {
     /// grazing an edge or a corner does not block. A projection lying exactly on a pixel edge
     /// is inside the region only where the pixels on both sides are occupied.
     pub fn blocks(&self, a: &P3, b: &P3) -> bool {
-        self.trace::<true>(a, b, &mut Blocker::default()).0
+        self.trace(a, b, true, &mut Blocker::default()).0
     }
 
     /// [`Raster::blocks`] for a run of links from one source to neighbouring users (a grid
@@ -179,18 +179,20 @@ impl Raster {
     /// neighbouring cells are mostly blocked by the same wall, so they cost a few columns
     /// instead of a walk. The answer is [`Raster::blocks`]'s (tested against it).
     pub fn blocks_after(&self, a: &P3, b: &P3, last: &mut Blocker) -> bool {
-        self.trace::<true>(a, b, last).0
+        self.trace(a, b, true, last).0
     }
 
-    /// The pixel columns [`Raster::blocks`] walks from a to b before it answers: what a
-    /// blockage test against the floor plan costs (see `radiomap::cost`).
+    /// The pixel columns [`Raster::blocks`] looks at from a to b before it answers (not those
+    /// it leaps over): what a blockage test against the floor plan costs (see
+    /// `radiomap::cost`).
     pub fn columns_walked(&self, a: &P3, b: &P3) -> usize {
-        self.trace::<true>(a, b, &mut Blocker::default()).1
+        self.trace(a, b, true, &mut Blocker::default()).1
     }
 
-    /// [`Raster::blocks`] and the columns walked to answer it; `LEAP` as in [`Raster::walk`];
-    /// `last` is tried first and holds the blocking pixel after.
-    fn trace<const LEAP: bool>(&self, a: &P3, b: &P3, last: &mut Blocker) -> (bool, usize) {
+    /// [`Raster::blocks`] and the columns looked at to answer it; `leap` as in
+    /// [`Raster::walk`]; the columns around `last` are tried first, and it holds the blocking
+    /// pixel after.
+    fn trace(&self, a: &P3, b: &P3, leap: bool, last: &mut Blocker) -> (bool, usize) {
         // The parameter range where 0 < z(t) < obstacle height.
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
         let dz = b[2] - a[2];
@@ -251,7 +253,7 @@ impl Raster {
             }
             tried = looked;
         }
-        let (blocked, looked, pixel) = walk((i64::MIN, i64::MAX), LEAP);
+        let (blocked, looked, pixel) = walk((i64::MIN, i64::MAX), leap);
         // After a free link the next is likely free too: try nothing first.
         last.0 = blocked.then_some(pixel);
         (blocked, tried + looked)
@@ -442,7 +444,7 @@ mod tests {
     fn a_raster_walk_stops_at_its_first_occupied_column() {
         let free = raster(&[], 1.0);
         let plain = |r: &Raster, a: [f64; 3], b: [f64; 3]| {
-            r.trace::<false>(&p(a), &p(b), &mut Blocker::default()).1
+            r.trace(&p(a), &p(b), false, &mut Blocker::default()).1
         };
         assert_eq!(plain(&free, [0.0, 1.5, 0.5], [4.0, 1.5, 0.5]), 4);
         assert_eq!(
@@ -519,7 +521,7 @@ mod tests {
 
     /// The reference: the walk that looks at every column, with no pixel tried first.
     fn plain(r: &Raster, a: &P3, b: &P3) -> bool {
-        r.trace::<false>(a, b, &mut Blocker::default()).0
+        r.trace(a, b, false, &mut Blocker::default()).0
     }
 
     proptest! {
@@ -563,8 +565,8 @@ mod tests {
             };
             for (a, b, za, zb) in ends {
                 let (a, b) = (at(a, za), at(b, zb));
-                let (plain, plain_looked) = r.trace::<false>(&a, &b, &mut Blocker::default());
-                let (leaping, looked) = r.trace::<true>(&a, &b, &mut Blocker::default());
+                let (plain, plain_looked) = r.trace(&a, &b, false, &mut Blocker::default());
+                let (leaping, looked) = r.trace(&a, &b, true, &mut Blocker::default());
                 prop_assert_eq!(leaping, plain, "{:?} → {:?}", a, b);
                 prop_assert!(looked <= plain_looked);
             }
