@@ -103,8 +103,7 @@ pub struct ServeArgs {
     pub max_check_cpu_s: f64,
     /// Heavy queries (sweeps, paths and pictures of big maps, map bodies and exports, Monte
     /// Carlo checks) that may run at once, on a thread pool of their own so they never hold
-    /// the async threads or the map builders' pool (default: one a core, so queries use the
-    /// whole machine when no map is building; the pools share the cores when one is).
+    /// the async threads or the map builders' pool (default: half the cores, at least 1).
     #[arg(long, env = "IRS_QUERY_WORKERS")]
     pub query_workers: Option<usize>,
     /// Heavy queries that may wait for a query worker; one more is refused with 503 and
@@ -181,10 +180,10 @@ impl ServeArgs {
             .max(1)
     }
 
-    /// Heavy-query workers: `--query-workers`, else one a core.
+    /// Heavy-query workers: `--query-workers`, else half the cores (at least one).
     pub fn query_workers(&self) -> usize {
         self.query_workers
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()) / 2)
             .max(1)
     }
 }
