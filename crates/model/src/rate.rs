@@ -241,15 +241,6 @@ impl RateModel {
             .map(|score| self.rate_of_score(score))
     }
 
-    /// [`Self::mru_rate`] without the SIC channel-ordering check. It increases in every λ_l
-    /// (the tail powers shrink and the head powers grow as gains rise), which is what lets the
-    /// certificate bound it at an upper corner of the gains.
-    #[inline]
-    pub fn mru_rate_ignoring_ordering(&self, lambdas: &[f64], order: usize) -> Option<f64> {
-        self.mru_score_ignoring_ordering(lambdas, order)
-            .map(|score| self.rate_of_score(score))
-    }
-
     /// A number that orders like the MRU's rate for one order, without its logarithm: 1 + SINR
     /// (NOMA, eq. 22: (S_k + σ²/λ_m)/(S_{k+1} + σ²/λ_m); OMA, eq. 24: 1 + (K+1) λ_m p_m/σ²). Searches compare
     /// scores and take one logarithm at the end ([`Self::rate_of_score`]).
@@ -265,7 +256,9 @@ impl RateModel {
         self.mru_score_ignoring_ordering(lambdas, order)
     }
 
-    /// [`Self::mru_score`] without the SIC channel-ordering check.
+    /// [`Self::mru_score`] without the SIC channel-ordering check. It increases in every λ_l
+    /// (the tail powers shrink and the head powers grow as gains rise), which is what lets the
+    /// certificate bound it at an upper corner of the gains.
     #[inline]
     pub fn mru_score_ignoring_ordering(&self, lambdas: &[f64], order: usize) -> Option<f64> {
         let (p_m, interference) = self.allocate(lambdas, order, |_, _| {})?;
@@ -382,26 +375,92 @@ impl RateModel {
     /// Total power needed for the MRU to reach `r` with every SRU at its target, for one order:
     /// Σ_t c_t/λ_t (see the module doc); feasible iff ≤ P_max.
     pub fn required_power(&self, lambdas: &[f64], order: usize, r: f64) -> f64 {
+        let score = match self.access {
+            Access::Oma => (self.users() as f64 * r).exp2(),
+            Access::Noma => r.exp2(),
+        };
+        let mut costs = vec![0.0; self.users()];
+        self.power_costs(order, score, &mut costs);
+        costs.iter().zip(lambdas).map(|(c, l)| c / l).sum()
+    }
+
+    /// The coefficients of the feasibility test Σ_l c_l/λ_l ≤ P_max (module doc) for the MRU at
+    /// `score` ([`Self::mru_score`]: 2^r for NOMA, 2^{(K+1)r} for OMA), by user index. Each is
+    /// affine and non-decreasing in the score: the MRU's own is (score − 1)·κ, and under NOMA
+    /// the users decoded after it carry the factor 2^r = score.
+    pub fn power_costs(&self, order: usize, score: f64, out: &mut [f64]) {
         let noise = self.noise_w;
-        let target = |u: usize| if u == 0 { r } else { self.targets[u] };
         match self.access {
             Access::Oma => {
                 let bands = self.users() as f64;
-                (0..self.users())
-                    .map(|l| ((bands * target(l)).exp2() - 1.0) * noise / (bands * lambdas[l]))
-                    .sum()
+                for (l, c) in out.iter_mut().enumerate() {
+                    let excess = if l == 0 { score - 1.0 } else { self.excess[l] };
+                    *c = excess * noise / bands;
+                }
             }
             Access::Noma => {
                 let mut scale = 1.0;
-                let mut total = 0.0;
                 for &u in &self.orders[order] {
-                    let r = target(u as usize);
-                    total += scale * (r.exp2() - 1.0) * noise / lambdas[u as usize];
-                    scale *= r.exp2();
+                    let u = u as usize;
+                    let (excess, growth) = if u == 0 {
+                        (score - 1.0, score)
+                    } else {
+                        (self.excess[u], self.growth[u])
+                    };
+                    out[u] = scale * excess * noise;
+                    scale *= growth;
                 }
-                total
             }
         }
+    }
+
+    /// The supremum of the MRU's score under `order` (channel ordering ignored) over the
+    /// half-space {λ > 0 : g·λ ≤ budget}, g ≥ 0; `None` if not even score 1 (rate 0) fits.
+    ///
+    /// Exact, by Cauchy–Schwarz: min{Σ c_l/λ_l : g·λ ≤ B} = (Σ_l √(c_l g_l))²/B, so score x is
+    /// reachable iff (Σ_l √(c_l(x) g_l))² ≤ P_max·B, which is monotone in x and solved by
+    /// bisection on the rate (the returned end is the infeasible one, so the value is never
+    /// below the supremum). +∞ when g gives no weight to a user whose cost grows with x.
+    pub fn score_bound(&self, order: usize, g: &[f64], budget: f64) -> Option<f64> {
+        const MOST: usize = 8;
+        const STEPS: usize = 64;
+        let users = self.users();
+        let mut costs = [0.0; MOST];
+        let mut fits = |score: f64| {
+            self.power_costs(order, score, &mut costs[..users]);
+            let a: f64 = costs[..users]
+                .iter()
+                .zip(g)
+                .map(|(c, g)| (c * g).max(0.0).sqrt())
+                .sum();
+            a * a <= self.p_max_w * budget
+        };
+        if users > MOST || budget.is_nan() || budget <= 0.0 {
+            return Some(f64::INFINITY); // no claim
+        }
+        if !fits(1.0) {
+            return None;
+        }
+        // Bracket the score by doubling the rate, then bisect it.
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        while fits(hi.exp2()) {
+            (lo, hi) = (hi, 2.0 * hi);
+            if hi > 4096.0 {
+                return Some(f64::INFINITY);
+            }
+        }
+        for _ in 0..STEPS {
+            let mid = 0.5 * (lo + hi);
+            if mid <= lo || mid >= hi {
+                break;
+            }
+            if fits(mid.exp2()) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Some(hi.exp2())
     }
 
     /// Human-readable labels of an order's users: "mru", "sru0", …
@@ -543,6 +602,49 @@ mod tests {
                     if best.is_none_or(|(b, _)| s > b) { Some((s, k)) } else { best }
                 });
             prop_assert_eq!(model.best_order(&lambdas), scan, "{:?}", lambdas);
+        }
+    }
+
+    proptest! {
+        /// [`RateModel::score_bound`] is the supremum of an order's score over the half-space
+        /// g·λ ≤ B: no point of the half-space's boundary (where the score, increasing in every
+        /// gain, is largest) scores above it, and its Cauchy–Schwarz minimiser λ_l ∝ √(c_l/g_l)
+        /// attains it.
+        #[test]
+        fn the_half_space_bound_is_the_supremum(
+            srus in 1usize..=4,
+            noma in any::<bool>(),
+            targets in prop::collection::vec(0.05f64..2.0, 4),
+            g in prop::collection::vec(0.01f64..1.0, 5),
+            budget_db in -75.0f64..-50.0,
+            directions in prop::collection::vec(prop::collection::vec(0.01f64..1.0, 5), 64),
+            order_pick in 0usize..120,
+        ) {
+            let access = if noma { Access::Noma } else { Access::Oma };
+            let model = RateModel::new(access, 0.1, 1e-12, &targets[..srus]);
+            let n = srus + 1;
+            let order = order_pick % model.orders().len();
+            let (g, budget) = (&g[..n], 10f64.powf(budget_db / 10.0));
+            let bound = model.score_bound(order, g, budget);
+            for u in &directions {
+                let along: f64 = u[..n].iter().zip(g).map(|(u, g)| u * g).sum();
+                let lambdas: Vec<f64> = u[..n].iter().map(|u| u * budget / along).collect();
+                let score = model.mru_score_ignoring_ordering(&lambdas, order);
+                match (score, bound) {
+                    (Some(s), Some(b)) => prop_assert!(s <= b * (1.0 + 1e-12), "{s} > {b}"),
+                    (Some(s), None) => prop_assert!(false, "{s} reached, bound says none"),
+                    (None, _) => {}
+                }
+            }
+            if let Some(b) = bound.filter(|b| b.is_finite()) {
+                let mut costs = vec![0.0; n];
+                model.power_costs(order, b, &mut costs);
+                let roots: f64 = costs.iter().zip(g).map(|(c, g)| (c * g).sqrt()).sum();
+                let minimiser: Vec<f64> =
+                    costs.iter().zip(g).map(|(c, g)| budget * (c / g).sqrt() / roots).collect();
+                let s = model.mru_score_ignoring_ordering(&minimiser, order).unwrap_or(1.0);
+                prop_assert!(s >= b * (1.0 - 1e-9), "the minimiser scores {s} < {b}");
+            }
         }
     }
 
