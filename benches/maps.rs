@@ -154,9 +154,27 @@ fn rate_maps(c: &mut Criterion) {
             b.iter(|| fast::solve(black_box(&problem), &model))
         });
         group.bench_function(format!("certificate_n{n}"), |b| {
-            b.iter(|| certificate::upper_bound(black_box(&problem), &model))
+            b.iter(|| certificate::certify(black_box(&problem), &model, None).upper_bound)
         });
     }
+    // Three SRUs: the joint dual per decoding order, from the primal's phases as a map does.
+    let s = paper("paper-multi-user", |v| {
+        let list = v["srus"].as_array_mut().unwrap();
+        for p in [[-8.0, -8.0, 1.3], [8.0, -8.0, 1.3]] {
+            list.push(serde_json::json!({"position": p, "min_rate_bps_hz": 0.5}));
+        }
+    });
+    let channel = ChannelModel::new(&s);
+    let srus = solver::sru_part(&channel, &s, true);
+    let problem = solver::cell_problem(&channel, [3.0, -6.0, 1.0], &srus, true);
+    let model = RateModel::for_scenario(&s, Access::Noma);
+    let hint = fast::solve(&problem, &model);
+    group.bench_function("fast_k3_n60", |b| {
+        b.iter(|| fast::solve(black_box(&problem), &model))
+    });
+    group.bench_function("certificate_k3_n60", |b| {
+        b.iter(|| certificate::certify(black_box(&problem), &model, Some(&hint)).upper_bound)
+    });
     group.finish();
 }
 

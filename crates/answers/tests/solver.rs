@@ -62,7 +62,7 @@ fn fast_beats_random_phases_and_the_certificate_bounds_everything() {
         for (problem, model) in problems(&s, access, 12, k as u64) {
             let v = fast::solve(&problem, &model);
             let achieved = rate_of(&problem, &model, &v);
-            let bound = certificate::upper_bound(&problem, &model);
+            let bound = certificate::certify(&problem, &model, Some(&v)).upper_bound;
             assert!(
                 bound >= achieved - 1e-9,
                 "{access:?}: bound {bound} < fast {achieved}"
@@ -102,7 +102,9 @@ fn two_static_robots() {
             let v = fast::solve(&problem, &model);
             let achieved = rate_of(&problem, &model, &v);
             assert!(achieved.is_finite());
-            assert!(certificate::upper_bound(&problem, &model) >= achieved - 1e-9);
+            assert!(
+                certificate::certify(&problem, &model, Some(&v)).upper_bound >= achieved - 1e-9
+            );
             let mut lambdas = vec![0.0; 3];
             problem.lambdas(&v, &mut lambdas);
             let split = model.best(&lambdas).unwrap();
@@ -111,6 +113,44 @@ fn two_static_robots() {
                 rates[1] >= 0.5 - 1e-9 && rates[2] >= 0.5 - 1e-9,
                 "{rates:?}"
             );
+        }
+    }
+}
+
+/// Issue 36: the paper's multi-user floor with 2 and 3 SRUs (the paper's SRU plus SRUs at
+/// (−8, −8) and (8, −8) wanting 0.5 bit/s/Hz), at 1 m: the certificate's gap has median
+/// ≤ 1e-4 bit/s/Hz and max ≤ 1e-2 (K = 2) or 5e-2 (K = 3), the joint relaxation's own limit
+/// (at 0.5 m the medians are 8e-9 and 2e-6, the maxima 2.4e-3 and 2.1e-2; docs/model.md §5),
+/// and the bound is above the value in every cell. The per-user bound this replaced had
+/// medians of 0.077 and 0.12.
+#[test]
+fn multi_user_cells_are_certified() {
+    for (srus, max_gap) in [(2usize, 1e-2), (3, 5e-2)] {
+        let s = Scenario::builtin_with("paper-multi-user", |v| {
+            v["grid"]["resolution_m"] = 1.0.into();
+            let list = v["srus"].as_array_mut().unwrap();
+            for p in [[-8.0, -8.0, 1.3], [8.0, -8.0, 1.3]].iter().take(srus - 1) {
+                list.push(serde_json::json!({"position": p, "min_rate_bps_hz": 0.5}));
+            }
+        })
+        .unwrap()
+        .unwrap();
+        for access in [Access::Noma, Access::Oma] {
+            let key = MapKey::new("t", &s, MapKind::Rate, None, Some(access), None).unwrap();
+            let map = irs_answers::map::build(&s, &key, &Progress::default()).unwrap();
+            let summary = map.certificate_summary().unwrap();
+            let (median, max) = (summary.median_gap.unwrap(), summary.max_gap.unwrap());
+            assert!(summary.cells > 250, "{} cells", summary.cells);
+            assert!(
+                median <= 1e-4 && max <= max_gap,
+                "{srus} SRUs, {access:?}: median gap {median}, max {max}"
+            );
+            for (value, bound) in map.values.iter().zip(map.upper_bound().unwrap()) {
+                assert!(
+                    value.is_nan() || *bound >= value - 1e-9,
+                    "{bound} < {value}"
+                );
+            }
         }
     }
 }
@@ -193,6 +233,77 @@ mod sdp {
     use super::*;
     use irs_model::solver::sdr_sca;
 
+    /// The joint support bound (3–5 users) equals Clarabel's SDP optimum within 1e-4 relative.
+    #[test]
+    fn joint_support_bound_matches_clarabel() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(22);
+        for case in 0..9 {
+            let (users, dim) = (3 + case % 3, rng.random_range(3..9));
+            let a: Vec<Vec<C64>> = (0..users)
+                .map(|_| {
+                    (0..dim)
+                        .map(|_| C64::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5))
+                        .collect()
+                })
+                .collect();
+            let w: Vec<f64> = (0..users).map(|_| rng.random::<f64>() + 0.05).collect();
+            let exact = sdr_sca::support_value(&a, &w).expect("Clarabel solves the SDP");
+            let problem = CellProblem {
+                dim,
+                a: a.iter().flatten().copied().collect(),
+                tau: vec![0.0; users],
+            };
+            let bound = certificate::joint_support_bound(&problem, &w);
+            assert!(
+                (bound - exact).abs() <= 1e-4 * exact,
+                "{users} users: bound {bound} vs Clarabel {exact}"
+            );
+        }
+    }
+
+    /// K = 2 and 3 SRUs: the joint bound is at least the relaxation's value from Clarabel's
+    /// bisection (it is valid) and at most that plus the bisection's tolerance and 1e-3 (it is
+    /// the relaxation's value, not a looser one); `fast` meets the relaxation's SCA primal.
+    #[test]
+    fn the_joint_bound_is_the_relaxations_value() {
+        for srus in [2usize, 3] {
+            let s = small(|v| {
+                v["irs"]["nx_sub"] = 2.into();
+                v["irs"]["nz_sub"] = 2.into();
+                let all = serde_json::json!([
+                    {"position": [5.5, 3.5, 1.2], "min_rate_bps_hz": 0.5},
+                    {"position": [0.5, 0.5, 1.2], "min_rate_bps_hz": 0.5},
+                    {"position": [3.0, 3.8, 1.2], "min_rate_bps_hz": 0.3}
+                ]);
+                v["srus"] = serde_json::Value::Array(all.as_array().unwrap()[..srus].to_vec());
+            });
+            for access in [Access::Noma, Access::Oma] {
+                for (problem, model) in problems(&s, access, 2, 40 + srus as u64) {
+                    let cell = solver::solve_cell(
+                        &problem,
+                        &model,
+                        PhaseMode::Continuous,
+                        SolverKind::Fast,
+                    );
+                    let (fast_rate, bound) = (cell.rate, cell.upper_bound);
+                    let sdr = sdr_sca::solve(&problem, &model);
+                    let sdr_rate = rate_of(&problem, &model, &sdr.v);
+                    assert!(
+                        bound >= sdr.relaxed_rate - 1e-6,
+                        "{srus} SRUs, {access:?}: bound {bound} < SDR {}",
+                        sdr.relaxed_rate
+                    );
+                    assert!(
+                        bound <= sdr.relaxed_rate + 1e-4 + 1e-3,
+                        "{srus} SRUs, {access:?}: bound {bound} ≫ SDR {}",
+                        sdr.relaxed_rate
+                    );
+                    assert!(fast_rate >= sdr_rate - 1e-3 && fast_rate <= bound + 1e-9);
+                }
+            }
+        }
+    }
+
     /// The solver-free support bound equals Clarabel's SDP optimum within 1e-4 relative.
     #[test]
     fn support_bound_matches_clarabel() {
@@ -207,7 +318,8 @@ mod sdp {
             let (a, b) = (vec(&mut rng), vec(&mut rng));
             let angle = rng.random::<f64>() * std::f64::consts::FRAC_PI_2;
             let (w1, w2) = (angle.cos(), angle.sin());
-            let exact = sdr_sca::support_value(&a, &b, w1, w2).expect("Clarabel solves the SDP");
+            let exact = sdr_sca::support_value(&[a.clone(), b.clone()], &[w1, w2])
+                .expect("Clarabel solves the SDP");
             let bound = certificate::support_bound(&a, &b, w1, w2);
             assert!(
                 (bound - exact).abs() <= 1e-4 * exact,
@@ -228,7 +340,7 @@ mod sdp {
                 let fast_rate = rate_of(&problem, &model, &fast::solve(&problem, &model));
                 let sdr = sdr_sca::solve(&problem, &model);
                 let sdr_rate = rate_of(&problem, &model, &sdr.v);
-                let bound = certificate::upper_bound(&problem, &model);
+                let bound = certificate::certify(&problem, &model, None).upper_bound;
                 assert!(
                     fast_rate >= sdr_rate - 1e-3,
                     "{access:?}: fast {fast_rate} < sdr-sca {sdr_rate}"

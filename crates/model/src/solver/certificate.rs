@@ -23,14 +23,31 @@
 //! (see [`crate::rate`]), so its maximum over each polygon edge is found by golden-section
 //! search. Directions are refined adaptively around the maximiser.
 //!
-//! For K > 1 the relaxed gains live in R^{K+1}; there we use the looser bound of each user's own
-//! maximum, λ_l ≤ (‖a_l‖₁)² + τ_l (exact for a single user), with the ordering constraints
-//! dropped — still valid because the rate of every order increases in every gain.
+//! For K ≥ 2 the relaxed gains live in R^{K+1} and a polytope would need many directions; the
+//! bound is instead the relaxation's Lagrange dual, per decoding order ([`joint_bound`]):
+//! - Score x (2^r) is reachable under an order at gains λ iff Σ_l c_l(x)/λ_l ≤ P_max
+//!   ([`RateModel::power_costs`]), a convex function of λ.
+//! - For any w ≥ 0, every relaxed λ has w·λ ≤ h(w) + w·τ, with h the support function above
+//!   for K + 1 users: the same duality with a (K+1) × (K+1) multiplier Λ ([`joint_support`]).
+//! - On the order's region λ_{π[0]} ≤ … ≤ λ_{π[K]}, multipliers μ ≥ 0 give g·λ ≤ w·λ for
+//!   g = w + Dᵀμ ([`ordered_weights`] picks the best μ for a w).
+//! - On a half-space g·λ ≤ B the least Σ c_l/λ_l is (Σ_l √(c_l g_l))²/B (Cauchy–Schwarz), so
+//!   the order's score is at most the root of (Σ_l √(c_l(x) g_l))² = P_max·B
+//!   ([`RateModel::score_bound`]).
+//!
+//! Every (w, μ) gives a valid bound (weak duality); the best one is the relaxation's own value
+//! (strong duality: the relaxed problem is convex and strictly feasible wherever it is
+//! feasible). The direction is searched by a multiplicative ascent from the primal's gains, the
+//! primal's order first; other orders only where their cheap box bound (each user at most its
+//! own maximum and the ordering's caps) beats the best so far, and each only until it falls
+//! below it. The dual of the top order also rounds to phases ([`Certified::lead`]), which the
+//! `fast` solver polishes where they beat its own: that is how a missed decoding order is found.
 
 use super::CellProblem;
 use crate::channel::C64;
 use crate::numerics::{golden_section_max, l1_norm};
 use crate::rate::{Access, RateModel};
+use crate::scenario::MAX_SRUS;
 use nalgebra::{Matrix3, Vector3};
 use std::f64::consts::FRAC_PI_2;
 
@@ -61,24 +78,515 @@ const SECULAR_STEPS: usize = 60;
 /// |‖y‖ − 1| at which the model's maximiser on the sphere is taken (rescaled onto it): the step
 /// is a model's anyway, so this only needs to keep y in the ball.
 const SECULAR_TOLERANCE: f64 = 1e-12;
+/// Users a cell can have: the MRU and up to [`MAX_SRUS`] SRUs (fixed-size arrays on the stack).
+const MOST_USERS: usize = MAX_SRUS + 1;
+/// M of [`joint_support`], sized for the most users (the top-left n × n block is used).
+type Matrix5 = nalgebra::Matrix5<C64>;
+/// Power-iteration steps of [`joint_support`] (each O(N (K+1)²)); it stops earlier once the
+/// bound meets the lower estimate to [`JOINT_TOLERANCE`].
+const JOINT_STEPS: usize = 200;
+/// Relative agreement of [`joint_support`]'s bound and lower estimate at which it stops.
+const JOINT_TOLERANCE: f64 = 1e-9;
+/// Rounds of the direction fixed point per order in [`order_score_bound`].
+const DIRECTION_ROUNDS: usize = 30;
+/// The exponent of [`order_score_bound`]'s multiplicative direction step at its largest (2 is
+/// the fixed point w ← c/(s + τ)², which overshoots)...
+const DIRECTION_STEP: f64 = 1.0;
+/// ...and at its smallest, below which the search has converged.
+const DIRECTION_STEP_MIN: f64 = 1e-3;
+/// Relative score excess over the primal's at which an order's dual search stops: 1e-9 of the
+/// score is about 1.4e-9 bit/s/Hz.
+const PRIMAL_SETTLED: f64 = 1e-9;
+/// The identity's share in the dual's rank-one start ([`seed_dual`]).
+const SEED_IDENTITY: f64 = 1e-2;
+/// Smallest weight of a user in a direction (relative to a sum of 1): keeps ∂h/∂w_l finite.
+const WEIGHT_FLOOR: f64 = 1e-12;
+/// Smallest gain of a projected point, relative to the user's maximum: keeps c_l/λ_l² finite.
+const GAIN_FLOOR: f64 = 1e-9;
+/// Smallest score excess over 1 that directions are computed at (the MRU's cost vanishes at
+/// rate 0 and would drop it from the direction).
+const SCORE_FLOOR: f64 = 1e-9;
 /// Golden-section steps per polygon edge: 0.618^60 ≈ 3e-13 of the edge, i.e. to rounding.
 const EDGE_SEARCH_STEPS: usize = 60;
 
-/// An upper bound on the MRU's rate over all phase vectors (−∞ if even the relaxation cannot
-/// serve every SRU).
-pub fn upper_bound(problem: &CellProblem, model: &RateModel) -> f64 {
+/// A cell's certificate.
+#[derive(Debug, Clone)]
+pub struct Certified {
+    /// An upper bound on the MRU's rate over all phase vectors (−∞ if even the relaxation
+    /// cannot serve every SRU).
+    pub upper_bound: f64,
+    /// K ≥ 2: phases rounded from the dual of the order with the highest bound,
+    /// v_n = conj(yᴴρ_n)/|yᴴρ_n| with y the top direction of its Λ. Where that order's
+    /// relaxation is tight they attain its bound (the rank-one case of [`joint_support`]'s
+    /// duality), so a primal that missed the order can start there.
+    pub lead: Option<Vec<C64>>,
+}
+
+/// The upper bound on the MRU's rate over all phase vectors, and a lead for the primal.
+/// `hint` is a phase vector v = [e^{jθ}; 1] believed good (the primal solver's): for K ≥ 2 it
+/// only steers the dual search, so any hint, or none, gives a valid bound, and a near-optimal
+/// one a tight bound where the relaxation is tight. K = 1 needs none.
+pub fn certify(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -> Certified {
     if problem.users() == 2 {
-        polygon_bound(problem, model)
+        Certified {
+            upper_bound: polygon_bound(problem, model),
+            lead: None,
+        }
     } else {
-        per_user_bound(problem, model)
+        joint_bound(problem, model, hint)
     }
 }
 
-fn per_user_bound(problem: &CellProblem, model: &RateModel) -> f64 {
-    let lambdas: Vec<f64> = (0..problem.users()).map(|l| problem.max_gain(l)).collect();
-    (0..model.orders().len())
-        .filter_map(|k| model.mru_rate_ignoring_ordering(&lambdas, k))
-        .fold(f64::NEG_INFINITY, f64::max)
+/// Whether the SRUs can be served at all, by the cheap per-user bound (`false` proves they
+/// cannot, so no search is needed; `true` proves nothing).
+pub fn may_serve(problem: &CellProblem, model: &RateModel) -> bool {
+    let maxima = maxima(problem);
+    (0..model.orders().len()).any(|k| box_score(model, &maxima, k).is_some())
+}
+
+/// λ_l ≤ ‖a_l‖₁² + τ_l for every user (attained by the relaxation: A_l has rank one).
+fn maxima(problem: &CellProblem) -> [f64; MOST_USERS] {
+    let mut out = [0.0; MOST_USERS];
+    for (l, o) in out.iter_mut().enumerate().take(problem.users()) {
+        *o = problem.max_gain(l);
+    }
+    out
+}
+
+/// The MRU's best score under `order` over the box of the per-user maxima cut down by the
+/// order's channel ordering (user π[t] at most the smallest maximum from position t on):
+/// every order's score increases in every gain, so this bounds the order. `None` if the box's
+/// top corner cannot serve every SRU.
+fn box_score(model: &RateModel, maxima: &[f64; MOST_USERS], order: usize) -> Option<f64> {
+    let n = model.users();
+    let mut corner = [0.0; MOST_USERS];
+    let pi = &model.orders()[order];
+    let mut cap = f64::INFINITY;
+    for &u in pi.iter().rev() {
+        let u = u as usize;
+        cap = if model.access == Access::Noma {
+            cap.min(maxima[u])
+        } else {
+            maxima[u]
+        };
+        corner[u] = cap;
+    }
+    model.mru_score_ignoring_ordering(&corner[..n], order)
+}
+
+/// The K ≥ 2 bound: per decoding order, the dual of the relaxed problem (docs/model.md §5).
+///
+/// For gains λ in the relaxed set S + τ and a direction w ≥ 0, w·λ ≤ h(w) + w·τ, with h the
+/// support function of S ([`joint_support`]); on that half-space the order's score is at most
+/// [`RateModel::score_bound`]'s exact value. Any w gives a valid bound; the best is the normal
+/// of S + τ at the relaxed optimum λ*, where the rate's level set touches it:
+/// w ∝ ∇(Σ c_l/λ_l) = (c_l/λ_l²)_l. We start from the primal's gains and iterate
+/// λ ← (support point of w) projected onto the order's ordering, keeping the least bound. An
+/// order is searched only if its box bound ([`box_score`]) beats the best bound so far, and
+/// the primal's own order goes first.
+fn joint_bound(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -> Certified {
+    let n = problem.users();
+    let maxima = maxima(problem);
+    let mut amplitudes = [C64::new(0.0, 0.0); MOST_USERS];
+    let mut start = maxima;
+    if let Some(v) = hint {
+        for l in 0..n {
+            amplitudes[l] = problem.user(l).iter().zip(v).map(|(a, v)| a * v).sum();
+            start[l] = amplitudes[l].norm_sqr() + problem.tau[l];
+        }
+    }
+    let first = model.best_order(&start[..n]).map(|(_, k)| k);
+    let mut orders: Vec<(f64, usize)> = (0..model.orders().len())
+        .filter_map(|k| box_score(model, &maxima, k).map(|cap| (cap, k)))
+        .collect();
+    orders.sort_by(|p, q| {
+        (Some(q.1) == first)
+            .cmp(&(Some(p.1) == first))
+            .then(q.0.total_cmp(&p.0))
+    });
+    // An order bounded within PRIMAL_SETTLED of the primal's own score is as good as
+    // certified: its search stops there.
+    let primal = hint
+        .and_then(|_| model.best_order(&start[..n]))
+        .map_or(f64::NEG_INFINITY, |(s, _)| s);
+    let mut best = f64::NEG_INFINITY;
+    let mut lead = None;
+    for (cap, order) in orders {
+        if cap <= best {
+            continue;
+        }
+        let (bound, dual) = order_score_bound(
+            problem,
+            model,
+            order,
+            &start,
+            &amplitudes,
+            &maxima,
+            cap,
+            best.max(primal * (1.0 + PRIMAL_SETTLED)),
+        );
+        if bound > best {
+            best = bound;
+            lead = dual;
+        }
+    }
+    Certified {
+        upper_bound: model.rate_of_score(best),
+        lead: lead.map(|(y, w)| round_dual(problem, &y, &w[..n])),
+    }
+}
+
+/// The phases a dual iterate points at: y the top eigenvector of Λ = Y Yᴴ, then
+/// v_n = conj(yᴴρ_n)/|yᴴρ_n| (ρ_n = (√w_l a_{l,n})_l), scaled so that v_{N+1} = 1.
+fn round_dual(problem: &CellProblem, y: &Square, w: &[f64]) -> Vec<C64> {
+    let n = w.len();
+    let lambda = nalgebra::DMatrix::from_fn(n, n, |l, k| {
+        (0..n).map(|j| y[l][j] * y[k][j].conj()).sum::<C64>()
+    });
+    let eigen = lambda.symmetric_eigen();
+    let top = eigen.eigenvalues.imax();
+    let direction = eigen.eigenvectors.column(top);
+    let mut v: Vec<C64> = (0..problem.dim)
+        .map(|e| {
+            let t: C64 = (0..n)
+                .map(|l| direction[l].conj() * problem.a[l * problem.dim + e] * w[l].sqrt())
+                .sum();
+            if t.norm() > 0.0 {
+                t.conj() / t.norm()
+            } else {
+                C64::new(1.0, 0.0)
+            }
+        })
+        .collect();
+    let anchor = v[problem.dim - 1].conj();
+    for x in &mut v {
+        *x *= anchor;
+    }
+    v
+}
+
+/// The joint dual bound on one order's score (at most `cap`; −∞ if the relaxation cannot serve
+/// the SRUs in this order), from the gains `start`. It stops early once the bound is at most
+/// `enough`: below the best bound of another order it no longer matters.
+///
+/// Each round takes a direction w, bounds h(w) ([`joint_support`]), gives the ordering its
+/// best multipliers for that w ([`ordered_weights`]: g = w + Dᵀμ) and evaluates the exact
+/// bound on the half-space. At the optimum the support point s(w) + τ equals the gains the
+/// bound's minimiser implies, λ_l = √(c_l/g_l); the next direction scales each w_l by
+/// (λ_l/(s_l + τ_l))², which without active orderings is w ← (c_l/(s_l + τ_l)²)_l, the normal
+/// of the rate's level set at the support point.
+#[allow(clippy::too_many_arguments)]
+fn order_score_bound(
+    problem: &CellProblem,
+    model: &RateModel,
+    order: usize,
+    start: &[f64; MOST_USERS],
+    amplitudes: &[C64; MOST_USERS],
+    maxima: &[f64; MOST_USERS],
+    cap: f64,
+    enough: f64,
+) -> (f64, Option<(Square, [f64; MOST_USERS])>) {
+    let n = problem.users();
+    let pi = &model.orders()[order];
+    let mut lambda = *start;
+    project_onto_order(&mut lambda[..n], pi, maxima, model.access);
+    let score = model
+        .mru_score_ignoring_ordering(&lambda[..n], order)
+        .unwrap_or(cap)
+        .min(cap);
+    let mut costs = [0.0; MOST_USERS];
+    model.power_costs(order, score.max(1.0 + SCORE_FLOOR), &mut costs[..n]);
+    let mut w = [0.0; MOST_USERS];
+    for l in 0..n {
+        w[l] = costs[l] / (lambda[l] * lambda[l]);
+    }
+    if !normalise(&mut w[..n]) {
+        return (cap, None);
+    }
+    let mut y = [[C64::new(0.0, 0.0); MOST_USERS]; MOST_USERS];
+    seed_dual(&mut y, amplitudes, &w, n);
+    // One direction's bound: (score bound or None if the order serves nobody, support point,
+    // multiplied weights g).
+    let evaluate = |w: &[f64; MOST_USERS], y: &mut Square, costs: &[f64; MOST_USERS]| {
+        let support = joint_support(problem, &w[..n], y);
+        let budget = support.bound + (0..n).map(|l| w[l] * problem.tau[l]).sum::<f64>();
+        let g = ordered_weights(&w[..n], &costs[..n], pi, model.access);
+        (model.score_bound(order, &g[..n], budget), support, g)
+    };
+    let (first, mut support, mut g) = evaluate(&w, &mut y, &costs);
+    let Some(mut best) = first else {
+        return (f64::NEG_INFINITY, None); // not even rate 0: this order serves nobody
+    };
+    best = best.min(cap);
+    let mut step = DIRECTION_STEP;
+    for _ in 0..DIRECTION_ROUNDS {
+        if best <= enough || step < DIRECTION_STEP_MIN {
+            break;
+        }
+        // Costs at the bound reached; the trial direction.
+        model.power_costs(order, best.max(1.0 + SCORE_FLOOR), &mut costs[..n]);
+        let mut trial = w;
+        for l in 0..n {
+            let implied = (costs[l] / g[l]).sqrt();
+            let support_gain = (support.point[l] + problem.tau[l]).max(GAIN_FLOOR * maxima[l]);
+            trial[l] *= (implied / support_gain).powf(step);
+        }
+        if !normalise(&mut trial[..n]) {
+            break;
+        }
+        let mut trial_y = y;
+        let (bound, trial_support, trial_g) = evaluate(&trial, &mut trial_y, &costs);
+        let Some(bound) = bound else {
+            return (f64::NEG_INFINITY, None);
+        };
+        if bound < best {
+            (w, y, support, g, best) = (trial, trial_y, trial_support, trial_g, bound);
+            step = (step * 1.5).min(DIRECTION_STEP);
+        } else {
+            step *= 0.25;
+        }
+    }
+    (best, Some((y, w)))
+}
+
+/// Scales weights to sum 1, each at least [`WEIGHT_FLOOR`]; `false` if they cannot be (zero,
+/// infinite or NaN).
+fn normalise(w: &mut [f64]) -> bool {
+    let total: f64 = w.iter().sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return false;
+    }
+    for x in w.iter_mut() {
+        *x = (*x / total).max(WEIGHT_FLOOR);
+    }
+    true
+}
+
+/// The channel ordering's multipliers for a direction w (NOMA): g = w + Dᵀμ, μ ≥ 0, where
+/// (Dλ)_t = λ_{π[t]} − λ_{π[t+1]} ≤ 0 on the order's region, so g·λ ≤ w·λ there and the
+/// half-space bound with g is valid. The best μ maximises Σ_l √(c_l g_l) (the tighter the
+/// bound): each μ_t moves weight from position t + 1 to position t, and the optimum pools
+/// adjacent positions whose implied gains √(c/g) would break the ordering, giving a pooled block
+/// g_l = c_l·W/C (W, C its weight and cost): the pool-adjacent-violators algorithm. μ is then
+/// read back from the prefix sums, clamped at 0 and g rebuilt from it exactly, so rounding can
+/// never make the bound invalid (g = w if that fails). OMA has no ordering: g = w.
+fn ordered_weights(w: &[f64], costs: &[f64], pi: &[u8], access: Access) -> [f64; MOST_USERS] {
+    let n = w.len();
+    let mut g = [0.0; MOST_USERS];
+    g[..n].copy_from_slice(w);
+    if access != Access::Noma {
+        return g;
+    }
+    // Blocks of (cost, weight, positions); a block's implied gain is √(C/W).
+    let mut blocks = [(0.0, 0.0, 0usize); MOST_USERS];
+    let mut len = 0;
+    for &u in pi {
+        let u = u as usize;
+        blocks[len] = (costs[u], w[u], 1);
+        len += 1;
+        while len > 1 {
+            let (c1, w1, k1) = blocks[len - 1];
+            let (c0, w0, k0) = blocks[len - 2];
+            if c0 * w1 <= c1 * w0 {
+                break; // √(c0/w0) ≤ √(c1/w1): ordered
+            }
+            blocks[len - 2] = (c0 + c1, w0 + w1, k0 + k1);
+            len -= 1;
+        }
+    }
+    let mut t = 0;
+    let mut pooled = [0.0; MOST_USERS];
+    for &(c, weight, count) in &blocks[..len] {
+        for _ in 0..count {
+            let u = pi[t] as usize;
+            pooled[u] = if c > 0.0 { costs[u] * weight / c } else { w[u] };
+            t += 1;
+        }
+    }
+    // μ_t = Σ_{u ≤ t} (g − w) along the order, then g = w + Dᵀμ exactly.
+    let mut mu = [0.0; MOST_USERS];
+    let mut prefix = 0.0;
+    for t in 0..n - 1 {
+        let u = pi[t] as usize;
+        prefix += pooled[u] - w[u];
+        mu[t] = prefix.max(0.0);
+    }
+    for t in 0..n {
+        let u = pi[t] as usize;
+        let from_before = if t > 0 { mu[t - 1] } else { 0.0 };
+        let to_here = if t + 1 < n { mu[t] } else { 0.0 };
+        g[u] = w[u] + to_here - from_before;
+    }
+    if g[..n].iter().any(|x| x.is_nan() || *x < 0.0) {
+        g[..n].copy_from_slice(w);
+    }
+    g
+}
+
+/// The dual iterate Y's start: the rank-one Λ = y yᴴ that a rank-one relaxation would have at
+/// the hint (y_l = √w_l·a_lᵀv), plus a small multiple of the identity so the power iteration
+/// can leave rank one where the relaxation is not tight.
+fn seed_dual(y: &mut Square, amplitudes: &[C64; MOST_USERS], w: &[f64], n: usize) {
+    let norm: f64 = (0..n)
+        .map(|l| w[l] * amplitudes[l].norm_sqr())
+        .sum::<f64>()
+        .sqrt();
+    for (l, row) in y.iter_mut().enumerate().take(n) {
+        for (j, cell) in row.iter_mut().enumerate().take(n) {
+            *cell = C64::new(if l == j { SEED_IDENTITY } else { 0.0 }, 0.0);
+        }
+        if norm > 0.0 {
+            row[0] += amplitudes[l] * (w[l].sqrt() / norm);
+        }
+    }
+}
+
+/// Gains moved into the order's region: pooled where they break its channel ordering (the
+/// isotonic regression along the order, NOMA only) and capped by the per-user maxima as
+/// [`box_score`] caps them, and kept positive.
+fn project_onto_order(lambda: &mut [f64], pi: &[u8], maxima: &[f64; MOST_USERS], access: Access) {
+    let n = lambda.len();
+    if access == Access::Noma {
+        // Pool adjacent violators: blocks of (sum, count) along the order.
+        let mut blocks: Vec<(f64, usize)> = Vec::with_capacity(n);
+        for &u in pi {
+            blocks.push((lambda[u as usize], 1));
+            while blocks.len() > 1 {
+                let (s1, c1) = blocks[blocks.len() - 1];
+                let (s0, c0) = blocks[blocks.len() - 2];
+                if s0 / c0 as f64 <= s1 / c1 as f64 {
+                    break;
+                }
+                blocks.pop();
+                *blocks.last_mut().expect("two blocks") = (s0 + s1, c0 + c1);
+            }
+        }
+        let mut t = 0;
+        for (sum, count) in blocks {
+            for _ in 0..count {
+                lambda[pi[t] as usize] = sum / count as f64;
+                t += 1;
+            }
+        }
+    }
+    let mut cap = f64::INFINITY;
+    for &u in pi.iter().rev() {
+        let u = u as usize;
+        cap = if access == Access::Noma {
+            cap.min(maxima[u])
+        } else {
+            maxima[u]
+        };
+        lambda[u] = lambda[u].min(cap).max(GAIN_FLOOR * maxima[u]);
+    }
+}
+
+/// [`joint_support`]'s valid upper bound on h(w), from a cold start (Λ = I/(K+1)): the
+/// support bound for any number of users.
+pub fn joint_support_bound(problem: &CellProblem, w: &[f64]) -> f64 {
+    let n = w.len();
+    let mut y = [[C64::new(0.0, 0.0); MOST_USERS]; MOST_USERS];
+    for (l, row) in y.iter_mut().enumerate().take(n) {
+        row[l] = C64::new(1.0 / (n as f64).sqrt(), 0.0);
+    }
+    joint_support(problem, w, &mut y).bound
+}
+
+/// The dual iterate of [`joint_support`]: Y with Λ = Y Yᴴ, row l = user l.
+type Square = [[C64; MOST_USERS]; MOST_USERS];
+
+/// A valid upper bound on h(w) and the support point's estimate.
+struct Support {
+    bound: f64,
+    /// ∂h/∂w_l at the final iterate: the relaxed gains (without τ) that attain h(w).
+    point: [f64; MOST_USERS],
+}
+
+/// A valid upper bound on h(w) = max{Σ_l w_l tr(A_l V) : V ⪰ 0, diag V = 1} for any number of
+/// users, the K ≥ 2 form of [`support_bound`].
+///
+/// With ρ_n = (√w_l a_{l,n})_l ∈ C^{K+1}, SDP duality gives h(w) = max over Λ ⪰ 0, tr Λ = 1 of
+/// G(Λ)² with G = Σ_n √(ρ_nᴴ Λ ρ_n), and any Λ yields the valid bound λ_max(M) · G with
+/// M = Σ_n ρ_n ρ_nᴴ / √(ρ_nᴴ Λ ρ_n) (z_n = 1/√(ρ_nᴴΛρ_n), scaled feasible). Writing Λ = Y Yᴴ
+/// with ‖Y‖_F = 1, G(Y) = Σ_n ‖Yᴴρ_n‖ is *convex* in Y and its gradient is M Y, so the
+/// projected step Y ← M Y / ‖M Y‖_F never lowers G (G(Y') ≥ G(Y) + ⟨MY, Y' − Y⟩ ≥ G(Y)): a
+/// power iteration whose fixed points put Y in M's top eigenspace, where the bound meets G².
+/// It stops when the two agree to [`JOINT_TOLERANCE`].
+fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
+    let n = w.len();
+    let dim = problem.dim;
+    let mut root_w = [0.0; MOST_USERS];
+    for l in 0..n {
+        root_w[l] = w[l].sqrt();
+    }
+    let mut best = Support {
+        bound: f64::INFINITY,
+        point: [0.0; MOST_USERS],
+    };
+    let mut m = Matrix5::zeros();
+    for _ in 0..JOINT_STEPS {
+        m.fill(C64::new(0.0, 0.0));
+        let mut g = 0.0;
+        let mut slope = [0.0; MOST_USERS];
+        for e in 0..dim {
+            let mut rho = [C64::new(0.0, 0.0); MOST_USERS];
+            let mut alpha = 0.0;
+            for l in 0..n {
+                rho[l] = problem.a[l * dim + e] * root_w[l];
+                alpha += rho[l].norm_sqr();
+            }
+            // t = Yᴴρ, q = ‖t‖².
+            let mut t = [C64::new(0.0, 0.0); MOST_USERS];
+            let mut q = 0.0;
+            for (j, tj) in t.iter_mut().enumerate().take(n) {
+                *tj = (0..n).map(|l| y[l][j].conj() * rho[l]).sum();
+                q += tj.norm_sqr();
+            }
+            let root = q.max(1e-14 * alpha + f64::MIN_POSITIVE).sqrt();
+            let z = 1.0 / root;
+            g += root;
+            for l in 0..n {
+                let zr = rho[l] * z;
+                for k in 0..n {
+                    m[(l, k)] += zr * rho[k].conj();
+                }
+                // (Λρ)_l = (Y t)_l: the support point's term.
+                let yt: C64 = (0..n).map(|j| y[l][j] * t[j]).sum();
+                slope[l] += z * (rho[l].conj() * yt).re;
+            }
+        }
+        let top = m
+            .view((0, 0), (n, n))
+            .clone_owned()
+            .symmetric_eigenvalues()
+            .max();
+        let bound = top * g;
+        if bound < best.bound {
+            best.bound = bound;
+            for l in 0..n {
+                best.point[l] = g * slope[l] / (root_w[l] * root_w[l]);
+            }
+        }
+        if best.bound <= g * g * (1.0 + JOINT_TOLERANCE) {
+            break;
+        }
+        // Y ← M Y / ‖M Y‖_F.
+        let mut next = [[C64::new(0.0, 0.0); MOST_USERS]; MOST_USERS];
+        let mut norm = 0.0;
+        for l in 0..n {
+            for j in 0..n {
+                next[l][j] = (0..n).map(|k| m[(l, k)] * y[k][j]).sum();
+                norm += next[l][j].norm_sqr();
+            }
+        }
+        let scale = 1.0 / norm.sqrt();
+        for l in 0..n {
+            for j in 0..n {
+                y[l][j] = next[l][j] * scale;
+            }
+        }
+    }
+    best
 }
 
 /// A valid upper bound on h(w) = max{w₁ tr(ā āᴴ V) + w₂ tr(b̄ b̄ᴴ V) : V ⪰ 0, diag V = 1}.
@@ -421,6 +929,96 @@ mod tests {
             bound >= exact * (1.0 - 1e-12) && bound <= exact * (1.0 + 1e-6),
             "{bound} vs {exact}"
         );
+    }
+
+    /// The joint support bound is ≥ every rank-one value Σ w_l |a_lᵀv|², and exact where the
+    /// relaxation is: users whose a-vectors are parallel make W rank one.
+    #[test]
+    fn joint_support_bound_dominates_rank_one_points_and_is_tight_when_parallel() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        for case in 0..24 {
+            let users = 3 + case % 3;
+            let dim = rng.random_range(2..12);
+            let parallel = case % 4 == 0;
+            let base = random_vector(&mut rng, dim);
+            let mut a = Vec::new();
+            let mut scales = Vec::new();
+            for _ in 0..users {
+                if parallel {
+                    let c = C64::new(rng.random::<f64>() + 0.1, rng.random::<f64>() - 0.5);
+                    a.extend(base.iter().map(|x| x * c));
+                    scales.push(c.norm_sqr());
+                } else {
+                    a.extend(random_vector(&mut rng, dim));
+                }
+            }
+            let problem = CellProblem {
+                dim,
+                a,
+                tau: vec![0.0; users],
+            };
+            let w: Vec<f64> = (0..users).map(|_| rng.random::<f64>() + 0.01).collect();
+            let bound = joint_support_bound(&problem, &w);
+            if parallel {
+                let exact: f64 =
+                    w.iter().zip(&scales).map(|(w, s)| w * s).sum::<f64>() * l1_norm(&base).powi(2);
+                assert!(
+                    bound >= exact * (1.0 - 1e-12) && bound <= exact * (1.0 + 1e-6),
+                    "{bound} vs {exact}"
+                );
+            }
+            let mut lambdas = vec![0.0; users];
+            for _ in 0..2000 {
+                let v: Vec<C64> = (0..dim)
+                    .map(|_| C64::from_polar(1.0, rng.random::<f64>() * 6.3))
+                    .collect();
+                problem.lambdas(&v, &mut lambdas);
+                let value: f64 = w.iter().zip(&lambdas).map(|(w, l)| w * l).sum();
+                assert!(value <= bound * (1.0 + 1e-12), "{value} > {bound}");
+            }
+        }
+    }
+
+    /// [`ordered_weights`] returns g = w + Dᵀμ with μ ≥ 0 (so the bound stays valid) and g ≥ 0,
+    /// and no other such g has a larger Σ √(c_l g_l).
+    #[test]
+    fn ordering_multipliers_are_valid_and_best() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(31);
+        for case in 0..300 {
+            let n = 2 + case % 4;
+            let model = RateModel::new(Access::Noma, 1.0, 1.0, &vec![0.5; n - 1]);
+            let order = rng.random_range(0..model.orders().len());
+            let pi = &model.orders()[order];
+            let w: Vec<f64> = (0..n).map(|_| rng.random::<f64>().powi(3) + 1e-6).collect();
+            let c: Vec<f64> = (0..n).map(|_| rng.random::<f64>().powi(3) + 1e-6).collect();
+            let g = ordered_weights(&w, &c, pi, Access::Noma);
+            let objective = |g: &[f64]| -> f64 { (0..n).map(|l| (c[l] * g[l]).sqrt()).sum() };
+            // μ_t is the prefix sum of g − w along the order; the last one closes at 0.
+            let mut prefix = 0.0;
+            for (t, &u) in pi.iter().enumerate() {
+                let u = u as usize;
+                assert!(g[u] >= 0.0);
+                prefix += g[u] - w[u];
+                let tolerance = 1e-12 * w.iter().sum::<f64>();
+                if t + 1 < n {
+                    assert!(prefix >= -tolerance, "μ_{t} = {prefix} < 0");
+                } else {
+                    assert!(prefix.abs() <= tolerance, "weight not conserved: {prefix}");
+                }
+            }
+            let best = objective(&g[..n]);
+            for _ in 0..200 {
+                let mu: Vec<f64> = (0..n - 1).map(|_| rng.random::<f64>() * 0.5).collect();
+                let mut other = w.clone();
+                for t in 0..n - 1 {
+                    other[pi[t] as usize] += mu[t];
+                    other[pi[t + 1] as usize] -= mu[t];
+                }
+                if other.iter().all(|x| *x >= 0.0) {
+                    assert!(objective(&other) <= best * (1.0 + 1e-12));
+                }
+            }
+        }
     }
 
     #[test]

@@ -119,6 +119,13 @@ pub fn solve_from(
     (best.1, first_point.filter(|_| problem.users() == 2))
 }
 
+/// Element-wise coordinate ascent on the true objective from `v` (continuous phases), as the
+/// searches end: what a start from elsewhere (the certificate's dual) is polished with.
+pub fn polish(problem: &CellProblem, model: &RateModel, v: &mut [C64]) {
+    let mut eval = Evaluator::new(problem, model);
+    coordinate_ascent(&mut eval, &PhaseGrid::new(), problem, v);
+}
+
 /// The coordinate ascent's fixed rotations, computed once per solve rather than once per
 /// element and sweep: the grid phasors e^{j2πg/16} and the fits' sample offsets.
 struct PhaseGrid {

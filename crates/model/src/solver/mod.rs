@@ -217,25 +217,49 @@ pub fn solve_cell_warm(
             upper_bound: rate,
         };
     }
-    let upper_bound = certificate::upper_bound(problem, model);
-    if upper_bound == f64::NEG_INFINITY {
-        // Not even the relaxation serves every SRU: no phase vector can.
-        return CellSolution {
-            v: vec![C64::new(1.0, 0.0); problem.dim],
-            rate: f64::NEG_INFINITY,
-            upper_bound,
-        };
+    let infeasible = || CellSolution {
+        v: vec![C64::new(1.0, 0.0); problem.dim],
+        rate: f64::NEG_INFINITY,
+        upper_bound: f64::NEG_INFINITY,
+    };
+    // Not even the relaxation serves every SRU: no phase vector can, and no search is needed.
+    // The K = 1 bound needs no primal, so it goes first; K ≥ 2 starts its dual from the primal.
+    let early =
+        (problem.users() == 2).then(|| certificate::certify(problem, model, None).upper_bound);
+    if early == Some(f64::NEG_INFINITY) || !certificate::may_serve(problem, model) {
+        return infeasible();
     }
-    let mut v = match solver {
+    let (mut v, upper_bound) = match solver {
         SolverKind::Fast => {
             let hint = warm.family.take();
             let (mut v, mut point) = fast::solve_from(problem, model, hint);
             let mut rate = rate_of(&v);
+            let mut upper_bound = match early {
+                Some(bound) => bound,
+                None => {
+                    // K ≥ 2: where the dual's best order beats the primal, start there too.
+                    let certified = certificate::certify(problem, model, Some(&v));
+                    if let Some(mut lead) = certified.lead
+                        && certified.upper_bound - rate > WARM_START_ACCEPT_GAP
+                    {
+                        fast::polish(problem, model, &mut lead);
+                        let lead_rate = rate_of(&lead);
+                        if lead_rate > rate {
+                            (v, rate) = (lead, lead_rate);
+                        }
+                    }
+                    certified.upper_bound
+                }
+            };
             if hint.is_some() && upper_bound - rate > WARM_START_ACCEPT_GAP.max(warm.gap * 1.01) {
                 let (cold, cold_point) = fast::solve_from(problem, model, None);
                 let cold_rate = rate_of(&cold);
                 if cold_rate >= rate {
                     (v, point, rate) = (cold, cold_point, cold_rate);
+                    if early.is_none() {
+                        upper_bound = upper_bound
+                            .min(certificate::certify(problem, model, Some(&v)).upper_bound);
+                    }
                 }
             }
             // Only a served cell hands on its z: an infinite gap would make the next cell
@@ -246,13 +270,21 @@ pub fn solve_cell_warm(
             } else {
                 (None, 0.0)
             };
-            v
+            (v, upper_bound)
         }
         #[cfg(feature = "sdp")]
-        SolverKind::SdrSca => sdr_sca::solve(problem, model).v,
+        SolverKind::SdrSca => {
+            let v = sdr_sca::solve(problem, model).v;
+            let upper_bound =
+                early.unwrap_or_else(|| certificate::certify(problem, model, Some(&v)).upper_bound);
+            (v, upper_bound)
+        }
         #[cfg(not(feature = "sdp"))]
         SolverKind::SdrSca => unreachable!("map keys reject sdr-sca where it is not available"),
     };
+    if upper_bound == f64::NEG_INFINITY {
+        return infeasible();
+    }
     if let PhaseMode::Bits(b) = phases {
         fast::discrete_ascent(problem, model, b, &mut v);
     }

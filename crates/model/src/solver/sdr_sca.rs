@@ -45,7 +45,7 @@ pub fn solve(problem: &CellProblem, model: &RateModel) -> SdrScaSolution {
     problem.lambdas(&best_v, &mut lambdas);
     let mut best = objective(model, &lambdas);
     let mut relaxed_rate = f64::NEG_INFINITY;
-    let upper = super::certificate::upper_bound(problem, model);
+    let upper = super::certificate::certify(problem, model, None).upper_bound;
     if !upper.is_finite() {
         return SdrScaSolution {
             v: best_v,
@@ -76,6 +76,8 @@ pub fn solve(problem: &CellProblem, model: &RateModel) -> SdrScaSolution {
                         best_v = v;
                     }
                     lo = r.max(achieved.min(hi));
+                    // The rank-one point reaching `achieved` is feasible in the relaxation too.
+                    relaxed_lo = lo;
                 }
                 None => hi = r,
             }
@@ -328,27 +330,36 @@ fn csc(rows: usize, columns: Vec<Vec<(usize, f64)>>) -> CscMatrix<f64> {
     CscMatrix::new(rows, columns.len(), colptr, rowval, nzval)
 }
 
-/// max{tr(W V) : V ⪰ 0, diag V = 1} for W = w₁ ā āᴴ + w₂ b̄ b̄ᴴ, solved by Clarabel: the exact SDP
-/// value that [`super::certificate::support_bound`] bounds without a solver.
-pub fn support_value(a: &[C64], b: &[C64], w1: f64, w2: f64) -> Option<f64> {
+/// max{tr(W V) : V ⪰ 0, diag V = 1} for W = Σ_l w_l ā_l ā_lᴴ (one a-vector per user, all of
+/// the same length), solved by Clarabel: the exact SDP value that the certificate's support
+/// bounds ([`super::certificate::support_bound`] for two users, its joint form for more) bound
+/// without a solver.
+pub fn support_value(users: &[Vec<C64>], w: &[f64]) -> Option<f64> {
+    let dim = users[0].len();
     let problem = CellProblem {
-        dim: a.len(),
-        a: a.iter().chain(b).copied().collect(),
-        tau: vec![0.0, 0.0],
+        dim,
+        a: users.iter().flatten().copied().collect(),
+        tau: vec![0.0; users.len()],
     };
     // OMA with zero targets makes every rate constraint vacuous: only V ⪰ 0, diag V = 1 bind.
-    let model = RateModel::new(crate::rate::Access::Oma, 1.0, 1.0, &[0.0]);
+    let model = RateModel::new(
+        crate::rate::Access::Oma,
+        1.0,
+        1.0,
+        &vec![0.0; users.len() - 1],
+    );
     let sdp = Sdp::new(&problem, &model, 0);
-    let pairs = a.len() * (a.len() - 1) / 2;
+    let pairs = dim * (dim - 1) / 2;
     let weights: Vec<f64> = (0..2 * pairs)
-        .map(|k| w1 * sdp.grad[0][k] + w2 * sdp.grad[1][k])
+        .map(|k| (0..users.len()).map(|l| w[l] * sdp.grad[l][k]).sum())
         .collect();
     let mut q: Vec<f64> = weights.iter().map(|w| -w).collect();
-    q.extend([0.0, 0.0]);
+    q.extend(vec![0.0; users.len()]);
     let matrix = sdp.solve_with_objective(0.0, q)?;
-    let value: f64 = upper_pairs(a.len())
+    let value: f64 = upper_pairs(dim)
         .enumerate()
         .map(|(p, (i, j))| weights[p] * matrix[(i, j)].re + weights[pairs + p] * matrix[(i, j)].im)
         .sum();
-    Some((w1 * sdp.lambda0[0] + w2 * sdp.lambda0[1] + value) * sdp.scale)
+    let diagonal: f64 = (0..users.len()).map(|l| w[l] * sdp.lambda0[l]).sum();
+    Some((diagonal + value) * sdp.scale)
 }
