@@ -45,7 +45,9 @@ impl fmt::Display for MapKind {
 ///    (16-bit codes), not of the unrounded ones.
 /// 5: a link reaching less than 10⁻⁹ m into an obstacle grazes it (decimal coordinates rounded
 ///    into a face no longer block).
-pub const MODEL_VERSION: u32 = 5;
+/// 6: rate maps with two or more SRUs carry the joint dual bound, and their `fast` values may
+///    be higher where the certificate's rounded dual found a better decoding order.
+pub const MODEL_VERSION: u32 = 6;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
