@@ -57,7 +57,7 @@ fn main() {
                 format!("{},{}", cell[0], cell[1]),
                 rate(&v_fast),
                 rate(&sdr.v),
-                certificate::upper_bound(&problem, &model),
+                certificate::certify(&problem, &model, Some(&v_fast)).upper_bound,
                 fast_s,
                 sdr_s / fast_s,
                 sdr_s

@@ -23,9 +23,9 @@ const GAIN_S_PER_POINT: f64 = 20e-9;
 /// work of the closed form.
 const BITS_FACTOR: f64 = 2.0;
 /// Seconds per (cell · user weight · N) of a rate map with the `fast` solver and its
-/// certificate, one core, where K SRUs weigh (K + 1)(K + 2)/3 ([`fast_user_weight`]; 2 for one
-/// SRU): a cold cell of the paper's NOMA map with one SRU costs 0.5–0.6 ms at N = 60 and
-/// 1.4–2.1 ms at N = 256 (README "Performance"), 4.2–4.6 µs a unit; the warm-started cells of
+/// certificate, one core, where K SRUs weigh [`fast_user_weight`] (2 for one SRU): a cold
+/// cell of the paper's NOMA map with one SRU costs 0.5–0.6 ms at N = 60 and 1.4–2.1 ms at
+/// N = 256 (README "Performance"), 4.2–4.6 µs a unit; the warm-started cells of
 /// a map cost less, so 5 µs over-estimates a map, never under.
 const RATE_S_PER_POINT_WEIGHT: f64 = 5e-6;
 /// Seconds per (cell · decoding order · (N + 1)³) of `sdr-sca`, which solves SDPs of size N + 1
@@ -247,14 +247,16 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
     }
 }
 
-/// How the `fast` solver's work grows with K SRUs, as (K + 1)(K + 2)/3: it searches one
-/// family per SRU and each score weighs every user, while only the one decoding order the
-/// gains admit is scored (`RateModel::best_order`). Fitted to the paper's multi-user floor
-/// with 1–4 SRUs (41², N = 60): 0.77, 1.3–1.5, 2.2–2.5 and 3.8–4.0 s of CPU, ratios 1 : 1.8 :
-/// 3.1 : 5.1 against this weight's 1 : 2 : 3.3 : 5.
+/// How a rate cell's work (the `fast` search and the certificate) grows with K SRUs. One SRU
+/// weighs 2: one pair family and the polygon certificate. With K ≥ 2 the certificate's joint
+/// dual runs once per decoding order that its box bound cannot prune, and that dominates:
+/// 1.4 K². Fitted to the paper's multi-user floor with 1–4 SRUs (41², N = 60, NOMA; 2026-12-07,
+/// docs/performance.md "Several SRUs certified"): 0.54, 1.30, 3.20 and 5.77 s of CPU, ratios
+/// 1 : 2.4 : 5.9 : 10.6 against this weight's 1 : 2.8 : 6.3 : 11.2, so a map is
+/// over-estimated, not under.
 fn fast_user_weight(srus: usize) -> f64 {
     let k = srus as f64;
-    (k + 1.0) * (k + 2.0) / 3.0
+    if srus <= 1 { 2.0 } else { 1.4 * k * k }
 }
 
 /// Estimated bytes of the built map, as the cache weighs it ([`super::RadioMap::size_bytes`]):
