@@ -644,6 +644,7 @@ mod tests {
                     costs.iter().zip(g).map(|(c, g)| budget * (c / g).sqrt() / roots).collect();
                 let s = model.mru_score_ignoring_ordering(&minimiser, order).unwrap_or(1.0);
                 prop_assert!(s >= b * (1.0 - 1e-9), "the minimiser scores {s} < {b}");
+                prop_assert!(s <= b * (1.0 + 1e-9), "the minimiser scores {s} > {b}");
             }
         }
     }

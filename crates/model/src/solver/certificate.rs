@@ -127,6 +127,13 @@ pub struct Certified {
 /// only steers the dual search, so any hint, or none, gives a valid bound, and a near-optimal
 /// one a tight bound where the relaxation is tight. K = 1 needs none.
 pub fn certify(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -> Certified {
+    if problem.users() > MOST_USERS {
+        // Scenarios have at most MAX_SRUS SRUs; beyond the stack arrays, claim nothing.
+        return Certified {
+            upper_bound: f64::INFINITY,
+            lead: None,
+        };
+    }
     if problem.users() == 2 {
         Certified {
             upper_bound: polygon_bound(problem, model),
@@ -140,6 +147,9 @@ pub fn certify(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -
 /// Whether the SRUs can be served at all, by the cheap per-user bound (`false` proves they
 /// cannot, so no search is needed; `true` proves nothing).
 pub fn may_serve(problem: &CellProblem, model: &RateModel) -> bool {
+    if problem.users() > MOST_USERS {
+        return true;
+    }
     let maxima = maxima(problem);
     (0..model.orders().len()).any(|k| box_score(model, &maxima, k).is_some())
 }
@@ -180,10 +190,10 @@ fn box_score(model: &RateModel, maxima: &[f64; MOST_USERS], order: usize) -> Opt
 /// support function of S ([`joint_support`]); on that half-space the order's score is at most
 /// [`RateModel::score_bound`]'s exact value. Any w gives a valid bound; the best is the normal
 /// of S + τ at the relaxed optimum λ*, where the rate's level set touches it:
-/// w ∝ ∇(Σ c_l/λ_l) = (c_l/λ_l²)_l. We start from the primal's gains and iterate
-/// λ ← (support point of w) projected onto the order's ordering, keeping the least bound. An
-/// order is searched only if its box bound ([`box_score`]) beats the best bound so far, and
-/// the primal's own order goes first.
+/// w ∝ ∇(Σ c_l/λ_l) = (c_l/λ_l²)_l. The search ([`order_score_bound`]) starts there from the
+/// primal's gains moved into the order's region, and keeps the least bound. An order is
+/// searched only if its box bound ([`box_score`]) beats the best bound so far, and the
+/// primal's own order goes first.
 fn joint_bound(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -> Certified {
     let n = problem.users();
     let maxima = maxima(problem);
@@ -272,9 +282,11 @@ fn round_dual(problem: &CellProblem, y: &Square, w: &[f64]) -> Vec<C64> {
 /// Each round takes a direction w, bounds h(w) ([`joint_support`]), gives the ordering its
 /// best multipliers for that w ([`ordered_weights`]: g = w + Dᵀμ) and evaluates the exact
 /// bound on the half-space. At the optimum the support point s(w) + τ equals the gains the
-/// bound's minimiser implies, λ_l = √(c_l/g_l); the next direction scales each w_l by
-/// (λ_l/(s_l + τ_l))², which without active orderings is w ← (c_l/(s_l + τ_l)²)_l, the normal
-/// of the rate's level set at the support point.
+/// bound's minimiser implies, λ_l = √(c_l/g_l). The next direction scales each w_l by
+/// (λ_l/(s_l + τ_l))^η; η = 2 would be the fixed point w ← (c_l/(s_l + τ_l)²)_l (the normal of
+/// the rate's level set at the support point, without active orderings), which overshoots, so
+/// η ≤ 1, quartered after a step that does not lower the bound and grown by half after one
+/// that does.
 #[allow(clippy::too_many_arguments)]
 fn order_score_bound(
     problem: &CellProblem,
@@ -523,11 +535,28 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
         bound: f64::INFINITY,
         point: [0.0; MOST_USERS],
     };
-    let mut m = Matrix5::zeros();
-    for _ in 0..JOINT_STEPS {
+    // G(Y)² is a lower estimate of h only at ‖Y‖_F = 1, and the stopping test relies on it.
+    let start: f64 = y[..n]
+        .iter()
+        .flat_map(|row| &row[..n])
+        .map(|c| c.norm_sqr())
+        .sum();
+    if start > 0.0 {
+        let scale = 1.0 / start.sqrt();
+        for row in &mut y[..n] {
+            for cell in &mut row[..n] {
+                *cell *= scale;
+            }
+        }
+    }
+    // One pass over the elements at Y: G, M (upper triangle; Hermitian) and, when asked, the
+    // support point's sums Σ_n z_n Re(conj(ρ_{n,l}) (Y t_n)_l), which only the best iterate
+    // needs.
+    let pass = |y: &Square, m: &mut Matrix5, slope: Option<&mut [f64; MOST_USERS]>| -> f64 {
         m.fill(C64::new(0.0, 0.0));
         let mut g = 0.0;
-        let mut slope = [0.0; MOST_USERS];
+        let mut sums = [0.0; MOST_USERS];
+        let want_slope = slope.is_some();
         for e in 0..dim {
             let mut rho = [C64::new(0.0, 0.0); MOST_USERS];
             let mut alpha = 0.0;
@@ -539,22 +568,46 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
             let mut t = [C64::new(0.0, 0.0); MOST_USERS];
             let mut q = 0.0;
             for (j, tj) in t.iter_mut().enumerate().take(n) {
-                *tj = (0..n).map(|l| y[l][j].conj() * rho[l]).sum();
-                q += tj.norm_sqr();
+                let mut sum = C64::new(0.0, 0.0);
+                for l in 0..n {
+                    sum += y[l][j].conj() * rho[l];
+                }
+                *tj = sum;
+                q += sum.norm_sqr();
             }
             let root = q.max(1e-14 * alpha + f64::MIN_POSITIVE).sqrt();
             let z = 1.0 / root;
             g += root;
             for l in 0..n {
                 let zr = rho[l] * z;
-                for k in 0..n {
+                for k in l..n {
                     m[(l, k)] += zr * rho[k].conj();
                 }
-                // (Λρ)_l = (Y t)_l: the support point's term.
-                let yt: C64 = (0..n).map(|j| y[l][j] * t[j]).sum();
-                slope[l] += z * (rho[l].conj() * yt).re;
+            }
+            if want_slope {
+                for l in 0..n {
+                    let mut yt = C64::new(0.0, 0.0);
+                    for j in 0..n {
+                        yt += y[l][j] * t[j];
+                    }
+                    sums[l] += z * (rho[l].conj() * yt).re;
+                }
             }
         }
+        for l in 0..n {
+            for k in 0..l {
+                m[(l, k)] = m[(k, l)].conj();
+            }
+        }
+        if let Some(slope) = slope {
+            *slope = sums;
+        }
+        g
+    };
+    let mut m = Matrix5::zeros();
+    let mut best_y = *y;
+    for _ in 0..JOINT_STEPS {
+        let g = pass(y, &mut m, None);
         let top = m
             .view((0, 0), (n, n))
             .clone_owned()
@@ -563,9 +616,7 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
         let bound = top * g;
         if bound < best.bound {
             best.bound = bound;
-            for l in 0..n {
-                best.point[l] = g * slope[l] / (root_w[l] * root_w[l]);
-            }
+            best_y = *y;
         }
         if best.bound <= g * g * (1.0 + JOINT_TOLERANCE) {
             break;
@@ -575,8 +626,12 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
         let mut norm = 0.0;
         for l in 0..n {
             for j in 0..n {
-                next[l][j] = (0..n).map(|k| m[(l, k)] * y[k][j]).sum();
-                norm += next[l][j].norm_sqr();
+                let mut sum = C64::new(0.0, 0.0);
+                for k in 0..n {
+                    sum += m[(l, k)] * y[k][j];
+                }
+                next[l][j] = sum;
+                norm += sum.norm_sqr();
             }
         }
         let scale = 1.0 / norm.sqrt();
@@ -585,6 +640,12 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
                 y[l][j] = next[l][j] * scale;
             }
         }
+    }
+    // The support point at the iterate of the best bound: ∂h/∂w_l = G Σ_n z_n Re(…)/w_l.
+    let mut slope = [0.0; MOST_USERS];
+    let g = pass(&best_y, &mut m, Some(&mut slope));
+    for l in 0..n {
+        best.point[l] = g * slope[l] / (root_w[l] * root_w[l]);
     }
     best
 }

@@ -170,6 +170,11 @@ pub fn sru_part(model: &ChannelModel, scenario: &Scenario, with_irs: bool) -> Ce
 /// search by at most 6e-6 bit/s/Hz in 7 % of them and above it in 2 % (docs/model.md §5).
 pub const WARM_START_ACCEPT_GAP: f64 = 1e-6;
 
+/// How much (bit/s/Hz) the certificate's lead must beat the `fast` answer by to replace it:
+/// smaller differences are below what storing the phases as 16-bit codes moves a value
+/// (about 10⁻¹⁰ either way on the paper's maps), so swapping would not raise the stored value.
+pub const LEAD_MARGIN: f64 = 1e-9;
+
 /// What a map carries from one cell to the next along a grid row: where the `fast` solver's
 /// family search ended in the last cell solved.
 #[derive(Debug, Clone, Default)]
@@ -224,9 +229,12 @@ pub fn solve_cell_warm(
     };
     // Not even the relaxation serves every SRU: no phase vector can, and no search is needed.
     // The K = 1 bound needs no primal, so it goes first; K ≥ 2 starts its dual from the primal.
+    if !certificate::may_serve(problem, model) {
+        return infeasible();
+    }
     let early =
         (problem.users() == 2).then(|| certificate::certify(problem, model, None).upper_bound);
-    if early == Some(f64::NEG_INFINITY) || !certificate::may_serve(problem, model) {
+    if early == Some(f64::NEG_INFINITY) {
         return infeasible();
     }
     let (mut v, upper_bound) = match solver {
@@ -244,7 +252,7 @@ pub fn solve_cell_warm(
                     {
                         fast::polish(problem, model, &mut lead);
                         let lead_rate = rate_of(&lead);
-                        if lead_rate > rate {
+                        if lead_rate > rate + LEAD_MARGIN {
                             (v, rate) = (lead, lead_rate);
                         }
                     }
@@ -283,6 +291,10 @@ pub fn solve_cell_warm(
         SolverKind::SdrSca => unreachable!("map keys reject sdr-sca where it is not available"),
     };
     if upper_bound == f64::NEG_INFINITY {
+        debug_assert!(
+            rate_of(&v) == f64::NEG_INFINITY,
+            "a served cell cannot be proved unservable"
+        );
         return infeasible();
     }
     if let PhaseMode::Bits(b) = phases {
