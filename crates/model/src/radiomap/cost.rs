@@ -250,13 +250,13 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
 /// How a rate cell's work (the `fast` search and the certificate) grows with K SRUs. One SRU
 /// weighs 2: one pair family and the polygon certificate. With K ≥ 2 the certificate's joint
 /// dual runs once per decoding order that its box bound cannot prune, and that dominates:
-/// 1.4 K². Fitted to the paper's multi-user floor with 1–4 SRUs (41², N = 60, NOMA; 2026-12-07,
-/// docs/performance.md "Several SRUs certified"): 0.54, 1.30, 3.20 and 5.77 s of CPU, ratios
-/// 1 : 2.4 : 5.9 : 10.6 against this weight's 1 : 2.8 : 6.3 : 11.2, so a map is
-/// over-estimated, not under.
+/// 1.5 K². Fitted to the paper's multi-user floor with 1–4 SRUs (41², N = 60, NOMA; 2026-12-07,
+/// docs/performance.md "Several SRUs certified"): 0.46, 1.07, 2.60 and 5.33 s of CPU, ratios
+/// 1 : 2.3 : 5.7 : 11.7 against this weight's 1 : 3 : 6.8 : 12, so a map is over-estimated,
+/// not under.
 fn fast_user_weight(srus: usize) -> f64 {
     let k = srus as f64;
-    if srus <= 1 { 2.0 } else { 1.4 * k * k }
+    if srus <= 1 { 2.0 } else { 1.5 * k * k }
 }
 
 /// Estimated bytes of the built map, as the cache weighs it ([`super::RadioMap::size_bytes`]):
