@@ -168,20 +168,24 @@ fn maxima(problem: &CellProblem) -> [f64; MOST_USERS] {
 /// every order's score increases in every gain, so this bounds the order. `None` if the box's
 /// top corner cannot serve every SRU.
 fn box_score(model: &RateModel, maxima: &[f64; MOST_USERS], order: usize) -> Option<f64> {
-    let n = model.users();
-    let mut corner = [0.0; MOST_USERS];
-    let pi = &model.orders()[order];
+    let corner = order_caps(&model.orders()[order], maxima, model.access);
+    model.mru_score_ignoring_ordering(&corner[..model.users()], order)
+}
+
+/// The most each user's gain can be on an order's region: its own maximum, and under NOMA the
+/// smallest maximum from its position on (the ordering puts it below every later user).
+fn order_caps(pi: &[u8], maxima: &[f64; MOST_USERS], access: Access) -> [f64; MOST_USERS] {
+    let mut caps = [0.0; MOST_USERS];
     let mut cap = f64::INFINITY;
     for &u in pi.iter().rev() {
         let u = u as usize;
-        cap = if model.access == Access::Noma {
-            cap.min(maxima[u])
-        } else {
-            maxima[u]
+        cap = match access {
+            Access::Noma => cap.min(maxima[u]),
+            Access::Oma => maxima[u],
         };
-        corner[u] = cap;
+        caps[u] = cap;
     }
-    model.mru_score_ignoring_ordering(&corner[..n], order)
+    caps
 }
 
 /// The K ≥ 2 bound: per decoding order, the dual of the relaxed problem (docs/model.md §5).
@@ -205,7 +209,8 @@ fn joint_bound(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -
             start[l] = amplitudes[l].norm_sqr() + problem.tau[l];
         }
     }
-    let first = model.best_order(&start[..n]).map(|(_, k)| k);
+    let at_start = model.best_order(&start[..n]);
+    let first = at_start.map(|(_, k)| k);
     let mut orders: Vec<(f64, usize)> = (0..model.orders().len())
         .filter_map(|k| box_score(model, &maxima, k).map(|cap| (cap, k)))
         .collect();
@@ -216,8 +221,8 @@ fn joint_bound(problem: &CellProblem, model: &RateModel, hint: Option<&[C64]>) -
     });
     // An order bounded within PRIMAL_SETTLED of the primal's own score is as good as
     // certified: its search stops there.
-    let primal = hint
-        .and_then(|_| model.best_order(&start[..n]))
+    let primal = at_start
+        .filter(|_| hint.is_some())
         .map_or(f64::NEG_INFINITY, |(s, _)| s);
     let mut best = f64::NEG_INFINITY;
     let mut lead = None;
@@ -454,8 +459,8 @@ fn seed_dual(y: &mut Square, amplitudes: &[C64; MOST_USERS], w: &[f64], n: usize
 }
 
 /// Gains moved into the order's region: pooled where they break its channel ordering (the
-/// isotonic regression along the order, NOMA only) and capped by the per-user maxima as
-/// [`box_score`] caps them, and kept positive.
+/// isotonic regression along the order, NOMA only), capped by [`order_caps`] and kept
+/// positive.
 fn project_onto_order(lambda: &mut [f64], pi: &[u8], maxima: &[f64; MOST_USERS], access: Access) {
     let n = lambda.len();
     if access == Access::Noma {
@@ -481,15 +486,10 @@ fn project_onto_order(lambda: &mut [f64], pi: &[u8], maxima: &[f64; MOST_USERS],
             }
         }
     }
-    let mut cap = f64::INFINITY;
-    for &u in pi.iter().rev() {
+    let caps = order_caps(pi, maxima, access);
+    for &u in pi {
         let u = u as usize;
-        cap = if access == Access::Noma {
-            cap.min(maxima[u])
-        } else {
-            maxima[u]
-        };
-        lambda[u] = lambda[u].min(cap).max(GAIN_FLOOR * maxima[u]);
+        lambda[u] = lambda[u].min(caps[u]).max(GAIN_FLOOR * maxima[u]);
     }
 }
 
