@@ -27,7 +27,7 @@
 mod fading;
 mod rows;
 
-pub use rows::ClosedFormRow;
+pub use rows::{ClosedFormRow, RowTerms};
 
 use crate::geometry::{Obstructions, SightLines};
 use crate::scenario::{Grouping, Irs, SPEED_OF_LIGHT, Scenario};

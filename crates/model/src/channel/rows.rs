@@ -53,6 +53,29 @@ struct RowLinks {
     targets: Vec<[f64; 2]>,
 }
 
+/// Which terms of the closed form a row sums ([`ChannelModel::closed_form_row`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowTerms {
+    /// The direct link and every surface: a gain map's cells.
+    All,
+    /// The direct link and every surface but surface `s`: what every candidate pose of a
+    /// placement search shares (crate::placement).
+    AllBut(usize),
+    /// Surface `s` alone (‖w̃_s‖₁ and τ_s): one placement candidate's own part.
+    Surface(usize),
+}
+
+impl RowTerms {
+    /// True when surface `s`'s terms are summed.
+    fn includes(self, s: usize) -> bool {
+        match self {
+            RowTerms::All => true,
+            RowTerms::AllBut(moving) => s != moving,
+            RowTerms::Surface(only) => s == only,
+        }
+    }
+}
+
 impl ClosedFormRow {
     fn resize(&mut self, cells: usize) {
         self.amplitude.resize(cells, 0.0);
@@ -74,12 +97,15 @@ impl ChannelModel {
 
     /// [`Self::closed_form_terms`] for a whole row of a map at once: the users (x, y_min + j·Δ,
     /// height) for j < `skip.len()`, leaving cells where `skip[j]` holds (occupied) with
-    /// unspecified values. Fills `row.amplitude[j]` = |h̃| + ‖w̃‖₁ and `row.tau[j]` = τ, so
-    /// max_θ λ = amplitude² + τ (eq. 12). Only for models where [`Self::closed_form_by_rows`]
-    /// holds. The links' path gains are evaluated for the whole row in one vectorised pass
-    /// (crate::vecmath); the values equal the per-cell ones to rounding (a few ulp).
+    /// unspecified values. Fills `row.amplitude[j]` = |h̃| + ‖w̃‖₁ and `row.tau[j]` = τ over the
+    /// chosen `terms`, so that with [`RowTerms::All`] max_θ λ = amplitude² + τ (eq. 12). Only
+    /// for models where [`Self::closed_form_by_rows`] holds. The links' path gains are
+    /// evaluated for the whole row in one vectorised pass (crate::vecmath); the values equal
+    /// the per-cell ones to rounding (a few ulp).
+    #[allow(clippy::too_many_arguments)]
     pub fn closed_form_row(
         &self,
+        terms: RowTerms,
         x: f64,
         y_min: f64,
         step: f64,
@@ -103,18 +129,29 @@ impl ChannelModel {
         // √(K/(K+1)): a LoS link's amplitude over √L (a NLoS link has K = 0: none).
         let los_share = (self.kappa / (self.kappa + 1.0)).sqrt();
 
-        for (served, &skipped) in served.iter_mut().zip(skip) {
-            *served = !skipped;
-        }
-        self.links_from(&self.ap, users, served, links);
-        let direct_scattered = [1.0, 1.0 / (self.kappa + 1.0)]; // L/(K+1) over L, NLoS and LoS
-        for (j, (a, t)) in amplitude.iter_mut().zip(tau.iter_mut()).enumerate() {
-            let (root_gain, los) = (links.root_gain[j], links.los[j]);
-            *a = if los { root_gain * los_share } else { 0.0 };
-            *t = root_gain * root_gain * direct_scattered[usize::from(los)];
+        if matches!(terms, RowTerms::Surface(_)) {
+            amplitude.iter_mut().for_each(|a| *a = 0.0);
+            tau.iter_mut().for_each(|t| *t = 0.0);
+        } else {
+            for (served, &skipped) in served.iter_mut().zip(skip) {
+                *served = !skipped;
+            }
+            self.links_from(&self.ap, users, served, links);
+            let direct_scattered = [1.0, 1.0 / (self.kappa + 1.0)]; // L/(K+1) over L, NLoS and LoS
+            for (j, (a, t)) in amplitude.iter_mut().zip(tau.iter_mut()).enumerate() {
+                let (root_gain, los) = (links.root_gain[j], links.los[j]);
+                *a = if los { root_gain * los_share } else { 0.0 };
+                *t = root_gain * root_gain * direct_scattered[usize::from(los)];
+            }
         }
 
-        for irs in self.surfaces.iter().filter(|irs| irs.faces_ap) {
+        let surfaces = self
+            .surfaces
+            .iter()
+            .enumerate()
+            .filter(|&(s, irs)| irs.faces_ap && terms.includes(s))
+            .map(|(_, irs)| irs);
+        for irs in surfaces {
             // A user on or behind the surface's plane is not served: no link to evaluate.
             for (j, served) in served.iter_mut().enumerate() {
                 let user = P3::new(x, users.ys[j], height);

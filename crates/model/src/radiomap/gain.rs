@@ -7,7 +7,7 @@
 //! otherwise hold 480 MB of phases).
 
 use super::{Cancelled, Progress};
-use crate::channel::{C64, ChannelModel, ClosedFormRow, expected_gain};
+use crate::channel::{C64, ChannelModel, ClosedFormRow, RowTerms, expected_gain};
 use crate::phases::{PhaseMode, phases_for_mode};
 use crate::scenario::Grid;
 use crate::vecmath;
@@ -96,6 +96,7 @@ pub(super) fn gain_values(
                 // until the last AP is seen.
                 for (k, model) in models.iter().enumerate() {
                     model.closed_form_row(
+                        RowTerms::All,
                         x,
                         grid.y_min,
                         grid.resolution_m,
