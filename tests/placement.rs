@@ -187,3 +187,82 @@ fn every_objective_and_the_ap_rank_as_the_exhaustive_loop() {
     let answer = check_against_exhaustive(&base, &search);
     assert_eq!(answer.candidates.len(), 11);
 }
+
+/// Two APs and two IRSs, the second moving: a candidate's map is the shared part (both direct
+/// links and the first surface, per AP) plus the moving surface's own terms, best over the APs;
+/// continuous phases take the row form, 1-bit phases and `elements` grouping the cell form.
+#[test]
+fn several_aps_and_surfaces_rank_as_the_exhaustive_loop() {
+    for (phases, grouping) in [
+        (None, "coherent"),
+        (Some(PhaseMode::Bits(1)), "coherent"),
+        (None, "elements"),
+    ] {
+        let base = Scenario::builtin_with("paper-single-user", |v| {
+            v["grid"]["resolution_m"] = 1.0.into();
+            let ap = v["ap"].take();
+            let mut second = ap.clone();
+            second["position"] = serde_json::json!([-10.0, 3.0, 2.0]);
+            second["tx_power_dbm"] = 17.0.into();
+            v.as_object_mut().unwrap().remove("ap");
+            v["aps"] = serde_json::json!([ap, second]);
+            let irs = v["irs"].take();
+            let mut other = irs.clone();
+            other["center"] = serde_json::json!([10.0, 2.0, 2.0]);
+            other["normal"] = serde_json::json!([-1.0, 0.0, 0.0]);
+            v.as_object_mut().unwrap().remove("irs");
+            let (mut first, mut moving) = (irs, other);
+            for s in [&mut first, &mut moving] {
+                s["grouping"] = grouping.into();
+                if grouping == "elements" {
+                    s["nx_sub"] = 4.into();
+                    s["nz_sub"] = 2.into();
+                    s["elements_per_sub"] = 2.into();
+                }
+            }
+            v["irss"] = serde_json::json!([first, moving]);
+        })
+        .unwrap()
+        .unwrap();
+        let search = Search {
+            what: What::Irs,
+            index: 1,
+            candidates: walls(&[([10.0, -10.0], [10.0, 10.0])], 2.0),
+            objective: Objective::MaxThreshold {
+                start: Q_I,
+                goal: Q_F,
+            },
+            phases,
+        };
+        let answer = check_against_exhaustive(&base, &search);
+        assert!(answer.candidates.len() >= 8, "{grouping} {phases:?}");
+    }
+}
+
+/// A floor plan (the warehouse's 5 cm raster at 1 m cells): every candidate's links walk the
+/// raster, as the map builder's do.
+#[test]
+fn a_floor_plan_ranks_as_the_exhaustive_loop() {
+    let base = Scenario::from_file(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenarios/warehouse/warehouse.json"
+    )))
+    .unwrap();
+    let base = {
+        let mut v = base.to_json_value();
+        v["grid"]["resolution_m"] = 1.0.into();
+        Scenario::from_value(v).unwrap()
+    };
+    let search = Search {
+        what: What::Irs,
+        index: 0,
+        candidates: walls(&[([30.0, -20.0], [30.0, 20.0])], 4.0),
+        objective: Objective::MaxThreshold {
+            start: [-27.0, 16.0],
+            goal: [26.0, -16.0],
+        },
+        phases: None,
+    };
+    let answer = check_against_exhaustive(&base, &search);
+    assert!(answer.candidates.len() >= 8);
+}

@@ -12,17 +12,20 @@
 //! per cell and shared by every candidate; a candidate costs its own surface's terms alone. With
 //! continuous phases the best gain is (|h̃| + Σ_s ‖w̃_s‖₁)² + τ (eq. 12), so a cell keeps
 //! |h̃| + Σ_{s≠k} ‖w̃_s‖₁; with b-bit phases each element's quantised phase depends only on ∠h̃
-//! and its own ∠w̃_n, so a cell keeps the complex sum h̃ + Σ_{s≠k} w̃_sᵀθ_s. Moving the AP
-//! changes every link, so each AP candidate's map is built in full by the ordinary builder.
+//! and its own ∠w̃_n, so a cell keeps the complex sum h̃ + Σ_{s≠k} w̃_sᵀθ_s. With continuous
+//! phases and `coherent` surfaces both parts are evaluated a row at a time, as the map builder
+//! does ([`ChannelModel::closed_form_row`]): a candidate costs one vectorised link budget per
+//! cell and AP, no phasor. Moving the AP changes every link, so each AP candidate's map is
+//! built in full by the ordinary builder.
 
-use crate::channel::{C64, ChannelModel};
+use crate::channel::{C64, ChannelModel, ClosedFormRow, RowTerms};
 use crate::geometry::Obstructions;
 use crate::input::FieldError;
 use crate::numerics::l1_norm;
 use crate::phases::{PhaseMode, quantise_phase};
 use crate::planner::CellGraph;
 use crate::radiomap::{self, Cancelled, MapKey, Progress, WorkError, body::coverage};
-use crate::scenario::{Grid, Irs, Scenario};
+use crate::scenario::{Grid, Grouping, Irs, Scenario};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -568,13 +571,16 @@ fn surface_part(
 }
 
 /// Per AP and cell, the direct link's and the other surfaces' part of the gain: the same for
-/// every candidate pose of the moving surface, so computed once (stopped by a cancel).
+/// every candidate pose of the moving surface, so computed once (stopped by a cancel). With
+/// `by_rows` (continuous phases, `coherent` surfaces) a row at a time
+/// ([`ChannelModel::closed_form_row`]), else cell by cell.
 fn shared(
     base: &Scenario,
     grid: &Grid,
     occupied: &[bool],
     moving: usize,
     mode: PhaseMode,
+    by_rows: bool,
     progress: &Progress,
 ) -> Shared {
     let height = base.mru.antenna_height_m;
@@ -583,6 +589,36 @@ fn shared(
     let per_ap: Vec<(Vec<C64>, Vec<f64>)> = (0..base.access_points().len())
         .map(|ap| {
             let model = ChannelModel::for_ap(base, ap);
+            if by_rows {
+                let mut field = vec![C64::new(0.0, 0.0); grid.cells()];
+                let mut tau = vec![0.0; grid.cells()];
+                field
+                    .par_chunks_mut(grid.ny)
+                    .zip(tau.par_chunks_mut(grid.ny))
+                    .zip(occupied.par_chunks(grid.ny))
+                    .enumerate()
+                    .for_each_init(ClosedFormRow::default, |row, (i, ((field, tau), skip))| {
+                        if progress.is_cancelled() {
+                            return;
+                        }
+                        let x = grid.x_min + i as f64 * grid.resolution_m;
+                        let terms = RowTerms::AllBut(moving);
+                        model.closed_form_row(
+                            terms,
+                            x,
+                            grid.y_min,
+                            grid.resolution_m,
+                            height,
+                            skip,
+                            row,
+                        );
+                        for (f, &a) in field.iter_mut().zip(&row.amplitude) {
+                            *f = C64::new(a, 0.0);
+                        }
+                        tau.copy_from_slice(&row.tau);
+                    });
+                return (field, tau);
+            }
             (0..grid.cells())
                 .into_par_iter()
                 .map_init(
@@ -616,6 +652,100 @@ fn shared(
         .collect();
     let (field, tau) = per_ap.into_iter().unzip();
     Shared { field, tau }
+}
+
+/// Scratch of one worker scoring candidates: kept between candidates, so a candidate allocates
+/// only its channel models.
+struct Scratch {
+    w: Vec<C64>,
+    theta: Vec<f64>,
+    row: ClosedFormRow,
+    /// The candidate's map: best gain per cell in dB, NaN where occupied.
+    values: Vec<f64>,
+}
+
+/// One candidate's map values (dB, NaN where occupied) into `scratch.values`: the shared part
+/// plus the moving surface's own terms, best over the APs.
+fn candidate_values(
+    models: &[ChannelModel],
+    moving: usize,
+    shared: &Shared,
+    grid: &Grid,
+    occupied: &[bool],
+    height: f64,
+    (mode, by_rows): (PhaseMode, bool),
+    scratch: &mut Scratch,
+    progress: &Progress,
+) -> Result<(), Cancelled> {
+    let Scratch {
+        w,
+        theta,
+        row,
+        values,
+    } = scratch;
+    if by_rows {
+        let db_per_neper = 10.0 * std::f64::consts::LOG10_E;
+        let rows = values.chunks_mut(grid.ny).zip(occupied.chunks(grid.ny));
+        for (i, (values, skip)) in rows.enumerate() {
+            if progress.is_cancelled() {
+                return Err(Cancelled);
+            }
+            let x = grid.x_min + i as f64 * grid.resolution_m;
+            let cells = i * grid.ny..(i + 1) * grid.ny;
+            for (ap, model) in models.iter().enumerate() {
+                let terms = RowTerms::Surface(moving);
+                model.closed_form_row(terms, x, grid.y_min, grid.resolution_m, height, skip, row);
+                let (field, tau) = (
+                    &shared.field[ap][cells.clone()],
+                    &shared.tau[ap][cells.clone()],
+                );
+                let own = row.amplitude.iter().zip(&row.tau);
+                for (((value, f), t), (a, t_own)) in values.iter_mut().zip(field).zip(tau).zip(own)
+                {
+                    let gain = (f.re + a).powi(2) + t + t_own;
+                    if ap == 0 || gain > *value {
+                        *value = gain;
+                    }
+                }
+            }
+            crate::vecmath::ln_in_place(values);
+            for (value, &occupied) in values.iter_mut().zip(skip) {
+                *value = if occupied {
+                    f64::NAN
+                } else {
+                    *value * db_per_neper
+                };
+            }
+        }
+        return Ok(());
+    }
+    for (cell, value) in values.iter_mut().enumerate() {
+        if occupied[cell] {
+            *value = f64::NAN;
+            continue;
+        }
+        // One candidate on a big floor plan takes minutes: a cancel is honoured per cell (one
+        // relaxed load).
+        if progress.is_cancelled() {
+            return Err(Cancelled);
+        }
+        let (i, j) = grid.cell_of(cell);
+        let [x, y] = grid.centre(i, j);
+        let user = [x, y, height];
+        let mut best = f64::NEG_INFINITY;
+        for (ap, model) in models.iter().enumerate() {
+            let (part, tau_k) = surface_part(model, moving, user, mode, w, theta);
+            let field = shared.field[ap][cell];
+            let gain = match mode {
+                PhaseMode::Bits(_) => (field + part).norm_sqr(),
+                _ => (field.re + part.re).powi(2),
+            } + shared.tau[ap][cell]
+                + tau_k;
+            best = best.max(gain);
+        }
+        *value = 10.0 * best.log10();
+    }
+    Ok(())
 }
 
 /// How an answer names scenarios and maps. Ids are hashes of documents, which the model does
@@ -660,57 +790,49 @@ pub fn rank_candidates(
     let height = base.mru.antenna_height_m;
     let scores: Vec<(usize, Option<f64>)> = match search.what {
         What::Irs => {
-            let shared = shared(base, &grid, &occupied, search.index, mode, progress);
+            // The row form needs the closed form (continuous phases) and one link budget per
+            // surface (`coherent`): the moving surface stays `coherent` at every pose.
+            let by_rows = mode == PhaseMode::Continuous
+                && base
+                    .surfaces()
+                    .iter()
+                    .all(|s| s.grouping == Grouping::Coherent);
+            let moving = search.index;
+            let shared = shared(base, &grid, &occupied, moving, mode, by_rows, progress);
             if progress.is_cancelled() {
                 return Err(Cancelled.into());
             }
-            let n = base.surfaces()[search.index].subsurfaces();
+            let n = base.surfaces()[moving].subsurfaces();
             valid
                 .par_iter()
                 .map_init(
-                    || {
-                        (
-                            vec![C64::new(0.0, 0.0); n],
-                            vec![0.0; n],
-                            vec![f64::NAN; grid.cells()],
-                        )
+                    || Scratch {
+                        w: vec![C64::new(0.0, 0.0); n],
+                        theta: vec![0.0; n],
+                        row: ClosedFormRow::default(),
+                        values: vec![f64::NAN; grid.cells()],
                     },
-                    |(w, theta, values), &(k, scenario)| {
+                    |scratch, &(k, scenario)| {
                         if progress.is_cancelled() {
                             return Err(Cancelled);
                         }
                         let models: Vec<ChannelModel> = (0..aps)
                             .map(|ap| ChannelModel::for_ap(scenario, ap))
                             .collect();
-                        for (cell, value) in values.iter_mut().enumerate() {
-                            if occupied[cell] {
-                                *value = f64::NAN;
-                                continue;
-                            }
-                            // One candidate on a big floor plan takes minutes: a cancel is
-                            // honoured per cell (one relaxed load).
-                            if progress.is_cancelled() {
-                                return Err(Cancelled);
-                            }
-                            let (i, j) = grid.cell_of(cell);
-                            let [x, y] = grid.centre(i, j);
-                            let user = [x, y, height];
-                            let mut best = f64::NEG_INFINITY;
-                            for (ap, model) in models.iter().enumerate() {
-                                let (part, tau_k) =
-                                    surface_part(model, search.index, user, mode, w, theta);
-                                let field = shared.field[ap][cell];
-                                let gain = match mode {
-                                    PhaseMode::Bits(_) => (field + part).norm_sqr(),
-                                    _ => (field.re + part.re).powi(2),
-                                } + shared.tau[ap][cell]
-                                    + tau_k;
-                                best = best.max(gain);
-                            }
-                            *value = 10.0 * best.log10();
-                        }
+                        candidate_values(
+                            &models,
+                            moving,
+                            &shared,
+                            &grid,
+                            &occupied,
+                            height,
+                            (mode, by_rows),
+                            scratch,
+                            progress,
+                        )?;
                         progress.advance(grid.cells() * aps);
-                        Ok((k, score(&grid, values, &occupied, &search.objective)))
+                        let score = score(&grid, &scratch.values, &occupied, &search.objective);
+                        Ok((k, score))
                     },
                 )
                 .collect::<Result<_, Cancelled>>()?
@@ -736,16 +858,25 @@ pub fn rank_candidates(
     };
     let mut scores = scores;
     rank(&mut scores, &search.objective);
-    let mut ranked = Vec::with_capacity(scores.len());
-    let mut scenarios = Vec::with_capacity(scores.len());
-    for (rank, (k, score)) in scores.into_iter().enumerate() {
-        let c = &candidates[k];
-        let scenario = c
+    let scenario = |k: usize| {
+        candidates[k]
             .scenario
             .as_ref()
-            .expect("only valid candidates are scored");
-        let scenario_id = naming.scenario_id(scenario);
-        let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario, mode)?);
+            .expect("only valid candidates are scored")
+    };
+    // Ids hash each candidate's whole document (a floor plan's image included): in parallel.
+    let ids: Vec<(String, String)> = scores
+        .par_iter()
+        .map(|&(k, _)| {
+            let scenario_id = naming.scenario_id(scenario(k));
+            let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario(k), mode)?);
+            Ok((scenario_id, map_id))
+        })
+        .collect::<Result<_, FieldError>>()?;
+    let mut ranked = Vec::with_capacity(scores.len());
+    let mut scenarios = Vec::with_capacity(scores.len());
+    for (rank, ((k, score), (scenario_id, map_id))) in scores.into_iter().zip(ids).enumerate() {
+        let c = &candidates[k];
         ranked.push(Ranked {
             rank: rank + 1,
             center: c.center,
@@ -754,7 +885,7 @@ pub fn rank_candidates(
             scenario_id,
             map_id,
         });
-        scenarios.push(scenario.clone());
+        scenarios.push(scenario(k).clone());
     }
     let rejected = candidates
         .iter()
