@@ -20,6 +20,7 @@ use base64::Engine;
 use irs_model::input::FieldError;
 use irs_model::scenario::Scenario;
 use sha2::{Digest, Sha256};
+use std::io::Write;
 use std::path::Path;
 
 /// The scenarios compiled into every build (name, document): the paper's two set-ups and a
@@ -122,13 +123,17 @@ impl ScenarioDocument for Scenario {
     }
 
     fn canonical_json(&self) -> String {
-        let mut out = String::new();
-        write_canonical(&self.to_json_value(), &mut out);
-        out
+        let mut out = Vec::new();
+        write_canonical(&self.to_json_value(), &mut out).expect("writing into memory");
+        String::from_utf8(out).expect("JSON text is UTF-8")
     }
 
     fn content_hash(&self) -> String {
-        hash_hex(self.canonical_json().as_bytes())
+        // Streamed into the hash: a floor plan's image is megabytes of base64, which a copy
+        // of the whole text would hold once more (a placement search names every candidate).
+        let mut hash = Hashing(Sha256::new());
+        write_canonical(&self.to_json_value(), &mut hash).expect("hashing cannot fail");
+        hex(&hash.0.finalize())
     }
 }
 
@@ -151,45 +156,79 @@ pub fn document(text: &str) -> Result<serde_json::Value, FieldError> {
 
 /// First 128 bits of SHA-256 of `bytes`, as 32 lowercase hex digits.
 pub fn hash_hex(bytes: &[u8]) -> String {
-    let digest = Sha256::digest(bytes);
+    hex(&Sha256::digest(bytes))
+}
+
+/// True when JSON escapes some of `text`'s characters. The scan is branch-free within a chunk
+/// so that it vectorises: a floor plan's image is megabytes of base64, scanned per id.
+fn needs_escapes(text: &str) -> bool {
+    text.as_bytes().chunks(256).any(|chunk| {
+        chunk.iter().fold(false, |found, &b| {
+            found | (b < 0x20) | (b == b'"') | (b == b'\\')
+        })
+    })
+}
+
+/// Text written into a SHA-256 hash.
+struct Hashing(Sha256);
+
+impl Write for Hashing {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.0.update(bytes);
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The first 128 bits of a digest in hex.
+fn hex(digest: &[u8]) -> String {
     digest[..16].iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn write_canonical(value: &serde_json::Value, out: &mut String) {
+fn write_canonical(value: &serde_json::Value, out: &mut impl Write) -> std::io::Result<()> {
     use serde_json::Value;
     match value {
         Value::Object(map) => {
             let mut keys: Vec<&String> = map.keys().collect();
             keys.sort();
-            out.push('{');
+            out.write_all(b"{")?;
             for (k, key) in keys.into_iter().enumerate() {
                 if k > 0 {
-                    out.push(',');
+                    out.write_all(b",")?;
                 }
-                out.push_str(&Value::String(key.clone()).to_string());
-                out.push(':');
-                write_canonical(&map[key], out);
+                serde_json::to_writer(&mut *out, key)?;
+                out.write_all(b":")?;
+                write_canonical(&map[key], out)?;
             }
-            out.push('}');
+            out.write_all(b"}")
         }
         Value::Array(items) => {
-            out.push('[');
+            out.write_all(b"[")?;
             for (k, item) in items.iter().enumerate() {
                 if k > 0 {
-                    out.push(',');
+                    out.write_all(b",")?;
                 }
-                write_canonical(item, out);
+                write_canonical(item, out)?;
             }
-            out.push(']');
+            out.write_all(b"]")
         }
         Value::Number(n) => match n.as_f64() {
-            Some(0.0) => out.push('0'),
+            Some(0.0) => out.write_all(b"0"),
             Some(f) if n.is_f64() && f.fract() == 0.0 && f.abs() < 1e15 => {
-                out.push_str(&format!("{}", f as i64))
+                write!(out, "{}", f as i64)
             }
-            _ => out.push_str(&n.to_string()),
+            _ => write!(out, "{n}"),
         },
-        other => out.push_str(&other.to_string()),
+        // JSON escapes only quotes, backslashes and control characters: text without them
+        // (a floor plan's base64 image, megabytes of it) is written as it is.
+        Value::String(text) if !needs_escapes(text) => {
+            out.write_all(b"\"")?;
+            out.write_all(text.as_bytes())?;
+            out.write_all(b"\"")
+        }
+        other => Ok(serde_json::to_writer(&mut *out, other)?),
     }
 }
 
@@ -215,6 +254,22 @@ mod tests {
     }
 
     const SMALL: &str = BUILTIN[2].1;
+
+    proptest::proptest! {
+        /// Strings are written as serde_json writes them, whether or not they take the path
+        /// for text without escapes; the streamed hash is the hash of the written text.
+        #[test]
+        fn canonical_strings_are_serde_json_strings(text in "(\\PC|[\"\\\\\u{0}-\u{1f}\u{7f}])*") {
+            let value = serde_json::json!({"k": text, "n": [1.5, 0.0, 2.0]});
+            let mut out = Vec::new();
+            write_canonical(&value, &mut out).unwrap();
+            let expected = format!("{{\"k\":{},\"n\":[1.5,0,2]}}", serde_json::to_string(&text).unwrap());
+            proptest::prop_assert_eq!(String::from_utf8(out.clone()).unwrap(), expected);
+            let mut hash = Hashing(Sha256::new());
+            write_canonical(&value, &mut hash).unwrap();
+            proptest::prop_assert_eq!(hex(&hash.0.finalize()), hash_hex(&out));
+        }
+    }
 
     #[test]
     fn builtin_scenarios_are_valid() {
