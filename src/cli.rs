@@ -448,10 +448,11 @@ fn with_progress_bar<T>(
     unit: &str,
     work: impl FnOnce() -> T,
 ) -> T {
-    let done = std::sync::atomic::AtomicBool::new(false);
+    // The bar redraws every 100 ms until `stop` is dropped, which wakes it at once: a sleep
+    // there held every finished command up to 100 ms.
+    let (stop, stopped) = std::sync::mpsc::channel::<()>();
     std::thread::scope(|scope| {
         let bar_thread = (!quiet).then(|| {
-            let done = &done;
             let template =
                 format!("{{spinner}} {what} {{bar:40}} {{pos}}/{{len}} {unit} ({{eta}})");
             scope.spawn(move || {
@@ -459,16 +460,19 @@ fn with_progress_bar<T>(
                 bar.set_style(
                     indicatif::ProgressStyle::with_template(&template).expect("valid template"),
                 );
-                while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                loop {
                     bar.set_length(progress.cells_total() as u64);
                     bar.set_position(progress.cells_done() as u64);
-                    std::thread::sleep(Duration::from_millis(100));
+                    match stopped.recv_timeout(Duration::from_millis(100)) {
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                        _ => break,
+                    }
                 }
                 bar.finish_and_clear();
             })
         });
         let result = work();
-        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        drop(stop);
         if let Some(t) = bar_thread {
             let _ = t.join();
         }
