@@ -2,7 +2,7 @@
 //! the Python half needs to time NumPy and SciPy on the same ones and to check that all of them
 //! computed the same thing.
 //!
-//! `cargo run --release --example python_comparison -- gain|maze OUT_DIR [REPEATS]`
+//! `cargo run --release --example python_comparison -- gain|maze|place OUT_DIR [REPEATS]`
 //!
 //! - `gain`: the continuous gain map of the paper floor at 2 cm (1001 × 1001 cells), the whole
 //!   `radiomap::build` (occupancy, channel model, every cell), on a one-thread and a two-thread
@@ -10,6 +10,11 @@
 //! - `maze`: the same floor with its boxes replaced by 19 serpentine walls, and the shortest
 //!   path between the maze's two ends over every free cell (a threshold far below any value);
 //!   writes `OUT_DIR/maze_free.npy` (u8, 1 where free).
+//!
+//! - `place`: the placement search of `benches/maps.rs` (an IRS at every 0.5 m of the paper
+//!   floor's four walls, 164 poses at 0.5 m cells, ranked by the widest path's threshold from
+//!   (−10, 0) to (10, 0)), the whole `placement::place` on a one-thread and a two-thread pool;
+//!   the JSON line carries every candidate's pose and score.
 //!
 //! Each prints one JSON line: the median and minimum of the timed runs, and the results to compare.
 
@@ -24,7 +29,7 @@ use std::time::Instant;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(workload), Some(out)) = (args.first(), args.get(1)) else {
-        eprintln!("usage: python_comparison gain|maze OUT_DIR [REPEATS]");
+        eprintln!("usage: python_comparison gain|maze|place OUT_DIR [REPEATS]");
         std::process::exit(2);
     };
     let repeats: usize = match args.get(2).map(|r| r.parse()) {
@@ -40,8 +45,9 @@ fn main() {
     match workload.as_str() {
         "gain" => gain(out, repeats),
         "maze" => maze(out, repeats),
+        "place" => place(repeats),
         other => {
-            eprintln!("unknown workload {other:?}: expected gain or maze");
+            eprintln!("unknown workload {other:?}: expected gain, maze or place");
             std::process::exit(2);
         }
     }
@@ -156,6 +162,57 @@ fn maze(out: &Path, repeats: usize) {
             "start": [0, 0], "goal": [map.grid.nx - 1, map.grid.ny - 1],
             "distance_m": path.distance_m, "waypoints": path.cells.len(),
             "shortest_path_s": {"median": median, "min": min},
+        })
+    );
+}
+
+fn place(repeats: usize) {
+    use irs_model::placement::{self, Candidates, Objective, Search, Segment, What};
+    let base = Scenario::builtin("paper-single-user").expect("built in");
+    let corners = [[-10.0, -10.0], [10.0, -10.0], [10.0, 10.0], [-10.0, 10.0]];
+    let (start, goal) = ([-10.0, 0.0], [10.0, 0.0]);
+    let search = Search {
+        what: What::Irs,
+        index: 0,
+        candidates: Candidates {
+            poses: Vec::new(),
+            positions: Vec::new(),
+            walls: (0..4)
+                .map(|k| Segment {
+                    from: corners[k],
+                    to: corners[(k + 1) % 4],
+                })
+                .collect(),
+            step_m: Some(0.5),
+            height_m: None,
+        },
+        objective: Objective::MaxThreshold { start, goal },
+        phases: None,
+    };
+    let run = || {
+        placement::place(
+            &base,
+            &search,
+            &irs_answers::map::ContentIds,
+            &Progress::default(),
+        )
+        .expect("a valid search")
+    };
+    let answer = run().answer;
+    let (one_median, one_min) = pool(1).install(|| timed(repeats, || drop(run())));
+    let (two_median, two_min) = pool(2).install(|| timed(repeats, || drop(run())));
+    let candidates: Vec<serde_json::Value> = answer
+        .candidates
+        .iter()
+        .map(|c| serde_json::json!({"center": c.center, "normal": c.normal, "score": c.score}))
+        .collect();
+    println!(
+        "{}",
+        serde_json::json!({
+            "workload": "place", "repeats": repeats, "start": start, "goal": goal,
+            "rejected": answer.rejected.len(), "candidates": candidates,
+            "one_thread_s": {"median": one_median, "min": one_min},
+            "two_threads_s": {"median": two_median, "min": two_min},
         })
     );
 }
