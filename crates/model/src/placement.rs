@@ -664,19 +664,37 @@ struct Scratch {
     values: Vec<f64>,
 }
 
+/// What every candidate pose of a moving IRS is evaluated on.
+struct Floor<'a> {
+    grid: &'a Grid,
+    occupied: &'a [bool],
+    /// The MRU's antenna height (m).
+    height: f64,
+    mode: PhaseMode,
+    /// Rows at a time ([`shared`]) rather than cell by cell.
+    by_rows: bool,
+    /// The moving surface, in scenario order.
+    moving: usize,
+    shared: Shared,
+}
+
 /// One candidate's map values (dB, NaN where occupied) into `scratch.values`: the shared part
 /// plus the moving surface's own terms, best over the APs.
 fn candidate_values(
+    floor: &Floor,
     models: &[ChannelModel],
-    moving: usize,
-    shared: &Shared,
-    grid: &Grid,
-    occupied: &[bool],
-    height: f64,
-    (mode, by_rows): (PhaseMode, bool),
     scratch: &mut Scratch,
     progress: &Progress,
 ) -> Result<(), Cancelled> {
+    let Floor {
+        grid,
+        occupied,
+        height,
+        mode,
+        by_rows,
+        moving,
+        ref shared,
+    } = *floor;
     let Scratch {
         w,
         theta,
@@ -798,7 +816,15 @@ pub fn rank_candidates(
                     .iter()
                     .all(|s| s.grouping == Grouping::Coherent);
             let moving = search.index;
-            let shared = shared(base, &grid, &occupied, moving, mode, by_rows, progress);
+            let floor = Floor {
+                grid: &grid,
+                occupied: &occupied,
+                height,
+                mode,
+                by_rows,
+                moving,
+                shared: shared(base, &grid, &occupied, moving, mode, by_rows, progress),
+            };
             if progress.is_cancelled() {
                 return Err(Cancelled.into());
             }
@@ -819,17 +845,7 @@ pub fn rank_candidates(
                         let models: Vec<ChannelModel> = (0..aps)
                             .map(|ap| ChannelModel::for_ap(scenario, ap))
                             .collect();
-                        candidate_values(
-                            &models,
-                            moving,
-                            &shared,
-                            &grid,
-                            &occupied,
-                            height,
-                            (mode, by_rows),
-                            scratch,
-                            progress,
-                        )?;
+                        candidate_values(&floor, &models, scratch, progress)?;
                         progress.advance(grid.cells() * aps);
                         let score = score(&grid, &scratch.values, &occupied, &search.objective);
                         Ok((k, score))
