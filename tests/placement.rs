@@ -224,18 +224,29 @@ fn several_aps_and_surfaces_rank_as_the_exhaustive_loop() {
         })
         .unwrap()
         .unwrap();
-        let search = Search {
-            what: What::Irs,
-            index: 1,
-            candidates: walls(&[([10.0, -10.0], [10.0, 10.0])], 2.0),
-            objective: Objective::MaxThreshold {
-                start: Q_I,
-                goal: Q_F,
-            },
-            phases,
-        };
-        let answer = check_against_exhaustive(&base, &search);
-        assert!(answer.candidates.len() >= 8, "{grouping} {phases:?}");
+        // The second surface moves along the east wall, then the first along the south wall
+        // (the other surface staying put in the shared part either way).
+        for (index, wall) in [
+            (1, ([10.0, -10.0], [10.0, 10.0])),
+            (0, ([-10.0, -10.0], [10.0, -10.0])),
+        ] {
+            let search = Search {
+                what: What::Irs,
+                index,
+                candidates: walls(&[wall], 2.0),
+                objective: Objective::MaxThreshold {
+                    start: Q_I,
+                    goal: Q_F,
+                },
+                phases,
+            };
+            let answer = check_against_exhaustive(&base, &search);
+            assert!(
+                answer.candidates.len() >= 8,
+                "{grouping} {phases:?} {index}: {} ranked",
+                answer.candidates.len()
+            );
+        }
     }
 }
 

@@ -255,6 +255,20 @@ mod tests {
 
     const SMALL: &str = BUILTIN[2].1;
 
+    /// A character JSON escapes is found on either side of the scan's 256-byte chunks.
+    #[test]
+    fn escapes_are_found_across_chunks() {
+        for at in [0, 255, 256, 257, 1023] {
+            for c in ['"', '\\', '\u{1f}'] {
+                let mut text = "A".repeat(1024);
+                text.replace_range(at..at + 1, &c.to_string());
+                let mut out = Vec::new();
+                write_canonical(&serde_json::Value::String(text.clone()), &mut out).unwrap();
+                assert_eq!(out, serde_json::to_vec(&text).unwrap(), "{c:?} at {at}");
+            }
+        }
+    }
+
     proptest::proptest! {
         /// Strings are written as serde_json writes them, whether or not they take the path
         /// for text without escapes; the streamed hash is the hash of the written text.
