@@ -5,8 +5,11 @@
 # Environment: IRS_BIN, a server binary to test instead of this checkout's release build (to
 # compare two builds in one run); PHASE_PRECISION and PHASE_FORMAT, the queries' phase_precision
 # and phase_format (the server's defaults when unset); DISTINCT=1 makes every query a new one
-# (thresholds −62 − k·10⁻⁹ dB, the same path), so none is answered from the answer cache. The
-# answer's size is printed before the figures.
+# (thresholds −62 − k·10⁻⁹ dB, the same path), so none is answered from the answer cache;
+# DISTINCT=random draws every query's start and goal uniformly over the room and its threshold
+# uniformly in [THRESHOLD_LOW, THRESHOLD_HIGH] dB (default −66 to −60: from nearly every free cell
+# feasible to a third of them not). RESOLUTION (m) builds the map at another grid step than the
+# scenario's 0.5 m (0.02: the 1001² floor). The answer's size is printed before the figures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 duration=${1:-20}; connections=${2:-32}; threads=${3:-2}
@@ -19,9 +22,17 @@ server=$!
 trap 'kill $server 2>/dev/null || true; rm -f "$log" "$lua"' EXIT
 for _ in $(seq 100); do grep -q listening "$log" && break; sleep 0.1; done
 url=$(sed -n 's/^listening on //p' "$log")
-sid=$(curl -s "$url/v1/scenarios" | python3 -c "import json,sys; print([s['id'] for s in json.load(sys.stdin)['scenarios'] if s['name']=='paper-single-user'][0])")
-map=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' \
-  -d "{\"scenario_id\":\"$sid\",\"kind\":\"gain\"}" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
+if [ -n "${RESOLUTION:-}" ]; then
+  sid=$(python3 -c "import json,sys; d=json.load(open('scenarios/paper-single-user.json')); d['grid']['resolution_m']=$RESOLUTION; d['name']='paper-single-user-load'; print(json.dumps(d))" \
+    | curl -sf -X POST "$url/v1/scenarios" -H 'content-type: application/json' -d @- | python3 -c "import json,sys; print(json.load(sys.stdin)['id'])")
+else
+  sid=$(curl -s "$url/v1/scenarios" | python3 -c "import json,sys; print([s['id'] for s in json.load(sys.stdin)['scenarios'] if s['name']=='paper-single-user'][0])")
+fi
+made=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' -d "{\"scenario_id\":\"$sid\",\"kind\":\"gain\"}")
+map=$(echo "$made" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
+# A large map is built as a job: wait until it is done.
+job=$(echo "$made" | python3 -c "import json,sys; print(json.load(sys.stdin).get('job_id') or '')")
+while [ -n "$job" ] && ! curl -s "$url/v1/jobs/$job" | grep -q '"state":"\(done\|failed\|cancelled\)"'; do sleep 0.2; done
 precision=${PHASE_PRECISION:+,\"phase_precision\":\"$PHASE_PRECISION\"}
 format=${PHASE_FORMAT:+,\"phase_format\":\"$PHASE_FORMAT\"}
 body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62$precision$format}"
@@ -32,7 +43,21 @@ wrk.method = "POST"
 wrk.body = '$body'
 wrk.headers["Content-Type"] = "application/json"
 LUA
-if [ "${DISTINCT:-0}" = 1 ]; then
+if [ "${DISTINCT:-0}" = random ]; then
+  low=${THRESHOLD_LOW:--66}; high=${THRESHOLD_HIGH:--60}
+  # Each wrk thread draws from its own seed.
+  cat >>"$lua" <<LUA
+local threads = 0
+setup = function(thread) threads = threads + 1; thread:set("seed", threads) end
+init = function() math.randomseed(seed) end
+local function at() return string.format("%.4f,%.4f", math.random() * 20 - 10, math.random() * 20 - 10) end
+request = function()
+  local body = string.format('{"map_id":"$map","start":[%s],"goal":[%s],"threshold":%.9f$precision$format}',
+    at(), at(), $low + math.random() * ($high - $low))
+  return wrk.format(nil, nil, nil, body)
+end
+LUA
+elif [ "${DISTINCT:-0}" = 1 ]; then
   # Each wrk thread numbers its queries from its own offset, so no two are alike.
   cat >>"$lua" <<LUA
 local count, threads = 0, 0

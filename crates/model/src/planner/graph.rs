@@ -2,8 +2,9 @@
 //!
 //! The feasible map Π (paper eq. 14) marks the free cells whose value meets the threshold; the
 //! graph joins each feasible cell to its feasible 8-neighbours with the Euclidean distance between
-//! centres as weight (paper eqs. 15–16). The shortest path is found by A* with the octile
-//! heuristic, which is admissible and consistent on this graph, so it returns Dijkstra's distance.
+//! centres as weight (paper eqs. 15–16). The shortest path is found by jump point search
+//! (`jump`); A* with the octile heuristic, which is admissible and consistent on this graph (so
+//! it returns Dijkstra's distance), is its reference and gives any-angle paths their heuristic.
 //!
 //! One choice beyond the paper: a diagonal step may not cut the corner of an *occupied* cell (both
 //! orthogonal neighbours must be free), because the segment between the two centres would graze
@@ -13,6 +14,7 @@
 //! any path exists (a bottleneck path: one Dijkstra-like pass maximising the minimum value along
 //! the path).
 
+use super::jump::JumpIndex;
 use super::queue::BucketQueue;
 use crate::scenario::Grid;
 use serde::Serialize;
@@ -105,8 +107,22 @@ impl<'a> CellGraph<'a> {
         !self.occupied[cell] && self.values[cell] >= threshold
     }
 
-    /// Shortest feasible path from `start` to `goal` (paper problem 13), or why there is none.
+    /// Shortest feasible path from `start` to `goal` (paper problem 13), or why there is none:
+    /// jump point search on a [`JumpIndex`] built for this one query (a map that answers many
+    /// keeps its index: [`JumpIndex::shortest_path`]).
     pub fn shortest_path(
+        &self,
+        start: usize,
+        goal: usize,
+        threshold: f64,
+    ) -> Result<Path, Infeasible> {
+        self.check_ends(start, goal, threshold)?;
+        JumpIndex::new(self).shortest_path(self, start, goal, threshold)
+    }
+
+    /// The same by A*: the reference the jump point search is tested against, a path of the
+    /// same length though not always the same cells.
+    pub fn a_star_path(
         &self,
         start: usize,
         goal: usize,
@@ -296,7 +312,7 @@ impl<'a> CellGraph<'a> {
 /// Kept as the two counts, a path's length is exact up to this one rounding, however long the
 /// path; equal counts are equal lengths, whatever the order of the steps.
 #[inline]
-fn length_in_cells(orthogonal: u64, diagonal: u64) -> f64 {
+pub(super) fn length_in_cells(orthogonal: u64, diagonal: u64) -> f64 {
     orthogonal as f64 + diagonal as f64 * std::f64::consts::SQRT_2
 }
 
@@ -432,6 +448,8 @@ pub(super) struct Scratch {
     widest_heap: BinaryHeap<(OrdF64, Reverse<OrdF64>, usize)>,
     /// Lazy Theta*'s state, allocated by the first any-angle query.
     pub(super) theta: super::any_angle::ThetaScratch,
+    /// Jump point search's state, allocated by the first indexed query.
+    pub(super) jump: super::jump::JumpScratch,
 }
 
 /// Scratch sets kept for reuse: as many as searches usually run at once (the query pool's
@@ -547,7 +565,7 @@ mod tests {
             let gr = grid(nx, ny);
             let g = CellGraph { grid: &gr, values: &values, occupied: &occupied };
             let expected = brute_force_distance(&g, s, t, threshold);
-            match g.shortest_path(s, t, threshold) {
+            match g.a_star_path(s, t, threshold) {
                 Ok(p) => {
                     let d = expected.expect("A* found a path the brute force did not");
                     prop_assert!((p.distance_m - d).abs() < 1e-9, "A* {} vs brute force {}", p.distance_m, d);
@@ -576,7 +594,7 @@ mod tests {
             let mut candidates: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
             candidates.sort_by(f64::total_cmp);
             candidates.dedup();
-            let feasible = |gamma: f64| g.shortest_path(s, t, gamma).is_ok();
+            let feasible = |gamma: f64| g.a_star_path(s, t, gamma).is_ok();
             let bisected = if candidates.is_empty() || !feasible(candidates[0]) { None } else {
                 let (mut lo, mut hi) = (0usize, candidates.len()); // feasible(lo), !feasible(hi)
                 while hi - lo > 1 {
@@ -616,7 +634,7 @@ mod tests {
             values: &values,
             occupied: &occupied,
         };
-        let p = g.shortest_path(4, 4, 0.5).unwrap();
+        let p = g.a_star_path(4, 4, 0.5).unwrap();
         assert_eq!(
             p,
             Path {
@@ -636,17 +654,17 @@ mod tests {
             values: &values,
             occupied: &occupied,
         };
-        assert_eq!(g.shortest_path(1, 0, 0.0), Err(Infeasible::StartOccupied));
-        assert_eq!(g.shortest_path(0, 1, 0.0), Err(Infeasible::GoalOccupied));
+        assert_eq!(g.a_star_path(1, 0, 0.0), Err(Infeasible::StartOccupied));
+        assert_eq!(g.a_star_path(0, 1, 0.0), Err(Infeasible::GoalOccupied));
         assert_eq!(
-            g.shortest_path(2, 0, 0.5),
+            g.a_star_path(2, 0, 0.5),
             Err(Infeasible::StartBelowThreshold)
         );
         assert_eq!(
-            g.shortest_path(0, 2, 0.5),
+            g.a_star_path(0, 2, 0.5),
             Err(Infeasible::GoalBelowThreshold)
         );
-        assert_eq!(g.shortest_path(0, 2, 0.1), Err(Infeasible::Disconnected));
+        assert_eq!(g.a_star_path(0, 2, 0.1), Err(Infeasible::Disconnected));
     }
 
     #[test]
@@ -660,7 +678,7 @@ mod tests {
             values: &values,
             occupied: &occupied,
         };
-        assert_eq!(g.shortest_path(0, 3, 0.0), Err(Infeasible::Disconnected));
+        assert_eq!(g.a_star_path(0, 3, 0.0), Err(Infeasible::Disconnected));
         // Below-threshold corners may be cut.
         let occupied = vec![false; 4];
         let values = vec![1.0, 0.0, 0.0, 1.0];
@@ -669,7 +687,7 @@ mod tests {
             values: &values,
             occupied: &occupied,
         };
-        let p = g.shortest_path(0, 3, 0.5).unwrap();
+        let p = g.a_star_path(0, 3, 0.5).unwrap();
         assert!((p.distance_m - 0.5 * std::f64::consts::SQRT_2).abs() < 1e-12);
     }
 }

@@ -6,6 +6,7 @@ mod answer;
 mod any_angle;
 mod bottleneck;
 pub mod graph;
+mod jump;
 mod query;
 mod queue;
 pub mod route_graph;
@@ -16,6 +17,7 @@ pub use query::{MAX_TOLERANCE_M, PathOptions, PathShape, Threshold};
 pub use any_angle::AnyAnglePath;
 pub use bottleneck::Bottlenecks;
 pub use graph::{CellGraph, Infeasible, Path};
+pub use jump::JumpIndex;
 
 use crate::input::FieldError;
 use crate::radiomap::{Cancelled, CellConfig, Progress, RadioMap, Unit, WorkError};
@@ -112,14 +114,16 @@ pub(crate) fn graph<'m>(map: &'m RadioMap, values: &'m [f64]) -> CellGraph<'m> {
     }
 }
 
-/// A map's values in one [`Unit`] and their widest-path index: what path and sweep queries on
-/// a map search, built once per map and unit (the service keeps it with the map).
+/// A map's values in one [`Unit`], their widest-path index and their jump point index: what
+/// path and sweep queries on a map search, built once per map and unit (the service keeps it
+/// with the map).
 #[derive(Debug, Clone)]
 pub struct UnitIndex {
     unit: Unit,
     /// The values in `unit`; `None` when they are the map's own.
     converted: Option<Vec<f64>>,
     bottlenecks: Bottlenecks,
+    jumps: JumpIndex,
 }
 
 impl UnitIndex {
@@ -131,11 +135,14 @@ impl UnitIndex {
             Cow::Owned(values) => Some(values),
         };
         let values = converted.as_deref().unwrap_or(&map.values);
-        let bottlenecks = Bottlenecks::new(&graph(map, values));
+        let graph = graph(map, values);
+        let bottlenecks = Bottlenecks::new(&graph);
+        let jumps = JumpIndex::new(&graph);
         Ok(UnitIndex {
             unit,
             converted,
             bottlenecks,
+            jumps,
         })
     }
 
@@ -147,6 +154,7 @@ impl UnitIndex {
     /// Heap bytes held, for a cache's weigher.
     pub fn bytes(&self) -> usize {
         self.bottlenecks.bytes()
+            + self.jumps.bytes()
             + self
                 .converted
                 .as_ref()
@@ -155,8 +163,8 @@ impl UnitIndex {
 }
 
 /// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre),
-/// with the threshold and the values in `unit`, finding the widest-path threshold by a search:
-/// the cheaper way for one query on a map.
+/// with the threshold and the values in `unit`, finding the widest-path threshold by a search
+/// and the path by A*: the cheaper way for one query on a map.
 pub fn plan(
     map: &RadioMap,
     unit: Unit,
@@ -174,12 +182,13 @@ pub fn plan(
         goal,
         threshold,
         v_max_mps,
-        |graph, s, g| graph.widest_path_threshold(s, g),
+        None,
     )
 }
 
-/// [`plan`] in the index's unit, the widest-path threshold read from the [`UnitIndex`]: the
-/// cheaper way for a map that answers many queries.
+/// [`plan`] in the index's unit, the widest-path threshold read from the [`UnitIndex`] and a
+/// grid path found by jump point search on it: the cheaper way for a map that answers many
+/// queries.
 pub fn plan_indexed(
     map: &RadioMap,
     index: &UnitIndex,
@@ -197,7 +206,7 @@ pub fn plan_indexed(
         goal,
         threshold,
         v_max_mps,
-        |_, s, g| index.bottlenecks.widest_path_threshold(values, s, g),
+        Some(index),
     )
 }
 
@@ -235,9 +244,11 @@ struct Route {
 }
 
 /// The route of a feasible path as its waypoints' cells and points, and its length (m): the
-/// 8-connected path's cell centres, or an any-angle path's entry points and vertex centres.
+/// 8-connected path's cell centres (found on `jumps` when given, else by A*), or an any-angle
+/// path's entry points and vertex centres.
 fn route(
     graph: &CellGraph,
+    jumps: Option<&JumpIndex>,
     shape: PathShape,
     start: usize,
     goal: usize,
@@ -250,7 +261,10 @@ fn route(
     };
     match shape {
         PathShape::Grid => {
-            let path = graph.shortest_path(start, goal, threshold)?;
+            let path = match jumps {
+                Some(jumps) => jumps.shortest_path(graph, start, goal, threshold)?,
+                None => graph.shortest_path(start, goal, threshold)?,
+            };
             let points: Vec<_> = path.cells.iter().map(|&c| (c, centre(c))).collect();
             // A vertex wherever the step (Δi, Δj) changes, with both ends.
             let step = |k: usize| {
@@ -356,7 +370,7 @@ fn plan_with(
     goal: [f64; 2],
     threshold: Threshold,
     v_max_mps: f64,
-    widest_path_threshold: impl FnOnce(&CellGraph, usize, usize) -> Option<f64>,
+    index: Option<&UnitIndex>,
 ) -> Result<PathAnswer, FieldError> {
     if options.shape == PathShape::RouteGraph {
         return Err(FieldError::new(
@@ -383,13 +397,16 @@ fn plan_with(
         options.tolerance_m,
         usable,
     );
-    let widest = widest_path_threshold(&graph, s, g);
+    let widest = match index {
+        Some(index) => index.bottlenecks.widest_path_threshold(values, s, g),
+        None => graph.widest_path_threshold(s, g),
+    };
     let applied = match threshold {
         Threshold::Value(v) => Some(v),
         Threshold::Max => widest,
     };
     let result = match applied {
-        Some(t) => route(&graph, options.shape, s, g, t),
+        Some(t) => route(&graph, index.map(|x| &x.jumps), options.shape, s, g, t),
         None => Err(if map.occupied[s] {
             Infeasible::StartOccupied
         } else if map.occupied[g] {
@@ -452,7 +469,7 @@ pub fn sweep(
             if progress.is_cancelled() {
                 return Err(Cancelled);
             }
-            let r = graph.shortest_path(s, g, t);
+            let r = index.jumps.shortest_path(&graph, s, g, t);
             progress.advance(1);
             Ok(SweepPoint {
                 threshold: t,
