@@ -6,9 +6,11 @@
 # compare two builds in one run); PHASE_PRECISION and PHASE_FORMAT, the queries' phase_precision
 # and phase_format (the server's defaults when unset); DISTINCT=1 makes every query a new one
 # (thresholds −62 − k·10⁻⁹ dB, the same path), so none is answered from the answer cache;
-# DISTINCT=random draws every query's start and goal uniformly over the room and its threshold
-# uniformly in [THRESHOLD_LOW, THRESHOLD_HIGH] dB (default −66 to −60: from nearly every free cell
-# feasible to a third of them not). RESOLUTION (m) builds the map at another grid step than the
+# DISTINCT=random draws every query's start and goal uniformly over the room, with a goal
+# tolerance of 2 m (an end in an obstacle or below the threshold moves to the nearest usable
+# cell, as a fleet's goals do), and its threshold uniformly in [THRESHOLD_LOW, THRESHOLD_HIGH] dB
+# (default −66 to −60: from nearly every free cell feasible to a third of them not); on the
+# 1001² floor 89 % of them have a path, of 570 waypoints on average. RESOLUTION (m) builds the map at another grid step than the
 # scenario's 0.5 m (0.02: the 1001² floor). The answer's size is printed before the figures.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -52,7 +54,7 @@ setup = function(thread) threads = threads + 1; thread:set("seed", threads) end
 init = function() math.randomseed(seed) end
 local function at() return string.format("%.4f,%.4f", math.random() * 20 - 10, math.random() * 20 - 10) end
 request = function()
-  local body = string.format('{"map_id":"$map","start":[%s],"goal":[%s],"threshold":%.9f$precision$format}',
+  local body = string.format('{"map_id":"$map","start":[%s],"goal":[%s],"threshold":%.9f,"tolerance_m":2$precision$format}',
     at(), at(), $low + math.random() * ($high - $low))
   return wrk.format(nil, nil, nil, body)
 end
