@@ -29,7 +29,7 @@ use std::time::Instant;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(workload), Some(out)) = (args.first(), args.get(1)) else {
-        eprintln!("usage: python_comparison gain|maze|place OUT_DIR [REPEATS]");
+        eprintln!("usage: python_comparison gain|maze|maze-coarse|place OUT_DIR [REPEATS]");
         std::process::exit(2);
     };
     let repeats: usize = match args.get(2).map(|r| r.parse()) {
@@ -44,10 +44,11 @@ fn main() {
     std::fs::create_dir_all(out).expect("creating OUT_DIR");
     match workload.as_str() {
         "gain" => gain(out, repeats),
-        "maze" => maze(out, repeats),
+        "maze" => maze(out, repeats, 0.02),
+        "maze-coarse" => maze(out, repeats, 0.1),
         "place" => place(repeats),
         other => {
-            eprintln!("unknown workload {other:?}: expected gain, maze or place");
+            eprintln!("unknown workload {other:?}: expected gain, maze, maze-coarse or place");
             std::process::exit(2);
         }
     }
@@ -126,10 +127,11 @@ fn maze_walls() -> serde_json::Value {
     walls.into()
 }
 
-fn maze(out: &Path, repeats: usize) {
+fn maze(out: &Path, repeats: usize, resolution_m: f64) {
     let s = paper_floor(|v| {
         v["obstacles"] = serde_json::json!([]);
         v["walls"] = maze_walls();
+        v["grid"]["resolution_m"] = resolution_m.into();
     });
     let map = build(&s);
     let graph = CellGraph {
@@ -141,7 +143,8 @@ fn maze(out: &Path, repeats: usize) {
         map.grid.index(0, 0),
         map.grid.index(map.grid.nx - 1, map.grid.ny - 1),
     );
-    // Every free cell is feasible: the path is the maze's, not the radio map's.
+    // Every free cell is feasible: the path is the maze's, not the radio map's. The search is
+    // the one a one-off query runs, its jump point index built in the time.
     let threshold = -1000.0;
     let path = graph
         .shortest_path(start, goal, threshold)
@@ -149,8 +152,9 @@ fn maze(out: &Path, repeats: usize) {
     let (median, min) = timed(repeats, || {
         drop(graph.shortest_path(start, goal, threshold));
     });
+    let free_file = format!("maze_free_{}.npy", map.grid.nx);
     write_npy(
-        &out.join("maze_free.npy"),
+        &out.join(&free_file),
         &[map.grid.nx, map.grid.ny],
         map.occupied.iter().map(|&o| if o { 0u8 } else { 1u8 }),
     );
@@ -158,7 +162,7 @@ fn maze(out: &Path, repeats: usize) {
         "{}",
         serde_json::json!({
             "workload": "maze", "nx": map.grid.nx, "ny": map.grid.ny, "repeats": repeats,
-            "resolution_m": map.grid.resolution_m,
+            "resolution_m": map.grid.resolution_m, "free_file": free_file,
             "start": [0, 0], "goal": [map.grid.nx - 1, map.grid.ny - 1],
             "distance_m": path.distance_m, "waypoints": path.cells.len(),
             "shortest_path_s": {"median": median, "min": min},
