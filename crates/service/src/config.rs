@@ -103,7 +103,7 @@ pub struct ServeArgs {
     pub max_check_cpu_s: f64,
     /// Heavy queries (sweeps, paths and pictures of big maps, map bodies and exports, Monte
     /// Carlo checks) that may run at once, on a thread pool of their own so they never hold
-    /// the async threads or the map builders' pool (default: half the cores, at least 1).
+    /// the async threads or the map builders' pool (default: one a core).
     #[arg(long, env = "IRS_QUERY_WORKERS")]
     pub query_workers: Option<usize>,
     /// Heavy queries that may wait for a query worker; one more is refused with 503 and
@@ -180,10 +180,13 @@ impl ServeArgs {
             .max(1)
     }
 
-    /// Heavy-query workers: `--query-workers`, else half the cores (at least one).
+    /// Heavy-query workers: `--query-workers`, else one a core. A path query on a large map
+    /// is a fraction of a millisecond of search and about as much of writing; with half the cores, the
+    /// 1001² floor's random path queries left a core idle (1 040–1 150 req/s on 2 cores against
+    /// 1 290–1 420 with both, `DISTINCT=random RESOLUTION=0.02 scripts/load.sh`).
     pub fn query_workers(&self) -> usize {
         self.query_workers
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()) / 2)
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
             .max(1)
     }
 }

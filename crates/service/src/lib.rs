@@ -20,12 +20,14 @@
 //!   the application's records without knowing their types;
 //! * leaves: [`config`] (flags and environment), `ids` (map, scenario and job ids and the
 //!   links built from them), `tasks` (spawning with the server's metrics registry),
-//!   `priority`, [`probe`], `viewer` (the built-in map viewer at `/`).
+//!   `priority`, `memory` (large blocks handed back when freed), [`probe`], `viewer` (the
+//!   built-in map viewer at `/`).
 
 pub mod app;
 pub mod config;
 pub mod http;
 pub(crate) mod ids;
+pub(crate) mod memory;
 pub(crate) mod priority;
 pub mod probe;
 pub mod runtime;

@@ -253,6 +253,7 @@ async fn serve_app(
 pub fn serve(args: ServeArgs) -> Result<(), ServeError> {
     let runtime_error = |e: &dyn std::fmt::Display| ServeError::Runtime(e.to_string());
     init_tracing(args.log_format);
+    crate::memory::return_large_blocks();
     // Map builds' parallel loops run on rayon's global pool: built here so that its threads
     // start at the workers' lower priority (see `priority`).
     if let Err(e) = rayon::ThreadPoolBuilder::new()
