@@ -125,7 +125,11 @@ fn large_grid(c: &mut Criterion) {
         })
     });
     group.bench_function("jump_index_build_1001x1001", |b| {
-        b.iter(|| planner::JumpIndex::new(black_box(&graph)))
+        b.iter(|| {
+            let index = planner::JumpIndex::new(black_box(&graph));
+            index.fill(&graph);
+            index
+        })
     });
     let centre = |cell: usize| {
         let (i, j) = map.grid.cell_of(cell);
@@ -520,6 +524,50 @@ fn path_answer(c: &mut Criterion) {
             })
         });
     }
+    // The same on the paper floor at 2 cm: a path of about a thousand waypoints, as the
+    // service writes one for a fleet on a large map (the search left out).
+    let fine = paper("paper-single-user", |v| {
+        v["grid"]["resolution_m"] = 0.02.into();
+    });
+    let key = MapKey::gain("bench", &fine, PhaseMode::Continuous).unwrap();
+    let map = irs_answers::map::build(&fine, &key, &Progress::default()).unwrap();
+    let index = planner::UnitIndex::new(&map, map.native_unit()).unwrap();
+    let long = planner::plan_indexed(
+        &map,
+        &index,
+        Default::default(),
+        [-10.0, 0.0],
+        [10.0, 0.0],
+        Threshold::Value(-62.0),
+        1.0,
+    )
+    .unwrap();
+    eprintln!("path_answer/body_1001: {} waypoints", long.waypoints.len());
+    group.bench_function("body_1e-4_1001x1001", |b| {
+        b.iter_batched(
+            || long.clone(),
+            |path| {
+                let path = write_phases(
+                    &fine,
+                    &map,
+                    path,
+                    PhaseFormat::Radians,
+                    PhasePrecision::TenthMilli,
+                );
+                // Sized up front as the service sizes it (`http::json::serialize_sized`).
+                let capacity = 512
+                    + path
+                        .waypoints
+                        .iter()
+                        .map(|w| 220 + w.config.phases.json_len_hint())
+                        .sum::<usize>();
+                let mut body = Vec::with_capacity(capacity);
+                serde_json::to_writer(&mut body, &path).unwrap();
+                body
+            },
+            criterion::BatchSize::SmallInput,
+        )
+    });
     group.finish();
 }
 

@@ -36,59 +36,63 @@ use super::graph::{CellGraph, Infeasible, Path};
 use rustc_hash::FxHashMap;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
+use std::sync::OnceLock;
 
 /// Cells to a word of bits, and to a block's side.
 const WORD: usize = 64;
 
 /// A map's occupancy as bits along rows and along columns, and each row word's value bounds:
-/// what a [`JumpIndex::shortest_path`] needs beyond the map, built once per map and unit.
-/// On a 1001² map it takes 0.5 MB.
+/// what a [`JumpIndex::shortest_path`] needs beyond the map, kept per map and unit. Its 64 × 64
+/// blocks are worked out from the map when a search first looks at them, once, by whichever
+/// search gets there first: a one-off query near its ends (a step across a 1001² map) costs
+/// microseconds, not the 3.4 ms of the whole map. 2 KB a block, 0.5 MB on a 1001² map.
 #[derive(Debug, Clone)]
 pub struct JumpIndex {
     nx: usize,
     ny: usize,
-    /// Words per row (bits along j): ⌈ny / 64⌉.
+    /// Words per row (bits along j): ⌈ny / 64⌉; block (bi, bj) is `blocks[bi · row_words + bj]`.
     row_words: usize,
     /// Words per column (bits along i): ⌈nx / 64⌉.
     column_words: usize,
-    /// Occupied cells along rows, row i's word w at [`JumpIndex::row_slot`]; bits past the
-    /// row's end are set (off the grid reads as occupied).
-    occupied_rows: Vec<u64>,
-    /// The same along columns, column j's word w at [`JumpIndex::column_slot`].
-    occupied_columns: Vec<u64>,
-    /// Per row word (same slots): the least value of its free cells (NaN if one is NaN, so
-    /// that no threshold finds them all feasible; +∞ when none is free) and the greatest (NaN
-    /// ignored; −∞ when none).
-    bounds: Vec<[f64; 2]>,
+    blocks: Vec<OnceLock<Box<Block>>>,
 }
 
-impl JumpIndex {
-    /// Builds the index of `graph`'s occupancy and values: one pass over the map.
-    pub fn new(graph: &CellGraph) -> JumpIndex {
+/// One 64 × 64 block of the index: rows 64·bi.. and columns 64·bj.. of the map.
+#[derive(Debug, Clone)]
+struct Block {
+    /// Occupied cells, the block's row r as word r (bit c: column 64·bj + c); bits past the
+    /// grid's end are set (off the grid reads as occupied).
+    occupied_rows: [u64; WORD],
+    /// The same by columns: column c as word c (bit r: row 64·bi + r).
+    occupied_columns: [u64; WORD],
+    /// Per row word: the least value of its free cells (NaN if one is NaN, so that no
+    /// threshold finds them all feasible; +∞ when none is free) and the greatest (NaN ignored;
+    /// −∞ when none).
+    bounds: [[f64; 2]; WORD],
+}
+
+impl Block {
+    fn new(graph: &CellGraph, bi: usize, bj: usize) -> Block {
         let (nx, ny) = (graph.grid.nx, graph.grid.ny);
-        let (row_words, column_words) = (ny.div_ceil(WORD), nx.div_ceil(WORD));
-        let slots = row_words * column_words * WORD;
-        let mut index = JumpIndex {
-            nx,
-            ny,
-            row_words,
-            column_words,
-            occupied_rows: vec![!0u64; slots],
-            occupied_columns: vec![!0u64; slots],
-            bounds: vec![[f64::INFINITY, f64::NEG_INFINITY]; slots],
+        let mut block = Block {
+            occupied_rows: [!0; WORD],
+            occupied_columns: [!0; WORD],
+            bounds: [[f64::INFINITY, f64::NEG_INFINITY]; WORD],
         };
-        for i in 0..nx {
-            for j in 0..ny {
-                let c = i * ny + j;
-                if graph.occupied[c] {
+        for r in 0..WORD.min(nx - bi * WORD) {
+            let first = (bi * WORD + r) * ny + bj * WORD;
+            let cells = first..first + WORD.min(ny - bj * WORD);
+            let [low, high] = &mut block.bounds[r];
+            for (c, (&occupied, &v)) in graph.occupied[cells.clone()]
+                .iter()
+                .zip(&graph.values[cells])
+                .enumerate()
+            {
+                if occupied {
                     continue;
                 }
-                let w = index.row_slot(i, j / WORD);
-                index.occupied_rows[w] &= !(1 << (j % WORD));
-                let k = index.column_slot(j, i / WORD);
-                index.occupied_columns[k] &= !(1 << (i % WORD));
-                let v = graph.values[c];
-                let [low, high] = &mut index.bounds[w];
+                block.occupied_rows[r] &= !(1 << c);
+                block.occupied_columns[c] &= !(1 << r);
                 if v.is_nan() {
                     *low = f64::NAN;
                 } else {
@@ -99,26 +103,46 @@ impl JumpIndex {
                 }
             }
         }
-        index
+        block
+    }
+}
+
+impl JumpIndex {
+    /// The index of `graph`'s occupancy and values, its blocks still to be worked out.
+    pub fn new(graph: &CellGraph) -> JumpIndex {
+        let (nx, ny) = (graph.grid.nx, graph.grid.ny);
+        let (row_words, column_words) = (ny.div_ceil(WORD), nx.div_ceil(WORD));
+        JumpIndex {
+            nx,
+            ny,
+            row_words,
+            column_words,
+            blocks: (0..row_words * column_words)
+                .map(|_| OnceLock::new())
+                .collect(),
+        }
     }
 
-    /// Where row i's word w lies. Words are laid out a 64 × 64 block at a time (block row
-    /// i / 64, block column w), the block's 64 row words in a run: filling a block reads and
-    /// writes 64 consecutive words, where a row-major layout touched 64 cache lines.
+    /// Block (bi, bj), worked out from `graph` (the index's) on first use.
     #[inline(always)]
-    fn row_slot(&self, i: usize, w: usize) -> usize {
-        ((i / WORD * self.row_words + w) * WORD) + i % WORD
+    fn block(&self, graph: &CellGraph, bi: usize, bj: usize) -> &Block {
+        self.blocks[bi * self.row_words + bj].get_or_init(|| Box::new(Block::new(graph, bi, bj)))
     }
 
-    /// Where column j's word w lies: in block (w, j / 64), the block's 64 column words in a run.
-    #[inline(always)]
-    fn column_slot(&self, j: usize, w: usize) -> usize {
-        ((w * self.row_words + j / WORD) * WORD) + j % WORD
+    /// Every block worked out now (the service does it when it builds a map's index, off the
+    /// path of the first queries).
+    pub fn fill(&self, graph: &CellGraph) {
+        for bi in 0..self.column_words {
+            for bj in 0..self.row_words {
+                self.block(graph, bi, bj);
+            }
+        }
     }
 
-    /// Heap bytes held, for a cache's weigher.
+    /// Heap bytes the index holds once every block is worked out, for a cache's weigher.
     pub fn bytes(&self) -> usize {
-        8 * (self.occupied_rows.len() + self.occupied_columns.len()) + 16 * self.bounds.len()
+        self.blocks.len()
+            * (std::mem::size_of::<OnceLock<Box<Block>>>() + std::mem::size_of::<Block>())
     }
 
     /// The shortest feasible path from `start` to `goal` at `threshold` on `graph` (the graph
@@ -140,7 +164,7 @@ impl JumpIndex {
             });
         }
         super::graph::with_scratch(graph.values.len(), |scratch| {
-            let mut search = Search::new(self, graph.values, threshold, &mut scratch.jump);
+            let mut search = Search::new(self, graph, threshold, &mut scratch.jump);
             let (cells, (orthogonal, diagonal)) =
                 search.run(start, goal).ok_or(Infeasible::Disconnected)?;
             Ok(Path {
@@ -155,9 +179,12 @@ impl JumpIndex {
 /// A search's working memory, kept between queries in the planner's scratch.
 #[derive(Debug, Default)]
 pub(super) struct JumpScratch {
-    /// Feasible cells along rows and along columns, laid out as the index's occupancy.
+    /// Feasible cells along rows and along columns, and occupied ones (copied from the index
+    /// with the block), each block's 64 row words, or column words, in a run ([`slot`]).
     feasible_rows: Vec<u64>,
     feasible_columns: Vec<u64>,
+    occupied_rows: Vec<u64>,
+    occupied_columns: Vec<u64>,
     /// Per 64 × 64 block (block row bi, block column bj at `bi · row_words + bj`): the query
     /// whose feasible row words, and column words, it holds.
     rows_stamp: Vec<u32>,
@@ -212,26 +239,33 @@ enum Axis {
 
 struct Search<'a> {
     index: &'a JumpIndex,
-    values: &'a [f64],
+    graph: &'a CellGraph<'a>,
     threshold: f64,
     s: &'a mut JumpScratch,
     goal: (usize, usize),
+    /// The goal's length found so far (cells), +∞ before: no jump goes further.
+    bound: f64,
+}
+
+/// Where a block's word r lies in the scratch's arrays: each block's 64 words in a run.
+#[inline(always)]
+fn slot(block: usize, r: usize) -> usize {
+    block * WORD + r
 }
 
 impl<'a> Search<'a> {
     fn new(
         index: &'a JumpIndex,
-        values: &'a [f64],
+        graph: &'a CellGraph<'a>,
         threshold: f64,
         s: &'a mut JumpScratch,
     ) -> Search<'a> {
-        let blocks = index.column_words * index.row_words;
-        if s.feasible_rows.len() != index.occupied_rows.len()
-            || s.feasible_columns.len() != index.occupied_columns.len()
-            || s.rows_stamp.len() != blocks
-        {
-            s.feasible_rows = vec![0; index.occupied_rows.len()];
-            s.feasible_columns = vec![0; index.occupied_columns.len()];
+        let blocks = index.blocks.len();
+        if s.rows_stamp.len() != blocks {
+            s.feasible_rows = vec![0; blocks * WORD];
+            s.feasible_columns = vec![0; blocks * WORD];
+            s.occupied_rows = vec![0; blocks * WORD];
+            s.occupied_columns = vec![0; blocks * WORD];
             s.rows_stamp = vec![0; blocks];
             s.columns_stamp = vec![0; blocks];
             s.query = 0;
@@ -248,14 +282,15 @@ impl<'a> Search<'a> {
         s.open.clear();
         Search {
             index,
-            values,
+            graph,
             threshold,
             s,
             goal: (usize::MAX, usize::MAX),
+            bound: f64::INFINITY,
         }
     }
 
-    /// Fills the feasible row words of block (bi, bj) for this query, once.
+    /// Fills the row words of block (bi, bj) for this query, once.
     #[inline(always)]
     fn fill_rows(&mut self, bi: usize, bj: usize) {
         let block = bi * self.index.row_words + bj;
@@ -269,22 +304,25 @@ impl<'a> Search<'a> {
     #[inline(never)]
     fn compute_rows(&mut self, bi: usize, bj: usize) {
         let (ix, t) = (self.index, self.threshold);
-        for i in bi * WORD..((bi + 1) * WORD).min(ix.nx) {
-            let w = ix.row_slot(i, bj);
-            let [low, high] = ix.bounds[w];
-            self.s.feasible_rows[w] = if high < t {
+        let index_block = ix.block(self.graph, bi, bj);
+        let block = bi * ix.row_words + bj;
+        for r in 0..WORD.min(ix.nx - bi * WORD) {
+            let [low, high] = index_block.bounds[r];
+            let occupied = index_block.occupied_rows[r];
+            self.s.occupied_rows[slot(block, r)] = occupied;
+            self.s.feasible_rows[slot(block, r)] = if high < t {
                 0
             } else if low >= t {
-                !ix.occupied_rows[w]
+                !occupied
             } else {
-                let first = i * ix.ny + bj * WORD;
-                let cells = &self.values[first..first + (ix.ny - bj * WORD).min(WORD)];
-                at_least(cells, t) & !ix.occupied_rows[w]
+                let first = (bi * WORD + r) * ix.ny + bj * WORD;
+                let cells = &self.graph.values[first..first + (ix.ny - bj * WORD).min(WORD)];
+                at_least(cells, t) & !occupied
             };
         }
     }
 
-    /// Fills the feasible column words of block (bi, bj), once: its row words, transposed.
+    /// Fills the column words of block (bi, bj), once: its feasible row words, transposed.
     #[inline(always)]
     fn fill_columns(&mut self, bi: usize, bj: usize) {
         let block = bi * self.index.row_words + bj;
@@ -299,21 +337,16 @@ impl<'a> Search<'a> {
     fn compute_columns(&mut self, bi: usize, bj: usize) {
         self.fill_rows(bi, bj);
         let ix = self.index;
+        let block = bi * ix.row_words + bj;
+        let rows = WORD.min(ix.nx - bi * WORD);
         let mut m = [0u64; WORD];
-        for (r, word) in m.iter_mut().enumerate() {
-            let i = bi * WORD + r;
-            if i < ix.nx {
-                *word = self.s.feasible_rows[ix.row_slot(i, bj)];
-            }
-        }
+        m[..rows].copy_from_slice(&self.s.feasible_rows[slot(block, 0)..slot(block, rows)]);
         transpose(&mut m);
-        for (c, &word) in m.iter().enumerate() {
-            let j = bj * WORD + c;
-            if j < ix.ny {
-                let k = ix.column_slot(j, bi);
-                self.s.feasible_columns[k] = word;
-            }
-        }
+        let columns = WORD.min(ix.ny - bj * WORD);
+        self.s.feasible_columns[slot(block, 0)..slot(block, columns)]
+            .copy_from_slice(&m[..columns]);
+        let occupied = &ix.block(self.graph, bi, bj).occupied_columns;
+        self.s.occupied_columns[slot(block, 0)..slot(block, WORD)].copy_from_slice(occupied);
     }
 
     /// Feasible and occupied words of `line` (a row or a column; off the grid: nothing
@@ -332,13 +365,13 @@ impl<'a> Search<'a> {
         match axis {
             Axis::Row => {
                 self.fill_rows(line / WORD, w);
-                let k = ix.row_slot(line, w);
-                (self.s.feasible_rows[k], ix.occupied_rows[k])
+                let k = slot((line / WORD) * ix.row_words + w, line % WORD);
+                (self.s.feasible_rows[k], self.s.occupied_rows[k])
             }
             Axis::Column => {
                 self.fill_columns(w, line / WORD);
-                let k = ix.column_slot(line, w);
-                (self.s.feasible_columns[k], ix.occupied_columns[k])
+                let k = slot(w * ix.row_words + line / WORD, line % WORD);
+                (self.s.feasible_columns[k], self.s.occupied_columns[k])
             }
         }
     }
@@ -369,7 +402,16 @@ impl<'a> Search<'a> {
     /// The first cell after `from` on `line`, going `forward` (up the line's positions) or
     /// back, where a straight jump stops at a jump point: the goal, or a cell with a neighbour
     /// a shortest path may have to turn to. `None` when an infeasible cell comes first.
-    fn scan(&mut self, axis: Axis, line: isize, from: isize, forward: bool) -> Option<isize> {
+    /// Nothing beyond `reach` steps from `from` is looked at (a way that long could not beat the
+    /// goal's length found so far).
+    fn scan(
+        &mut self,
+        axis: Axis,
+        line: isize,
+        from: isize,
+        forward: bool,
+        reach: isize,
+    ) -> Option<isize> {
         let goal_at = match axis {
             Axis::Row if self.goal.0 as isize == line => Some(self.goal.1 as isize),
             Axis::Column if self.goal.1 as isize == line => Some(self.goal.0 as isize),
@@ -431,9 +473,18 @@ impl<'a> Search<'a> {
                 } else {
                     63 - hits.leading_zeros()
                 };
-                return (f >> b & 1 == 1).then_some(w * word + b as isize);
+                let at = w * word + b as isize;
+                return (f >> b & 1 == 1 && at.abs_diff(from) <= reach as usize).then_some(at);
             }
             w += step;
+            let nearest = if forward {
+                w * word
+            } else {
+                w * word + word - 1
+            };
+            if nearest.abs_diff(from) > reach as usize {
+                return None;
+            }
             ahead = !0;
             for (l, words) in lines.iter().zip(&mut window) {
                 *words = if forward {
@@ -445,33 +496,50 @@ impl<'a> Search<'a> {
         }
     }
 
-    /// From (i, j), the first jump point in direction d and the steps to it.
+    /// The most steps of length `step` (cells) that keep a way of length `g` at or below the
+    /// goal's length found so far (any number before the goal is reached).
+    fn reach(&self, g: f64, step: f64) -> isize {
+        if self.bound.is_finite() {
+            ((self.bound - g) / step + 1e-9).floor().max(-1.0) as isize
+        } else {
+            isize::MAX
+        }
+    }
+
+    /// From (i, j), reached by a way of length `g` (cells), the first jump point in direction
+    /// d and the steps to it.
     fn jump(
         &mut self,
         (i, j): (isize, isize),
         (di, dj): (isize, isize),
+        g: f64,
     ) -> Option<(isize, isize, u32)> {
         if di == 0 {
-            let k = self.scan(Axis::Row, i, j, dj > 0)?;
+            let k = self.scan(Axis::Row, i, j, dj > 0, self.reach(g, 1.0))?;
             return Some((i, k, k.abs_diff(j) as u32));
         }
         if dj == 0 {
-            let k = self.scan(Axis::Column, j, i, di > 0)?;
+            let k = self.scan(Axis::Column, j, i, di > 0, self.reach(g, 1.0))?;
             return Some((k, j, k.abs_diff(i) as u32));
         }
         let (mut a, mut b) = (i, j);
-        let mut steps = 0;
+        let mut steps = 0u32;
+        let most = self.reach(g, std::f64::consts::SQRT_2);
         loop {
+            if steps as isize >= most {
+                return None;
+            }
             let (na, nb) = (a + di, b + dj);
             if !self.feasible(na, nb) || self.occupied(na, b) || self.occupied(a, nb) {
                 return None;
             }
             (a, b) = (na, nb);
             steps += 1;
+            let straight = self.reach(g + steps as f64 * std::f64::consts::SQRT_2, 1.0);
             if (a as usize, b as usize) == self.goal
                 || self.diagonal_forced(a, b, di, dj) != 0
-                || self.scan(Axis::Column, b, a, di > 0).is_some()
-                || self.scan(Axis::Row, a, b, dj > 0).is_some()
+                || self.scan(Axis::Column, b, a, di > 0, straight).is_some()
+                || self.scan(Axis::Row, a, b, dj > 0, straight).is_some()
             {
                 return Some((a, b, steps));
             }
@@ -584,11 +652,19 @@ impl<'a> Search<'a> {
             if directions == 0 {
                 continue;
             }
-            for (d, &(di, dj)) in DIRECTIONS.iter().enumerate() {
+            // Towards the goal first: once it is reached, its length bounds every later jump.
+            let toward = |&d: &usize| {
+                let (di, dj) = DIRECTIONS[d];
+                -(di * (gi - here.0).signum() + dj * (gj - here.1).signum())
+            };
+            let mut order: [usize; 8] = std::array::from_fn(|d| d);
+            order.sort_by_key(toward);
+            for d in order {
+                let (di, dj) = DIRECTIONS[d];
                 if directions >> d & 1 == 0 {
                     continue;
                 }
-                let Some((a, b, steps)) = self.jump(here, (di, dj)) else {
+                let Some((a, b, steps)) = self.jump(here, (di, dj), g) else {
                     continue;
                 };
                 let (orthogonal, diagonal) = if di != 0 && dj != 0 {
@@ -598,6 +674,9 @@ impl<'a> Search<'a> {
                 };
                 let to = (a as usize * ny + b as usize) as u32;
                 let length = super::graph::length_in_cells(orthogonal.into(), diagonal.into());
+                if to as usize == goal {
+                    self.bound = self.bound.min(length);
+                }
                 let push = match self.s.nodes.get_mut(&to) {
                     Some(n) if (n.orthogonal, n.diagonal) == (orthogonal, diagonal) => {
                         let new = n.entered & 1 << d == 0;

@@ -156,6 +156,7 @@ impl UnitIndex {
         let graph = graph(map, values);
         let bottlenecks = Bottlenecks::new(&graph);
         let jumps = JumpIndex::new(&graph);
+        jumps.fill(&graph);
         Ok(UnitIndex {
             unit,
             converted,
