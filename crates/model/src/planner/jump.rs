@@ -799,9 +799,9 @@ mod tests {
         }
         let original = m;
         transpose(&mut m);
-        for r in 0..WORD {
-            for c in 0..WORD {
-                assert_eq!(m[c] >> r & 1, original[r] >> c & 1, "({r}, {c})");
+        for (r, row) in original.iter().enumerate() {
+            for (c, column) in m.iter().enumerate() {
+                assert_eq!(column >> r & 1, row >> c & 1, "({r}, {c})");
             }
         }
     }
