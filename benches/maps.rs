@@ -165,13 +165,9 @@ fn random_queries(
     index: &planner::Bottlenecks,
     count: usize,
 ) -> Vec<(usize, usize, f64)> {
-    let mut seed = 0x853C_49E6_748F_EA9Bu64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        seed
-    };
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(0x853C_49E6_748F_EA9B);
+    let mut next = move || rng.random::<u64>();
     let free: Vec<usize> = (0..map.values.len())
         .filter(|&c| !map.occupied[c] && map.values[c].is_finite())
         .collect();
@@ -554,14 +550,8 @@ fn path_answer(c: &mut Criterion) {
                     PhaseFormat::Radians,
                     PhasePrecision::TenthMilli,
                 );
-                // Sized up front as the service sizes it (`http::json::serialize_sized`).
-                let capacity = 512
-                    + path
-                        .waypoints
-                        .iter()
-                        .map(|w| 220 + w.config.phases.json_len_hint())
-                        .sum::<usize>();
-                let mut body = Vec::with_capacity(capacity);
+                // Sized up front as the service sizes it.
+                let mut body = Vec::with_capacity(irs_answers::path::body_capacity(&path));
                 serde_json::to_writer(&mut body, &path).unwrap();
                 body
             },

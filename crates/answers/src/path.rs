@@ -176,6 +176,17 @@ pub fn write_phases(
     written
 }
 
+/// About the bytes of `path`'s JSON body: the phases' text and ~220 bytes per waypoint's other
+/// fields, so that a buffer sized by it is not regrown (and copied) a dozen times on the way to
+/// hundreds of kilobytes.
+pub fn body_capacity(path: &PathAnswer<SurfacePhases>) -> usize {
+    512 + path
+        .waypoints
+        .iter()
+        .map(|w| 220 + w.config.phases.json_len_hint())
+        .sum::<usize>()
+}
+
 /// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.
 pub(crate) fn format_phases(
     path: PathAnswer,

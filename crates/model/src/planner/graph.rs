@@ -49,7 +49,7 @@ pub struct Path {
 
 /// The 8 neighbour offsets (di, dj) with their length in units of Δ: four orthogonal steps,
 /// then four diagonal ones (a step's index is the direction a [`Node`] records).
-const NEIGHBOURS: [(isize, isize, f64); 8] = [
+pub(super) const NEIGHBOURS: [(isize, isize, f64); 8] = [
     (1, 0, 1.0),
     (-1, 0, 1.0),
     (0, 1, 1.0),

@@ -32,7 +32,7 @@
 //! index keeps each word's bounds) costs one comparison, and a block's columns are its rows
 //! transposed as a bit matrix.
 
-use super::graph::{CellGraph, Infeasible, Path};
+use super::graph::{CellGraph, Infeasible, NEIGHBOURS, Path};
 use rustc_hash::FxHashMap;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -209,17 +209,17 @@ struct JumpNode {
     expanded: u8,
 }
 
-/// The 8 directions (di, dj), in [`super::graph`]'s order: orthogonal ones first.
-const DIRECTIONS: [(isize, isize); 8] = [
-    (1, 0),
-    (-1, 0),
-    (0, 1),
-    (0, -1),
-    (1, 1),
-    (1, -1),
-    (-1, 1),
-    (-1, -1),
-];
+/// The 8 directions (di, dj), in the graph's order (orthogonal ones first): a direction's
+/// index is its bit in a [`JumpNode`]'s masks.
+const DIRECTIONS: [(isize, isize); 8] = {
+    let mut out = [(0, 0); 8];
+    let mut d = 0;
+    while d < 8 {
+        out[d] = (NEIGHBOURS[d].0, NEIGHBOURS[d].1);
+        d += 1;
+    }
+    out
+};
 
 fn direction_of(di: isize, dj: isize) -> usize {
     DIRECTIONS
@@ -789,14 +789,9 @@ mod tests {
 
     #[test]
     fn transpose_moves_every_bit_across_the_diagonal() {
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-        let mut m = [0u64; WORD];
-        for word in &mut m {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            *word = seed;
-        }
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(0x9E37_79B9_7F4A_7C15);
+        let mut m: [u64; WORD] = std::array::from_fn(|_| rng.random());
         let original = m;
         transpose(&mut m);
         for (r, row) in original.iter().enumerate() {
@@ -883,13 +878,9 @@ mod tests {
     /// A long exhaustive sweep over small maps of the three kinds: every pair of cells.
     #[test]
     fn every_pair_on_small_maps() {
-        let mut seed = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(0x2545_F491_4F6C_DD1D);
+        let mut next = || rng.random::<u64>();
         for _ in 0..100 {
             let (nx, ny) = (2 + next() as usize % 7, 2 + next() as usize % 7);
             let n = nx * ny;

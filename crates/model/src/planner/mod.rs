@@ -702,13 +702,9 @@ mod tests {
     /// centre, near the edges) and tolerances of 0–12 cells.
     #[test]
     fn relocation_by_rings_is_the_nearest_usable_cell_of_the_square() {
-        let mut seed = 0x51_7CC1_B727_220Au64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(0x51_7CC1_B727_220A);
+        let mut next = move || rng.random::<u64>();
         for _ in 0..3000 {
             let (nx, ny) = (1 + next() as usize % 30, 1 + next() as usize % 30);
             let grid = Grid {

@@ -406,14 +406,7 @@ pub(super) async fn plan_path(
         }
         _ => None,
     };
-    // Sized up front: the phases' text and ~220 bytes per waypoint's other fields, so the
-    // buffer is not regrown (and copied) a dozen times on the way to 20–400 kB.
-    let capacity = 512
-        + path
-            .waypoints
-            .iter()
-            .map(|w| 220 + w.config.phases.json_len_hint())
-            .sum::<usize>();
+    let capacity = path::body_capacity(&path);
     let answer = OpenAnswer::new(serialize_sized(
         &CheckedPath { path, monte_carlo },
         capacity,
