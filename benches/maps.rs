@@ -77,8 +77,9 @@ fn large_grid(c: &mut Criterion) {
     group.bench_function("widest_path_1001x1001", |b| {
         b.iter(|| graph.widest_path_threshold(start, goal))
     });
-    // The same searches the other way, and a one-step query (widest path + A*) both ways: the
-    // cost must not depend on the direction.
+    // The same searches the other way, and a one-step query (widest path + grid path, by
+    // `planner::plan`, which keeps no index) both ways: the cost must not depend on the
+    // direction.
     group.bench_function("astar_1001x1001_at_minus_62_db_reversed", |b| {
         b.iter(|| graph.a_star_path(goal, start, black_box(-62.0)))
     });

@@ -6,9 +6,10 @@
 # compare two builds in one run); PHASE_PRECISION and PHASE_FORMAT, the queries' phase_precision
 # and phase_format (the server's defaults when unset); DISTINCT=1 makes every query a new one
 # (thresholds −62 − k·10⁻⁹ dB, the same path), so none is answered from the answer cache;
-# DISTINCT=random draws every query's start and goal uniformly over the room, with a goal
-# tolerance of 2 m (an end in an obstacle or below the threshold moves to the nearest usable
-# cell, as a fleet's goals do), and its threshold uniformly in [THRESHOLD_LOW, THRESHOLD_HIGH] dB
+# DISTINCT=random draws every query's start and goal uniformly over the room, with a tolerance
+# of TOLERANCE m (default 2: an end in an obstacle or below the threshold moves to the nearest
+# usable cell, as a fleet's goals do; 0 leaves the ends as drawn), and its threshold uniformly
+# in [THRESHOLD_LOW, THRESHOLD_HIGH] dB
 # (default −66 to −60: from nearly every free cell feasible to a third of them not); on the
 # 1001² floor 89 % of them have a path, of 570 waypoints on average. RESOLUTION (m) builds the map at another grid step than the
 # scenario's 0.5 m (0.02: the 1001² floor). The answer's size is printed before the figures.
@@ -34,7 +35,11 @@ made=$(curl -s -X POST "$url/v1/maps" -H 'content-type: application/json' -d "{\
 map=$(echo "$made" | python3 -c "import json,sys; print(json.load(sys.stdin)['map_id'])")
 # A large map is built as a job: wait until it is done.
 job=$(echo "$made" | python3 -c "import json,sys; print(json.load(sys.stdin).get('job_id') or '')")
-while [ -n "$job" ] && ! curl -s "$url/v1/jobs/$job" | grep -q '"state":"\(done\|failed\|cancelled\)"'; do sleep 0.2; done
+while [ -n "$job" ]; do
+  state=$(curl -s "$url/v1/jobs/$job" | python3 -c "import json,sys; print(json.load(sys.stdin)['state'])")
+  case $state in done) break ;; failed|cancelled) echo "the map's build $state" >&2; exit 1 ;; esac
+  sleep 0.2
+done
 precision=${PHASE_PRECISION:+,\"phase_precision\":\"$PHASE_PRECISION\"}
 format=${PHASE_FORMAT:+,\"phase_format\":\"$PHASE_FORMAT\"}
 body="{\"map_id\":\"$map\",\"start\":[-10,0],\"goal\":[10,0],\"threshold\":-62$precision$format}"
@@ -46,7 +51,7 @@ wrk.body = '$body'
 wrk.headers["Content-Type"] = "application/json"
 LUA
 if [ "${DISTINCT:-0}" = random ]; then
-  low=${THRESHOLD_LOW:--66}; high=${THRESHOLD_HIGH:--60}
+  low=${THRESHOLD_LOW:--66}; high=${THRESHOLD_HIGH:--60}; tolerance=${TOLERANCE:-2}
   # Each wrk thread draws from its own seed.
   cat >>"$lua" <<LUA
 local threads = 0
@@ -54,7 +59,7 @@ setup = function(thread) threads = threads + 1; thread:set("seed", threads) end
 init = function() math.randomseed(seed) end
 local function at() return string.format("%.4f,%.4f", math.random() * 20 - 10, math.random() * 20 - 10) end
 request = function()
-  local body = string.format('{"map_id":"$map","start":[%s],"goal":[%s],"threshold":%.9f,"tolerance_m":2$precision$format}',
+  local body = string.format('{"map_id":"$map","start":[%s],"goal":[%s],"threshold":%.9f,"tolerance_m":$tolerance$precision$format}',
     at(), at(), $low + math.random() * ($high - $low))
   return wrk.format(nil, nil, nil, body)
 end

@@ -182,8 +182,8 @@ impl ServeArgs {
 
     /// Heavy-query workers: `--query-workers`, else one a core. A path query on a large map
     /// is a fraction of a millisecond of search and about as much of writing; with half the cores, the
-    /// 1001² floor's random path queries left a core idle (1 040–1 150 req/s on 2 cores against
-    /// 1 290–1 420 with both, `DISTINCT=random RESOLUTION=0.02 scripts/load.sh`).
+    /// 1001² floor's random path queries left a core idle (1 037–1 150 req/s on 2 cores against
+    /// 1 287–1 421 with both, `DISTINCT=random RESOLUTION=0.02 scripts/load.sh`).
     pub fn query_workers(&self) -> usize {
         self.query_workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))

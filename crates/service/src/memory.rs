@@ -5,7 +5,7 @@
 //! after the first 16 MB map body is freed the next ones come from the arenas of the query
 //! workers that wrote them, and the answers-in-flight budget (`--answers-in-flight-mb`) no
 //! longer bounds what the process holds. With two query workers, 150 unread 16 MB map bodies
-//! left it 139–143 MB larger, against 94–96 MB with the threshold fixed
+//! left it 139–143 MB larger, against 93–96 MB with the threshold fixed
 //! (`tests/reliability/suite.py BINARY slow-readers`).
 
 /// Blocks of this size or more are always mapped on their own and returned when freed. Path

@@ -541,6 +541,8 @@ fn checked<R>(
         })
         .collect::<Result<Vec<_>, FieldError>>()?;
     let graph = crate::planner::graph(map, &values);
+    // One jump point index for every robot's search on this map (its blocks worked out once).
+    let jumps = crate::planner::JumpIndex::new(&graph);
     // Each robot's route on its own: a given route as given, a trip's shortest path alone (the
     // planner's first try); the longest sets the default horizon.
     let alone: Vec<Result<Track, Infeasible>> = robots
@@ -549,8 +551,8 @@ fn checked<R>(
         .zip(&given)
         .map(|((robot, ((s, _), (g, _))), given)| match given {
             Some(track) => Ok(track.clone()),
-            None => graph
-                .shortest_path(*s, *g, robot.threshold)
+            None => jumps
+                .shortest_path(&graph, *s, *g, robot.threshold)
                 .map(|p| search::timed(grid, &p.cells, move_steps)),
         })
         .collect();

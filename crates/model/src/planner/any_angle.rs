@@ -108,7 +108,7 @@ impl CellGraph<'_> {
         threshold: f64,
     ) -> Result<AnyAnglePath, Infeasible> {
         self.check_ends(start, goal, threshold)?;
-        with_scratch(self.values.len(), |scratch| {
+        with_scratch(|scratch| {
             // From the goal: every cell the grid search reaches then knows its 8-connected
             // distance to the goal, Lazy Theta*'s heuristic. Its path comes start first.
             let (grid_cells, _) = self.a_star(scratch, goal, start, threshold)?;

@@ -129,7 +129,7 @@ impl<'a> CellGraph<'a> {
         threshold: f64,
     ) -> Result<Path, Infeasible> {
         self.check_ends(start, goal, threshold)?;
-        with_scratch(self.values.len(), |scratch| {
+        with_scratch(|scratch| {
             let (mut cells, length) = self.a_star(scratch, start, goal, threshold)?;
             cells.reverse();
             Ok(Path {
@@ -151,6 +151,7 @@ impl<'a> CellGraph<'a> {
     ) -> Result<(Vec<usize>, f64), Infeasible> {
         let heuristic = self.octile_to(to);
         let Scratch { nodes, open, .. } = scratch;
+        nodes.reset(self.values.len());
         nodes.set(from, Node::reached(0, 0, 0, nodes.generation));
         let from_f = heuristic(self.grid.cell_of(from));
         open.reset(from_f);
@@ -224,12 +225,13 @@ impl<'a> CellGraph<'a> {
         // nothing can improve it (a one-step query then ends at once, in either direction).
         let ceiling = value(start).min(value(goal));
         let to_goal = self.octile_to(goal);
-        with_scratch(self.values.len(), |scratch| {
+        with_scratch(|scratch| {
             let Scratch {
                 nodes,
                 widest_heap: heap,
                 ..
             } = scratch;
+            nodes.reset(self.values.len());
             // A node records the cell whose value is the width of the widest way found to it.
             let width = |nodes: &Nodes, c: usize| {
                 let node = nodes.get(c);
@@ -452,22 +454,24 @@ pub(super) struct Scratch {
     pub(super) jump: super::jump::JumpScratch,
 }
 
-/// Scratch sets kept for reuse: as many as searches usually run at once (the query pool's
-/// workers); beyond that a search allocates its own and drops it. At most 4 × 8 B per cell of
-/// the largest map queried stay allocated, 4 × 20.25 B once any-angle queries ran: 32 MB and
-/// 81 MB at the grid limit of 1001² cells.
+/// Scratch sets kept for reuse; beyond that a search allocates its own and drops it. Each part
+/// is allocated by the first search that needs it: A* and the widest path 8 B per cell of the
+/// largest map queried (32 MB for four at the grid limit of 1001² cells), any-angle queries
+/// 12.25 B more, jump point search 4 × 8 B per 64 × 64 block of cells (0.5 MB) and its jump
+/// points and open list as they grew (a few thousand entries on the paper floor; at most one a
+/// cell on a maze), kept with the set.
 const POOLED_SCRATCH: usize = 4;
 static SCRATCH_POOL: Mutex<Vec<Scratch>> = Mutex::new(Vec::new());
 
-/// Runs `search` with a scratch set sized and reset for `cells` cells.
-pub(super) fn with_scratch<R>(cells: usize, search: impl FnOnce(&mut Scratch) -> R) -> R {
+/// Runs `search` with a scratch set from the pool; each search resets the parts it uses (A*'s
+/// [`Nodes`] by [`CellGraph::a_star`], which any-angle queries run first).
+pub(super) fn with_scratch<R>(search: impl FnOnce(&mut Scratch) -> R) -> R {
     let pooled = SCRATCH_POOL
         .lock()
         .map(|mut pool| pool.pop())
         .ok()
         .flatten();
     let mut scratch = pooled.unwrap_or_default();
-    scratch.nodes.reset(cells);
     let result = search(&mut scratch);
     if let Ok(mut pool) = SCRATCH_POOL.lock()
         && pool.len() < POOLED_SCRATCH

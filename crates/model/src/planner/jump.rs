@@ -145,9 +145,10 @@ impl JumpIndex {
             * (std::mem::size_of::<OnceLock<Box<Block>>>() + std::mem::size_of::<Block>())
     }
 
-    /// The shortest feasible path from `start` to `goal` at `threshold` on `graph` (the graph
-    /// the index was built from), or why there is none: the length of
-    /// [`CellGraph::shortest_path`]'s.
+    /// The shortest feasible path from `start` to `goal` at `threshold` on `graph`, or why
+    /// there is none: the length of [`CellGraph::a_star_path`]'s. `graph` must be the one the
+    /// index was built from: the blocks it works out are kept, and a graph of the same size
+    /// with other values or obstacles would be searched with them.
     pub fn shortest_path(
         &self,
         graph: &CellGraph,
@@ -155,7 +156,11 @@ impl JumpIndex {
         goal: usize,
         threshold: f64,
     ) -> Result<Path, Infeasible> {
-        debug_assert_eq!((graph.grid.nx, graph.grid.ny), (self.nx, self.ny));
+        assert_eq!(
+            (graph.grid.nx, graph.grid.ny),
+            (self.nx, self.ny),
+            "a jump index searched on another map"
+        );
         graph.check_ends(start, goal, threshold)?;
         if start == goal {
             return Ok(Path {
@@ -163,7 +168,7 @@ impl JumpIndex {
                 distance_m: 0.0,
             });
         }
-        super::graph::with_scratch(graph.values.len(), |scratch| {
+        super::graph::with_scratch(|scratch| {
             let mut search = Search::new(self, graph, threshold, &mut scratch.jump);
             let (cells, (orthogonal, diagonal)) =
                 search.run(start, goal).ok_or(Infeasible::Disconnected)?;
@@ -500,7 +505,7 @@ impl<'a> Search<'a> {
     /// goal's length found so far (any number before the goal is reached).
     fn reach(&self, g: f64, step: f64) -> isize {
         if self.bound.is_finite() {
-            ((self.bound - g) / step + 1e-9).floor().max(-1.0) as isize
+            ((self.bound - g) / step + 1e-9).floor().max(0.0) as isize
         } else {
             isize::MAX
         }

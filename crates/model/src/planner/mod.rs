@@ -183,7 +183,8 @@ impl UnitIndex {
 
 /// Plans the shortest feasible path on a map (start/goal snapped to the nearest cell centre),
 /// with the threshold and the values in `unit`, finding the widest-path threshold by a search
-/// and the path by A*: the cheaper way for one query on a map.
+/// and the path on a jump point index built for the query: the cheaper way for one query on a
+/// map.
 pub fn plan(
     map: &RadioMap,
     unit: Unit,
@@ -263,7 +264,8 @@ struct Route {
 }
 
 /// The route of a feasible path as its waypoints' cells and points, and its length (m): the
-/// 8-connected path's cell centres (found on `jumps` when given, else by A*), or an any-angle
+/// 8-connected path's cell centres (found on `jumps` when given, else on an index built for the
+/// query), or an any-angle
 /// path's entry points and vertex centres.
 fn route(
     graph: &CellGraph,

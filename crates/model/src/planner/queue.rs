@@ -4,7 +4,7 @@
 //! Pushes and pops are O(1): a cell goes on its bucket's stack and comes off the lowest
 //! non-empty one. Within a bucket the order is last in, first out, not by f, so the search
 //! that uses this queue must accept a cell being expanded before its shortest way is known and
-//! expand it again when that way turns up (`CellGraph::shortest_path` does: it reopens improved
+//! expand it again when that way turns up (`CellGraph::a_star` does: it reopens improved
 //! cells, and once the goal is settled it finishes the goal's bucket before it stops). That
 //! search still returns the shortest path: every cell of a shortest path to the goal has f at
 //! most the goal's length, so it lies in the goal's bucket or an earlier one, all of which are
