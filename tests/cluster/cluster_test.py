@@ -379,7 +379,8 @@ def main():
 
     # Throughput: HAProxy in front of the two survivors against one of them directly, on
     # the paper's map (41², about a millisecond a query: HAProxy's own cost shows) and on the
-    # 1001² one (a search of a million cells a query: two replicas share the load).
+    # 1001² one (a search of the million-cell map and a 0.6 MB answer a query: two replicas
+    # share the load).
     ratios = throughputs(cached.base, proxy.base, {"41² paper map": small_path, "1001² map": path}, "two")
     # On the 41² map a query costs about what HAProxy's own hop costs, and on a two-core
     # machine wrk, HAProxy and the replicas share the same cores, so the ratio there measures
