@@ -144,6 +144,69 @@ impl Raster {
         (r0..=r1).any(|r| (c0..=c1).any(|c| self.is_occupied(c, r)))
     }
 
+    /// For each y, the pixel rows [`Raster::overlaps_square`] looks at for a square of
+    /// half-side `h` around (·, y): those whose interiors meet (y − h, y + h), clamped to the map
+    /// (r0 > r1 when there are none). A grid's rows share them across its columns.
+    pub fn rows_meeting(&self, ys: &[f64], h: f64) -> Vec<(i64, i64)> {
+        ys.iter()
+            .map(|&y| {
+                let (v0, v1) = (self.to_pixels(0.0, y - h).1, self.to_pixels(0.0, y + h).1);
+                (floor(v0).max(0), (ceil(v1) - 1).min(self.height as i64 - 1))
+            })
+            .collect()
+    }
+
+    /// [`Raster::overlaps_square`] for the squares of half-side `h` around (x, y) of a column of
+    /// centres sharing x, given each square's rows by [`Raster::rows_meeting`]: sets `out[k]`
+    /// where the k-th square overlaps an occupied pixel, leaves it alone elsewhere.
+    ///
+    /// The occupied pixels of the columns the squares span are counted a row at a time, once
+    /// (a row with clearance to spare around its middle pixel counts none unlooked), so a
+    /// square costs the difference of two running counts where `overlaps_square` works out
+    /// its pixel range and, near a wall, scans it (13 × 13 pixels for a 0.3 m robot on 5 cm
+    /// pixels). `counts` is the caller's scratch.
+    pub fn mark_overlapping(
+        &self,
+        x: f64,
+        h: f64,
+        rows: &[(i64, i64)],
+        counts: &mut Vec<u32>,
+        out: &mut [bool],
+    ) {
+        let (u0, u1) = (self.to_pixels(x - h, 0.0).0, self.to_pixels(x + h, 0.0).0);
+        let (c0, c1) = (floor(u0).max(0), (ceil(u1) - 1).min(self.width as i64 - 1));
+        let Some(top) = rows
+            .iter()
+            .filter(|(r0, r1)| r0 <= r1)
+            .map(|&(_, r1)| r1)
+            .max()
+        else {
+            return;
+        };
+        if c0 > c1 {
+            return;
+        }
+        let middle = (c0 + c1) / 2;
+        let reach = (middle - c0).max(c1 - middle);
+        let span = c0 as usize..=c1 as usize;
+        // counts[r] = occupied pixels of columns c0..=c1 in the rows below r.
+        counts.clear();
+        counts.push(0);
+        let mut total = 0;
+        for r in 0..=top {
+            if reach >= i64::from(self.clearance_at(middle, r)) {
+                let row = &self.clearance[r as usize * self.width..][span.clone()];
+                total += row.iter().filter(|&&d| d == 0).count() as u32;
+            }
+            counts.push(total);
+        }
+        for (cell, &(r0, r1)) in out.iter_mut().zip(rows) {
+            if r0 <= r1 && counts[r1 as usize + 1] > counts[r0 as usize] {
+                *cell = true;
+            }
+        }
+    }
+
     /// True when (x, y) lies in or on an occupied pixel.
     pub fn covers(&self, x: f64, y: f64) -> bool {
         let (u, v) = self.to_pixels(x, y);
@@ -606,6 +669,37 @@ mod tests {
                     occupied[k] && c < u1 - tol && c + 1.0 > u0 + tol && row < v1 - tol && row + 1.0 > v0 + tol
                 });
                 prop_assert_eq!(r.overlaps_square(x, y, h), scan, "({}, {}) ± {}", x, y, h);
+            }
+        }
+
+        /// A column of squares marked at once is marked as each square alone says, whatever
+        /// the grid's step and offset against the pixels (on their edges, between, finer,
+        /// coarser) and however far the squares reach off the map.
+        #[test]
+        fn a_column_of_squares_is_marked_as_each_square_alone(
+            width in 4usize..80, height in 4usize..80,
+            share in prop::sample::select(vec![0.0005, 0.003, 0.02, 0.1]),
+            seed in any::<u64>(),
+            columns in prop::collection::vec(-40i32..360, 1..12),
+            (first, step, cells) in (-40i32..360, 1i32..40, 1usize..60),
+            half in 0u32..40,
+        ) {
+            let pixel = 0.05;
+            let r = seeded(width, height, share, seed, pixel);
+            let [ox, oy] = r.origin;
+            let h = f64::from(half) / 4.0 * pixel + if half % 3 == 0 { 0.0013 } else { 0.0 };
+            let ys: Vec<f64> = (0..cells)
+                .map(|k| oy + f64::from(first + k as i32 * step) / 4.0 * pixel)
+                .collect();
+            let rows = r.rows_meeting(&ys, h);
+            let mut counts = Vec::new();
+            for i in columns {
+                let x = ox + f64::from(i) / 4.0 * pixel;
+                let mut marked = vec![false; cells];
+                r.mark_overlapping(x, h, &rows, &mut counts, &mut marked);
+                for (k, &y) in ys.iter().enumerate() {
+                    prop_assert_eq!(marked[k], r.overlaps_square(x, y, h), "({}, {}) ± {}", x, y, h);
+                }
             }
         }
 

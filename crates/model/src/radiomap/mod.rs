@@ -298,15 +298,14 @@ pub(crate) fn overlapped(scenario: &Scenario, grid: &Grid, h: f64) -> Vec<bool> 
     let mut occupied = vec![false; grid.cells()];
     obstructions.mark_boxes_and_walls(grid, h, &mut occupied);
     if let Some(raster) = &obstructions.raster {
-        occupied
-            .par_chunks_mut(grid.ny)
-            .enumerate()
-            .for_each(|(i, row)| {
-                for (j, cell) in row.iter_mut().enumerate() {
-                    let [x, y] = grid.centre(i, j);
-                    *cell = *cell || raster.overlaps_square(x, y, h);
-                }
-            });
+        let ys: Vec<f64> = (0..grid.ny).map(|j| grid.centre(0, j)[1]).collect();
+        let rows = raster.rows_meeting(&ys, h);
+        occupied.par_chunks_mut(grid.ny).enumerate().for_each_init(
+            Vec::new,
+            |counts, (i, column)| {
+                raster.mark_overlapping(grid.centre(i, 0)[0], h, &rows, counts, column);
+            },
+        );
     }
     occupied
 }
