@@ -11,6 +11,7 @@
 //! saves is the columns looked at, a few per aisle instead of one per pixel.
 
 use super::*;
+use crate::vecmath::ROUNDING_SHIFT;
 
 /// An occupancy raster: `width × height` square pixels of side `resolution` (m), the lower-left
 /// corner of pixel (0, 0) at `origin`; pixel (c, r) spans [origin_x + c·res, origin_x + (c+1)·res]
@@ -468,24 +469,50 @@ fn clearance(width: usize, height: usize, occupied: &[bool]) -> Vec<u8> {
     d
 }
 
-/// ⌊t⌋ as an integer, inline: `f64::floor` is a libm call on the baseline x86-64 target, and
-/// the walk takes several per column. Pixel coordinates are far inside i64's range.
+/// ⌊t⌋ as an integer for |t| < 2⁵¹, inline: `f64::floor` is a libm call on the baseline
+/// x86-64 target, and the walk takes several per column. Adding 1.5·2⁵² rounds t to the
+/// nearest integer r, which is then the sum's low mantissa bits; r − 1 where r > t. A cast
+/// (`t as i64`) would instead pay for Rust's saturation: a NaN test and a range test on every
+/// conversion. Pixel coordinates are far inside the range (a NaN gives a meaningless integer,
+/// never a panic).
 #[inline]
 fn floor(t: f64) -> i64 {
-    let i = t as i64;
-    i - i64::from((i as f64) > t)
+    let shifted = t + ROUNDING_SHIFT;
+    let nearest = (shifted.to_bits() as i64).wrapping_sub(ROUNDING_SHIFT.to_bits() as i64);
+    nearest - i64::from(shifted - ROUNDING_SHIFT > t)
 }
 
 /// ⌈t⌉ as an integer, inline (see [`floor`]).
 #[inline]
 fn ceil(t: f64) -> i64 {
-    let i = t as i64;
-    i + i64::from((i as f64) < t)
+    let shifted = t + ROUNDING_SHIFT;
+    let nearest = (shifted.to_bits() as i64).wrapping_sub(ROUNDING_SHIFT.to_bits() as i64);
+    nearest + i64::from(shifted - ROUNDING_SHIFT < t)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The inline floor and ceiling agree with libm's on integers, halves, their neighbours
+    /// one ulp away, negatives and values up to 2⁵⁰.
+    #[test]
+    fn inline_floor_and_ceil_agree_with_libm() {
+        let mut values = vec![0.0, -0.0, 1e-300, -1e-300, 2f64.powi(50), -(2f64.powi(50))];
+        for k in -300..300 {
+            let t = f64::from(k) / 4.0;
+            values.extend([t, t.next_up(), t.next_down()]);
+        }
+        let mut x = 0.123_456_789f64;
+        for _ in 0..10_000 {
+            x = (x * 9_301.0 + 0.497).fract();
+            values.extend([x * 1e6 - 5e5, x * 100.0 - 50.0]);
+        }
+        for t in values {
+            assert_eq!(floor(t), t.floor() as i64, "floor({t})");
+            assert_eq!(ceil(t), t.ceil() as i64, "ceil({t})");
+        }
+    }
 
     fn p(x: [f64; 3]) -> P3 {
         P3::from(x)
