@@ -176,12 +176,11 @@ impl Raster {
     ) {
         let (u0, u1) = (self.to_pixels(x - h, 0.0).0, self.to_pixels(x + h, 0.0).0);
         let (c0, c1) = (floor(u0).max(0), (ceil(u1) - 1).min(self.width as i64 - 1));
-        let Some(top) = rows
-            .iter()
-            .filter(|(r0, r1)| r0 <= r1)
-            .map(|&(_, r1)| r1)
-            .max()
-        else {
+        let meeting = || rows.iter().filter(|(r0, r1)| r0 <= r1);
+        let (Some(bottom), Some(top)) = (
+            meeting().map(|&(r0, _)| r0).min(),
+            meeting().map(|&(_, r1)| r1).max(),
+        ) else {
             return;
         };
         if c0 > c1 {
@@ -190,11 +189,11 @@ impl Raster {
         let middle = (c0 + c1) / 2;
         let reach = (middle - c0).max(c1 - middle);
         let span = c0 as usize..=c1 as usize;
-        // counts[r] = occupied pixels of columns c0..=c1 in the rows below r.
+        // counts[r − bottom] = occupied pixels of columns c0..=c1 in rows bottom..r.
         counts.clear();
         counts.push(0);
         let mut total = 0;
-        for r in 0..=top {
+        for r in bottom..=top {
             if reach >= i64::from(self.clearance_at(middle, r)) {
                 let row = &self.clearance[r as usize * self.width..][span.clone()];
                 total += row.iter().filter(|&&d| d == 0).count() as u32;
@@ -202,7 +201,7 @@ impl Raster {
             counts.push(total);
         }
         for (cell, &(r0, r1)) in out.iter_mut().zip(rows) {
-            if r0 <= r1 && counts[r1 as usize + 1] > counts[r0 as usize] {
+            if r0 <= r1 && counts[(r1 - bottom) as usize + 1] > counts[(r0 - bottom) as usize] {
                 *cell = true;
             }
         }
@@ -469,25 +468,34 @@ fn clearance(width: usize, height: usize, occupied: &[bool]) -> Vec<u8> {
     d
 }
 
-/// ⌊t⌋ as an integer for |t| < 2⁵¹, inline: `f64::floor` is a libm call on the baseline
-/// x86-64 target, and the walk takes several per column. Adding 1.5·2⁵² rounds t to the
-/// nearest integer r, which is then the sum's low mantissa bits; r − 1 where r > t. A cast
-/// (`t as i64`) would instead pay for Rust's saturation: a NaN test and a range test on every
-/// conversion. Pixel coordinates are far inside the range (a NaN gives a meaningless integer,
-/// never a panic).
+/// ⌊t⌋ as an integer, inline: `f64::floor` is a libm call on the baseline x86-64 target, and
+/// the walk takes several per column. Adding 1.5·2⁵² rounds t to the nearest integer r, which
+/// is then the sum's low mantissa bits; r − 1 where r > t. A cast (`t as i64`) would instead
+/// pay for Rust's saturation: a NaN test and a range test on every conversion. t is first
+/// clamped to ±2⁵⁰ (NaN to −2⁵⁰), where the shift is exact: a point that far off the map
+/// (a floor plan of tiny pixels far from the room) stays off it, and the `± 1`s the callers
+/// add cannot overflow.
 #[inline]
 fn floor(t: f64) -> i64 {
-    let shifted = t + ROUNDING_SHIFT;
-    let nearest = (shifted.to_bits() as i64).wrapping_sub(ROUNDING_SHIFT.to_bits() as i64);
-    nearest - i64::from(shifted - ROUNDING_SHIFT > t)
+    let (t, nearest, rounded) = nearest(t);
+    nearest - i64::from(rounded > t)
 }
 
 /// ⌈t⌉ as an integer, inline (see [`floor`]).
 #[inline]
 fn ceil(t: f64) -> i64 {
+    let (t, nearest, rounded) = nearest(t);
+    nearest + i64::from(rounded < t)
+}
+
+/// t clamped to ±2⁵⁰, the integer nearest it, and that integer as a double (see [`floor`]).
+#[inline]
+fn nearest(t: f64) -> (f64, i64, f64) {
+    const LIMIT: f64 = (1u64 << 50) as f64;
+    let t = t.max(-LIMIT).min(LIMIT);
     let shifted = t + ROUNDING_SHIFT;
-    let nearest = (shifted.to_bits() as i64).wrapping_sub(ROUNDING_SHIFT.to_bits() as i64);
-    nearest + i64::from(shifted - ROUNDING_SHIFT < t)
+    let nearest = shifted.to_bits() as i64 - ROUNDING_SHIFT.to_bits() as i64;
+    (t, nearest, shifted - ROUNDING_SHIFT)
 }
 
 #[cfg(test)]
@@ -511,6 +519,16 @@ mod tests {
         for t in values {
             assert_eq!(floor(t), t.floor() as i64, "floor({t})");
             assert_eq!(ceil(t), t.ceil() as i64, "ceil({t})");
+        }
+        // Beyond ±2⁵⁰ (and NaN) the clamp's ends, far off any map, with room for the ± 1s.
+        let limit = 1i64 << 50;
+        for (t, end) in [
+            (1e16, limit),
+            (-1e16, -limit),
+            (-6.8e15, -limit),
+            (f64::NAN, -limit),
+        ] {
+            assert_eq!((floor(t), ceil(t)), (end, end), "{t}");
         }
     }
 
@@ -714,7 +732,7 @@ mod tests {
             let pixel = 0.05;
             let r = seeded(width, height, share, seed, pixel);
             let [ox, oy] = r.origin;
-            let h = f64::from(half) / 4.0 * pixel + if half % 3 == 0 { 0.0013 } else { 0.0 };
+            let h = f64::from(half) / 4.0 * pixel + if half % 3 == 1 { 0.0013 } else { 0.0 };
             let ys: Vec<f64> = (0..cells)
                 .map(|k| oy + f64::from(first + k as i32 * step) / 4.0 * pixel)
                 .collect();
