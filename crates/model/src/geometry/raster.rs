@@ -492,6 +492,8 @@ fn ceil(t: f64) -> i64 {
 #[inline]
 fn nearest(t: f64) -> (f64, i64, f64) {
     const LIMIT: f64 = (1u64 << 50) as f64;
+    // Not `clamp`, which keeps a NaN: `max` turns it into −2⁵⁰.
+    #[allow(clippy::manual_clamp)]
     let t = t.max(-LIMIT).min(LIMIT);
     let shifted = t + ROUNDING_SHIFT;
     let nearest = shifted.to_bits() as i64 - ROUNDING_SHIFT.to_bits() as i64;
