@@ -147,7 +147,7 @@ impl Raster {
 
     /// For each y, the pixel rows [`Raster::overlaps_square`] looks at for a square of
     /// half-side `h` around (·, y): those whose interiors meet (y − h, y + h), clamped to the map
-    /// (r0 > r1 when there are none). A grid's rows share them across its columns.
+    /// (r0 > r1 when there are none). Every row of a grid (its cells sharing x) has the same.
     pub fn rows_meeting(&self, ys: &[f64], h: f64) -> Vec<(i64, i64)> {
         ys.iter()
             .map(|&y| {
@@ -157,11 +157,12 @@ impl Raster {
             .collect()
     }
 
-    /// [`Raster::overlaps_square`] for the squares of half-side `h` around (x, y) of a column of
-    /// centres sharing x, given each square's rows by [`Raster::rows_meeting`]: sets `out[k]`
-    /// where the k-th square overlaps an occupied pixel, leaves it alone elsewhere.
+    /// [`Raster::overlaps_square`] for the squares of half-side `h` around the centres (x, y) of
+    /// a grid row (its cells sharing x), given each square's pixel rows by
+    /// [`Raster::rows_meeting`]: sets `out[k]` where the k-th square overlaps an occupied
+    /// pixel, leaves it alone elsewhere.
     ///
-    /// The occupied pixels of the columns the squares span are counted a row at a time, once
+    /// The occupied pixels of the columns the squares span are counted a pixel row at a time, once
     /// (a row with clearance to spare around its middle pixel counts none unlooked), so a
     /// square costs the difference of two running counts where `overlaps_square` works out
     /// its pixel range and, near a wall, scans it (13 × 13 pixels for a 0.3 m robot on 5 cm
@@ -734,11 +735,11 @@ mod tests {
             }
         }
 
-        /// A column of squares marked at once is marked as each square alone says, whatever
+        /// A grid row's squares marked at once are marked as each square alone says, whatever
         /// the grid's step and offset against the pixels (on their edges, between, finer,
         /// coarser) and however far the squares reach off the map.
         #[test]
-        fn a_column_of_squares_is_marked_as_each_square_alone(
+        fn a_grid_row_of_squares_is_marked_as_each_square_alone(
             width in 4usize..80, height in 4usize..80,
             share in prop::sample::select(vec![0.0005, 0.003, 0.02, 0.1]),
             seed in any::<u64>(),

@@ -300,12 +300,12 @@ pub(crate) fn overlapped(scenario: &Scenario, grid: &Grid, h: f64) -> Vec<bool> 
     if let Some(raster) = &obstructions.raster {
         let ys: Vec<f64> = (0..grid.ny).map(|j| grid.centre(0, j)[1]).collect();
         let rows = raster.rows_meeting(&ys, h);
-        occupied.par_chunks_mut(grid.ny).enumerate().for_each_init(
-            Vec::new,
-            |counts, (i, column)| {
-                raster.mark_overlapping(grid.centre(i, 0)[0], h, &rows, counts, column);
-            },
-        );
+        occupied
+            .par_chunks_mut(grid.ny)
+            .enumerate()
+            .for_each_init(Vec::new, |counts, (i, row)| {
+                raster.mark_overlapping(grid.centre(i, 0)[0], h, &rows, counts, row);
+            });
     }
     occupied
 }
