@@ -131,6 +131,12 @@ async fn build_entry(state: App, cluster: Arc<Cluster>, build: BuildEntry) {
             .await
             .map_err(|e| e.to_string())?;
         let shared = publisher.put_map(&map_id, &scenario_id, &encoded).await;
+        if shared.is_ok() {
+            // Shared, the map needs no checkpoint: deleted here, before the job says `done`
+            // (`finish` deletes it again, for builds that end otherwise), so no one who sees
+            // the job done finds its rows still held.
+            publisher.remove_checkpoint(&map_id).await;
+        }
         shared.map_err(|e| match e {
             // Retrying cannot make room: the map stays this replica's only (the others build
             // it again when asked), and the operator is told.

@@ -876,13 +876,19 @@ impl Cluster {
             .await;
     }
 
+    /// Deletes a build's checkpoint (best effort: one Redis cannot take is left to expire).
+    pub async fn remove_checkpoint(&self, map_id: &MapId) {
+        let Ok(mut conn) = self.conn() else { return };
+        let _: redis::RedisResult<()> = conn.del(checkpoint_key(map_id)).await;
+    }
+
     /// A build ended (done, failed or cancelled): the entry is acknowledged and removed, its
     /// checkpoint deleted, the lock released if it is still this job's.
     pub async fn finish(&self, build: &BuildEntry) {
+        self.remove_checkpoint(&build.map_id).await;
         let Ok(mut conn) = self.conn() else { return };
         let _: redis::RedisResult<()> = conn.xack(STREAM, GROUP, &[&build.stream_id]).await;
         let _: redis::RedisResult<()> = conn.xdel(STREAM, &[&build.stream_id]).await;
-        let _: redis::RedisResult<()> = conn.del(checkpoint_key(&build.map_id)).await;
         let holder: Option<String> = conn.get(lock_key(&build.map_id)).await.unwrap_or(None);
         if holder.as_deref() == Some(build.job_id.as_str()) {
             let _: redis::RedisResult<()> = conn.del(lock_key(&build.map_id)).await;
