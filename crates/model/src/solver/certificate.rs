@@ -526,7 +526,6 @@ struct Support {
 /// It stops when the two agree to [`JOINT_TOLERANCE`].
 fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
     let n = w.len();
-    let dim = problem.dim;
     let mut root_w = [0.0; MOST_USERS];
     for l in 0..n {
         root_w[l] = w[l].sqrt();
@@ -549,60 +548,13 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
             }
         }
     }
-    // One pass over the elements at Y: G, M (upper triangle; Hermitian) and, when asked, the
-    // support point's sums Σ_n z_n Re(conj(ρ_{n,l}) (Y t_n)_l), which only the best iterate
-    // needs.
-    let pass = |y: &Square, m: &mut Matrix5, slope: Option<&mut [f64; MOST_USERS]>| -> f64 {
-        m.fill(C64::new(0.0, 0.0));
-        let mut g = 0.0;
-        let mut sums = [0.0; MOST_USERS];
-        let want_slope = slope.is_some();
-        for e in 0..dim {
-            let mut rho = [C64::new(0.0, 0.0); MOST_USERS];
-            let mut alpha = 0.0;
-            for l in 0..n {
-                rho[l] = problem.a[l * dim + e] * root_w[l];
-                alpha += rho[l].norm_sqr();
-            }
-            // t = Yᴴρ, q = ‖t‖².
-            let mut t = [C64::new(0.0, 0.0); MOST_USERS];
-            let mut q = 0.0;
-            for (j, tj) in t.iter_mut().enumerate().take(n) {
-                let mut sum = C64::new(0.0, 0.0);
-                for l in 0..n {
-                    sum += y[l][j].conj() * rho[l];
-                }
-                *tj = sum;
-                q += sum.norm_sqr();
-            }
-            let root = q.max(1e-14 * alpha + f64::MIN_POSITIVE).sqrt();
-            let z = 1.0 / root;
-            g += root;
-            for l in 0..n {
-                let zr = rho[l] * z;
-                for k in l..n {
-                    m[(l, k)] += zr * rho[k].conj();
-                }
-            }
-            if want_slope {
-                for l in 0..n {
-                    let mut yt = C64::new(0.0, 0.0);
-                    for j in 0..n {
-                        yt += y[l][j] * t[j];
-                    }
-                    sums[l] += z * (rho[l].conj() * yt).re;
-                }
-            }
-        }
-        for l in 0..n {
-            for k in 0..l {
-                m[(l, k)] = m[(k, l)].conj();
-            }
-        }
-        if let Some(slope) = slope {
-            *slope = sums;
-        }
-        g
+    let pass = |y: &Square, m: &mut Matrix5, slope: Option<&mut [f64; MOST_USERS]>| match n {
+        1 => joint_pass::<1>(problem, &root_w, y, m, slope),
+        2 => joint_pass::<2>(problem, &root_w, y, m, slope),
+        3 => joint_pass::<3>(problem, &root_w, y, m, slope),
+        4 => joint_pass::<4>(problem, &root_w, y, m, slope),
+        5 => joint_pass::<5>(problem, &root_w, y, m, slope),
+        _ => unreachable!("callers admit 1..={MOST_USERS} users"),
     };
     let mut m = Matrix5::zeros();
     let mut best_y = *y;
@@ -648,6 +600,76 @@ fn joint_support(problem: &CellProblem, w: &[f64], y: &mut Square) -> Support {
         best.point[l] = g * slope[l] / (root_w[l] * root_w[l]);
     }
     best
+}
+
+/// One pass of [`joint_support`] over the elements at Y, for N users: returns G and fills M
+/// (its upper triangle summed, the lower mirrored, Hermitian) and, when asked, the support
+/// point's sums Σ_n z_n Re(conj(ρ_{n,l}) (Y t_n)_l), which only the best iterate needs. The
+/// number of users is a constant so that the loops over them unroll and M's sums stay in
+/// registers: this pass is most of a K ≥ 2 map's certificate. Every sum runs over the elements
+/// in order, as a loop over any number of users would.
+fn joint_pass<const N: usize>(
+    problem: &CellProblem,
+    root_w: &[f64; MOST_USERS],
+    y: &Square,
+    m: &mut Matrix5,
+    slope: Option<&mut [f64; MOST_USERS]>,
+) -> f64 {
+    let dim = problem.dim;
+    let zero = C64::new(0.0, 0.0);
+    let mut upper = [[zero; N]; N];
+    let mut g = 0.0;
+    let mut sums = [0.0; N];
+    let want_slope = slope.is_some();
+    for e in 0..dim {
+        let mut rho = [zero; N];
+        let mut alpha = 0.0;
+        for l in 0..N {
+            rho[l] = problem.a[l * dim + e] * root_w[l];
+            alpha += rho[l].norm_sqr();
+        }
+        // t = Yᴴρ, q = ‖t‖².
+        let mut t = [zero; N];
+        let mut q = 0.0;
+        for (j, tj) in t.iter_mut().enumerate() {
+            let mut sum = zero;
+            for l in 0..N {
+                sum += y[l][j].conj() * rho[l];
+            }
+            *tj = sum;
+            q += sum.norm_sqr();
+        }
+        let root = q.max(1e-14 * alpha + f64::MIN_POSITIVE).sqrt();
+        let z = 1.0 / root;
+        g += root;
+        for l in 0..N {
+            let zr = rho[l] * z;
+            for k in l..N {
+                upper[l][k] += zr * rho[k].conj();
+            }
+        }
+        if want_slope {
+            for l in 0..N {
+                let mut yt = zero;
+                for j in 0..N {
+                    yt += y[l][j] * t[j];
+                }
+                sums[l] += z * (rho[l].conj() * yt).re;
+            }
+        }
+    }
+    m.fill(zero);
+    for l in 0..N {
+        m[(l, l)] = upper[l][l];
+        for k in l + 1..N {
+            m[(l, k)] = upper[l][k];
+            m[(k, l)] = upper[l][k].conj();
+        }
+    }
+    if let Some(slope) = slope {
+        slope[..N].copy_from_slice(&sums);
+    }
+    g
 }
 
 /// A valid upper bound on h(w) = max{w₁ tr(ā āᴴ V) + w₂ tr(b̄ b̄ᴴ V) : V ⪰ 0, diag V = 1}.
