@@ -50,7 +50,7 @@ const Z_ANGLES: usize = 16;
 /// on its own additions, and square roots and divisions go two lanes an instruction. A divisor
 /// of [`Z_ANGLES`], so that a magnitude's angles fill whole batches.
 const LANES: usize = 4;
-const _: () = assert!(Z_ANGLES % LANES == 0);
+const _: () = assert!(Z_ANGLES.is_multiple_of(LANES));
 /// Pattern-search rounds refining z (each tries the 4 neighbours and halves the steps when none
 /// is better): the kept value of the cold search before warm starts, under which the step ends
 /// at 1/4096 of the grid's at most, far below what moves the rate after the ascent.
