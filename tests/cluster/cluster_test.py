@@ -380,7 +380,7 @@ def main():
     # Throughput: HAProxy in front of the two survivors against one of them directly, on
     # the paper's map (41², about a millisecond a query: HAProxy's own cost shows) and on the
     # 1001² one. There the grid path is a 0.15 ms search and a 0.6 MB answer, whose relay
-    # through HAProxy costs about what the query does (0.67–0.80× on a 2.4 GHz host): reported.
+    # through HAProxy costs about what the query does (0.67–0.83× on a 2.4 GHz host): reported.
     # The any-angle path (an A* from the goal and Lazy Theta*, ~5 ms) is real work per query,
     # where the replicas share it and the proxy must not be the bottleneck: asserted, as the
     # compose test does.

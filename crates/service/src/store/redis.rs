@@ -31,9 +31,10 @@
 //! * `irs:checkpoint:<map id>`: a rate-map build's progress, a list of batches of solved grid
 //!   rows (`encoding::encode_rows`) its builder appends every [`crate::app::builder`] checkpoint
 //!   period and once more when a graceful stop interrupts it; the replica that takes the build
-//!   over copies those rows instead of solving them again, and the key goes when the build
-//!   ends (or [`CHECKPOINT_TTL_S`] after its last append). Outside the maps' budget: at most one
-//!   map's worth per running build;
+//!   over copies those rows instead of solving them again. The key goes once the built map is
+//!   shared, before the job reports done, or when a build ends otherwise (at the latest
+//!   [`CHECKPOINT_TTL_S`] after its last append). Outside the maps' budget: at most one map's
+//!   worth per running build;
 //! * the stream `irs:builds` with the consumer group `builders`: one entry per build. Every
 //!   replica reads it (`XREADGROUP`) when it has a free worker; an entry stays pending until
 //!   its build ends (`XACK`, then `XDEL`). The builder's heartbeat re-claims its own entry to
