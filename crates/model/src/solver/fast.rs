@@ -21,12 +21,12 @@
 //! apart — and polish the best two starts by the same coordinate ascent on the full objective.
 //! Either way the certificate ([`super::certificate`]) reports how far from optimal the result can be.
 //!
-//! Neighbouring cells of a map have nearly the same optimal *weighting* z of the two users
+//! Neighbouring cells of a map have nearly the same optimal *weighting* z of each pair
 //! (their phases differ completely: cells are several wavelengths apart), so a map starts each
-//! cell's pattern search from the previous cell's z ([`FamilyPoint`]) instead of the 400-point
-//! grid, and ascends from that start alone; [`super::solve_cell_warm`] keeps the answer only
-//! when the certificate vouches for it ([`super::WARM_START_ACCEPT_GAP`]), and otherwise runs
-//! the cold search too.
+//! pair's pattern search from the previous cell's z ([`FamilyPoint`]) instead of the 400-point
+//! grid, and ascends from the best start alone; [`super::solve_cell_warm`] keeps the answer only
+//! when the certificate vouches for it ([`super::WARM_START_ACCEPT_GAP`] with one SRU,
+//! [`super::WARM_START_PROVEN_GAP`] with more), and otherwise runs the cold search too.
 //!
 //! The searches compare the rate's monotone *score* 1 + SINR ([`RateModel::mru_score`]) and take
 //! one logarithm at the end.
@@ -82,39 +82,44 @@ pub struct FamilyPoint {
 
 /// Returns v = [e^{jθ}; 1] maximising the MRU's rate (continuous phases).
 pub fn solve(problem: &CellProblem, model: &RateModel) -> Vec<C64> {
-    solve_from(problem, model, None).0
+    solve_from(problem, model, &[]).0
 }
 
-/// [`solve`], warm-started from a neighbouring cell's family point when one is given and the
-/// cell has one SRU: the pattern search starts there (no grid) and only its result is
-/// ascended. Returns v and, with one SRU, the family point to hand to the next cell.
+/// [`solve`], warm-started from a neighbouring cell's family points when `hint` holds one for
+/// every (MRU, SRU) pair: each pair's pattern search starts at its point (no grid) and only the
+/// best start is ascended. Any other `hint` (none, or one of another scenario's length) means
+/// the cold search. Returns v and each pair's family point, to hand to the next cell.
 pub fn solve_from(
     problem: &CellProblem,
     model: &RateModel,
-    hint: Option<FamilyPoint>,
-) -> (Vec<C64>, Option<FamilyPoint>) {
+    hint: &[FamilyPoint],
+) -> (Vec<C64>, Vec<FamilyPoint>) {
     let mut eval = Evaluator::new(problem, model);
     let grid = PhaseGrid::new();
-    if let (Some(hint), 2) = (hint, problem.users()) {
-        let (_, mut v, point) = search_pair(&mut eval, problem, 1, Some(hint));
-        coordinate_ascent(&mut eval, &grid, problem, &mut v);
-        return (v, Some(point));
-    }
+    let pairs = problem.users() - 1;
+    let warm = hint.len() == pairs;
     let mut starts: Vec<(f64, Vec<C64>)> = Vec::new();
-    let mut first_point = None;
-    for k in 1..problem.users() {
-        let (value, v, point) = search_pair(&mut eval, problem, k, None);
-        first_point.get_or_insert(point);
+    let mut points = Vec::with_capacity(pairs);
+    for k in 1..=pairs {
+        let (value, v, point) = search_pair(&mut eval, problem, k, warm.then(|| hint[k - 1]));
+        points.push(point);
         starts.push((value, v));
     }
+    // A warm start is the neighbour's basin: its pattern search's answer is the one ascended.
+    if warm && pairs == 1 {
+        let mut v = starts.pop().map(|(_, v)| v).unwrap_or_default();
+        coordinate_ascent(&mut eval, &grid, problem, &mut v);
+        return (v, points);
+    }
     // The MRU's own optimum (z = 0) is in every pair's family; add each SRU's own (z → ∞).
-    for k in 1..problem.users() {
+    for k in 1..=pairs {
         let mut v = vec![C64::new(0.0, 0.0); problem.dim];
         family(problem, 0, k, None, &mut v);
         starts.push((eval.value(&v), v));
     }
     starts.sort_by(|a, b| b.0.total_cmp(&a.0));
-    starts.truncate(2);
+    // Cold, the grids may rank a start first whose basin is not the best: two are ascended.
+    starts.truncate(if warm { 1 } else { 2 });
     let mut best = (f64::NEG_INFINITY, starts[0].1.clone());
     for (_, mut v) in starts {
         let value = coordinate_ascent(&mut eval, &grid, problem, &mut v);
@@ -122,7 +127,7 @@ pub fn solve_from(
             best = (value, v);
         }
     }
-    (best.1, first_point.filter(|_| problem.users() == 2))
+    (best.1, points)
 }
 
 /// Element-wise coordinate ascent on the true objective from `v` (continuous phases), as the

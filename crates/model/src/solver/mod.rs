@@ -175,13 +175,25 @@ pub const WARM_START_ACCEPT_GAP: f64 = 1e-6;
 /// (about 10⁻¹⁰ either way on the paper's maps), so swapping would not raise the stored value.
 pub const LEAD_MARGIN: f64 = 1e-9;
 
+/// Certified gap (bit/s/Hz) within which a warm-started cell with K ≥ 2 SRUs is kept without
+/// the cold search. The cold search cannot beat the upper bound, so a kept answer is below it
+/// by at most this much: the values are the cold search's or better, to within what storing
+/// the phases as 16-bit codes moves them (see [`LEAD_MARGIN`]). Elsewhere the cold search runs
+/// too, the better answer is kept and the tighter of the two bounds; and the next cell starts
+/// cold, because where the relaxation is loose a warm answer is seldom proved and would cost a
+/// second certificate. K = 1 keeps a looser warm answer ([`WARM_START_ACCEPT_GAP`]): its
+/// certificate does not depend on the answer, while the K ≥ 2 one costs more than the search.
+pub const WARM_START_PROVEN_GAP: f64 = 1e-9;
+
 /// What a map carries from one cell to the next along a grid row: where the `fast` solver's
 /// family search ended in the last cell solved.
 #[derive(Debug, Clone, Default)]
 pub struct WarmStart {
-    family: Option<fast::FamilyPoint>,
-    /// The certified gap of the last cell solved: a warm answer whose gap is no larger is as
-    /// good as its neighbour's, where the relaxation itself is not tight.
+    /// One point per (MRU, SRU) pair; empty after a cell left unserved.
+    family: Vec<fast::FamilyPoint>,
+    /// The certified gap of the last cell solved. K = 1: a warm answer whose gap is no larger
+    /// is as good as its neighbour's, where the relaxation itself is not tight. K ≥ 2: above
+    /// [`WARM_START_PROVEN_GAP`], the next cell starts cold.
     gap: f64,
 }
 
@@ -198,8 +210,8 @@ pub fn solve_cell(
 /// [`solve_cell`] warm-started from the previous cell of a map (`warm`, updated for the next).
 /// The certificate comes first: a cell it proves infeasible needs no search, and the `fast`
 /// solver's warm start is kept only when the certificate shows it good enough
-/// ([`WARM_START_ACCEPT_GAP`]); otherwise the cold search runs as well and the better answer
-/// wins.
+/// ([`WARM_START_ACCEPT_GAP`] with one SRU, [`WARM_START_PROVEN_GAP`] with more); otherwise
+/// the cold search runs as well and the better answer wins.
 pub fn solve_cell_warm(
     problem: &CellProblem,
     model: &RateModel,
@@ -239,44 +251,49 @@ pub fn solve_cell_warm(
     }
     let (mut v, upper_bound) = match solver {
         SolverKind::Fast => {
-            let hint = warm.family.take();
-            let (mut v, mut point) = fast::solve_from(problem, model, hint);
-            let mut rate = rate_of(&v);
-            let mut upper_bound = match early {
-                Some(bound) => bound,
-                None => {
-                    // K ≥ 2: where the dual's best order beats the primal, start there too.
-                    let certified = certificate::certify(problem, model, Some(&v));
-                    if let Some(mut lead) = certified.lead
-                        && certified.upper_bound - rate > WARM_START_ACCEPT_GAP
-                    {
-                        fast::polish(problem, model, &mut lead);
-                        let lead_rate = rate_of(&lead);
-                        if lead_rate > rate + LEAD_MARGIN {
-                            (v, rate) = (lead, lead_rate);
-                        }
-                    }
-                    certified.upper_bound
+            let mut hint = std::mem::take(&mut warm.family);
+            if early.is_none() && warm.gap > WARM_START_PROVEN_GAP {
+                // K ≥ 2 next to a cell whose relaxation was loose: likely loose here too, so a
+                // warm answer would not be proved and the cold search would follow, with a
+                // second certificate (the dearest ones: up to 50 ms at K = 4). Cold alone.
+                hint.clear();
+            }
+            let (mut v, mut points, mut rate, mut upper_bound) = match early {
+                Some(bound) => {
+                    let (v, points) = fast::solve_from(problem, model, &hint);
+                    let rate = rate_of(&v);
+                    (v, points, rate, bound)
                 }
+                None => joint_search(problem, model, &hint, &mut rate_of),
             };
-            if hint.is_some() && upper_bound - rate > WARM_START_ACCEPT_GAP.max(warm.gap * 1.01) {
-                let (cold, cold_point) = fast::solve_from(problem, model, None);
-                let cold_rate = rate_of(&cold);
-                if cold_rate >= rate {
-                    (v, point, rate) = (cold, cold_point, cold_rate);
-                    if early.is_none() {
-                        upper_bound = upper_bound
-                            .min(certificate::certify(problem, model, Some(&v)).upper_bound);
+            // K = 1 also keeps a warm answer as loose as its neighbour's, where the relaxation
+            // itself is loose; K ≥ 2 keeps one only where it is proved optimal (see the consts).
+            let keep = match early {
+                Some(_) => WARM_START_ACCEPT_GAP.max(warm.gap * 1.01),
+                None => WARM_START_PROVEN_GAP,
+            };
+            if !hint.is_empty() && upper_bound - rate > keep {
+                let (cold, cold_points, cold_rate, cold_bound) = match early {
+                    Some(bound) => {
+                        let (v, points) = fast::solve_from(problem, model, &[]);
+                        let rate = rate_of(&v);
+                        // The K = 1 bound does not depend on the primal: no need to certify.
+                        (v, points, rate, bound)
                     }
+                    None => joint_search(problem, model, &[], &mut rate_of),
+                };
+                if cold_rate >= rate {
+                    (v, points, rate) = (cold, cold_points, cold_rate);
                 }
+                upper_bound = upper_bound.min(cold_bound);
             }
             // Only a served cell hands on its z: an infinite gap would make the next cell
             // accept any warm answer.
             let gap = upper_bound - rate;
             (warm.family, warm.gap) = if gap.is_finite() {
-                (point, gap)
+                (points, gap)
             } else {
-                (None, 0.0)
+                (Vec::new(), 0.0)
             };
             (v, upper_bound)
         }
@@ -310,6 +327,31 @@ pub fn solve_cell_warm(
         rate,
         upper_bound,
     }
+}
+
+/// K ≥ 2: the `fast` search from `hint` (see [`fast::solve_from`]) and the joint certificate
+/// of its answer; where the certificate's lead (the rounded dual of its best order) polishes to
+/// a better rate, that answer instead. Returns v, the pairs' family points, v's rate and the
+/// upper bound.
+fn joint_search(
+    problem: &CellProblem,
+    model: &RateModel,
+    hint: &[fast::FamilyPoint],
+    rate_of: &mut impl FnMut(&[C64]) -> f64,
+) -> (Vec<C64>, Vec<fast::FamilyPoint>, f64, f64) {
+    let (mut v, points) = fast::solve_from(problem, model, hint);
+    let mut rate = rate_of(&v);
+    let certified = certificate::certify(problem, model, Some(&v));
+    if let Some(mut lead) = certified.lead
+        && certified.upper_bound - rate > WARM_START_ACCEPT_GAP
+    {
+        fast::polish(problem, model, &mut lead);
+        let lead_rate = rate_of(&lead);
+        if lead_rate > rate + LEAD_MARGIN {
+            (v, rate) = (lead, lead_rate);
+        }
+    }
+    (v, points, rate, certified.upper_bound)
 }
 
 /// θ_n = ∠v_n in [0, 2π) for n < N.
