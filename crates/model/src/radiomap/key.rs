@@ -47,7 +47,10 @@ impl fmt::Display for MapKind {
 ///    into a face no longer block).
 /// 6: rate maps with two or more SRUs carry the joint dual bound, and their `fast` values may
 ///    be higher where the certificate's rounded dual found a better decoding order.
-pub const MODEL_VERSION: u32 = 6;
+/// 7: rate maps with two or more SRUs warm-start the `fast` search from the previous cell
+///    where the certificate proves the answer (values the same within 10⁻⁹ or higher, bounds
+///    the same within 10⁻⁹ or lower).
+pub const MODEL_VERSION: u32 = 7;
 
 /// Everything that defines a map; its hash is the map id.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
