@@ -253,7 +253,10 @@ pub fn build_seconds(scenario: &Scenario, key: &MapKey) -> f64 {
 /// 1.5 K². Fitted to the paper's multi-user floor with 1–4 SRUs (41², N = 60, NOMA; 2026-12-07,
 /// docs/performance.md "Several SRUs certified"): 0.46, 1.07, 2.60 and 5.33 s of CPU, ratios
 /// 1 : 2.3 : 5.7 : 11.7 against this weight's 1 : 3 : 6.8 : 12, so a map is over-estimated,
-/// not under.
+/// not under. Since K ≥ 2 cells are warm-started (performance.md "Several SRUs, warm where
+/// proved"), 0.46–0.50, 0.68, 2.21 and 4.02 s: 1 : 1.4 : 4.6 : 8.4, over-estimated further.
+/// The weight stays: a map over-estimated waits in the queue longer than it needs, while one
+/// under-estimated would overload the workers.
 fn fast_user_weight(srus: usize) -> f64 {
     let k = srus as f64;
     if srus <= 1 { 2.0 } else { 1.5 * k * k }
