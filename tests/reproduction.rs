@@ -238,10 +238,10 @@ fn warm_started_cells_match_the_cold_solver() {
 }
 
 /// With several SRUs a map keeps a cell's warm-started answer only where the certificate proves
-/// it within 10⁻⁹ bit/s/Hz of optimal (solver::WARM_START_PROVEN_GAP); elsewhere the cold search runs too and
-/// the better answer wins. So along grid rows solved as a map solves them, no cell's rate is
-/// below the cold solve of that cell by more than that gap, no bound is above the cold bound by
-/// more, and the warm answers do get kept (they differ from the cold ones).
+/// it within 10⁻⁹ bit/s/Hz of optimal (solver::WARM_START_PROVEN_GAP); elsewhere the cold
+/// search runs too and the better answer wins. So along grid rows solved as a map solves them,
+/// no cell's rate is below the cold solve of that cell by more than 10⁻⁹, no bound is above the
+/// cold bound by more, and the warm answers do get kept (they differ from the cold ones).
 #[test]
 fn several_srus_keep_a_warm_answer_only_where_it_is_proved() {
     for (srus, access) in [(2, Access::Noma), (3, Access::Noma), (3, Access::Oma)] {

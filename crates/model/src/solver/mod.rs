@@ -258,14 +258,17 @@ pub fn solve_cell_warm(
                 // second certificate (the dearest ones: up to 50 ms at K = 4). Cold alone.
                 hint.clear();
             }
-            let (mut v, mut points, mut rate, mut upper_bound) = match early {
+            // The search from `hint` ([] for cold) with its bound: K = 1's does not depend on
+            // the answer, so it is the one computed above; K ≥ 2 certifies the answer.
+            let mut search = |hint: &[fast::FamilyPoint]| match early {
                 Some(bound) => {
-                    let (v, points) = fast::solve_from(problem, model, &hint);
+                    let (v, points) = fast::solve_from(problem, model, hint);
                     let rate = rate_of(&v);
                     (v, points, rate, bound)
                 }
-                None => joint_search(problem, model, &hint, &mut rate_of),
+                None => joint_search(problem, model, hint, &mut rate_of),
             };
+            let (mut v, mut points, mut rate, mut upper_bound) = search(&hint);
             // K = 1 also keeps a warm answer as loose as its neighbour's, where the relaxation
             // itself is loose; K ≥ 2 keeps one only where it is proved optimal (see the consts).
             let keep = match early {
@@ -273,15 +276,7 @@ pub fn solve_cell_warm(
                 None => WARM_START_PROVEN_GAP,
             };
             if !hint.is_empty() && upper_bound - rate > keep {
-                let (cold, cold_points, cold_rate, cold_bound) = match early {
-                    Some(bound) => {
-                        let (v, points) = fast::solve_from(problem, model, &[]);
-                        let rate = rate_of(&v);
-                        // The K = 1 bound does not depend on the primal: no need to certify.
-                        (v, points, rate, bound)
-                    }
-                    None => joint_search(problem, model, &[], &mut rate_of),
-                };
+                let (cold, cold_points, cold_rate, cold_bound) = search(&[]);
                 if cold_rate >= rate {
                     (v, points, rate) = (cold, cold_points, cold_rate);
                 }
