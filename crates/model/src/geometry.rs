@@ -20,7 +20,7 @@ mod nearby;
 mod raster;
 mod sightlines;
 pub use nearby::Nearby;
-pub use raster::{Blocker, Raster};
+pub use raster::{Blocker, Horizon, Raster};
 pub use sightlines::SightLines;
 
 type P3 = Vector3<f64>;
@@ -439,10 +439,13 @@ impl Obstructions {
 
     /// `blocked[j]` = [`Obstructions::blocks_segment`] from `source` to each user of a grid
     /// row where `wanted[j]` holds (false elsewhere), bit for bit, a row at a time: what the
-    /// gain map's rows test (docs/model.md §2). `targets` is scratch kept by the caller.
+    /// gain map's rows test (docs/model.md §2). `horizon` is the floor plan's from `source`
+    /// ([`Raster::horizon`]), if any: the links it settles are not walked. `targets` is
+    /// scratch kept by the caller.
     pub fn blocks_row(
         &self,
         source: &P3,
+        horizon: Option<&Horizon>,
         users: RowOfUsers,
         wanted: &[bool],
         targets: &mut Vec<[f64; 2]>,
@@ -455,15 +458,26 @@ impl Obstructions {
         for wall in &self.walls {
             wall.block_row(source, users, targets, blocked);
         }
+        let Some(raster) = &self.raster else {
+            for (blocked, &wanted) in blocked.iter_mut().zip(wanted) {
+                *blocked &= wanted;
+            }
+            return;
+        };
         let mut last = raster::Blocker::default();
         for (j, blocked) in blocked.iter_mut().enumerate() {
-            let user = || P3::new(users.x, users.ys[j], users.z);
-            *blocked = wanted[j]
-                && (*blocked
-                    || self
-                        .raster
-                        .as_ref()
-                        .is_some_and(|r| r.blocks_after(source, &user(), &mut last)));
+            if !wanted[j] {
+                *blocked = false;
+                continue;
+            }
+            if *blocked {
+                continue;
+            }
+            let user = P3::new(users.x, users.ys[j], users.z);
+            *blocked = match horizon.and_then(|h| raster.settled(h, source, &user)) {
+                Some(blocked) => blocked,
+                None => raster.blocks_after(source, &user, &mut last),
+            };
         }
     }
 
@@ -877,13 +891,72 @@ pub(crate) mod tests {
             let (mut targets, mut blocked) = (Vec::new(), vec![true; ys.len()]);
             let source = P3::from(source);
             for x in xs {
-                scene.blocks_row(&source, RowOfUsers { x, ys: &ys, z }, &wanted, &mut targets, &mut blocked);
+                scene.blocks_row(&source, None, RowOfUsers { x, ys: &ys, z }, &wanted, &mut targets, &mut blocked);
                 for (j, &y) in ys.iter().enumerate() {
                     let expected = wanted[j] && scene.blocks_segment(&source, &P3::new(x, y, z));
                     prop_assert_eq!(blocked[j], expected, "{:?} to ({}, {}, {})", source, x, y, z);
                 }
             }
         }
+    }
+
+    /// A floor plan's rows, with the source's horizon settling what it can, are blocked as each
+    /// link is: from the AP and from a surface mounted on a wall pixel's edge, to rows of users
+    /// on and off the pixel lattice, at heights below and above the plan's obstacles.
+    #[test]
+    fn a_floor_plans_rows_are_blocked_as_each_link_is() {
+        let (width, height, pixel) = (160, 120, 0.05);
+        let mut occupied = vec![false; width * height];
+        for r in 0..height {
+            for c in 0..width {
+                let wall = c >= 150 || r < 4 || (r == 60 && c > 20 && c < 120);
+                let rack = (c / 10) % 3 == 1 && (r / 8) % 3 != 0 && c < 140;
+                occupied[r * width + c] = wall || rack;
+            }
+        }
+        let raster = Raster::new(width, height, pixel, [-4.0, -3.0], 2.0, &occupied);
+        let scene = Obstructions {
+            raster: Some(std::sync::Arc::new(raster)),
+            ..Obstructions::default()
+        };
+        let mut settled = 0;
+        // The AP in the open; a surface on the east wall's face (x = 150 pixels).
+        for source in [
+            P3::new(-3.74, -1.1, 1.5),
+            P3::new(-4.0 + 150.0 * pixel, -0.2, 1.5),
+        ] {
+            let horizon = scene.raster.as_ref().unwrap().horizon(&source);
+            assert!(horizon.is_some(), "{source:?}");
+            for z in [0.5, 1.0, 2.5] {
+                for step in 0..45 {
+                    let x = -4.0 + step as f64 * 0.17 + if step % 2 == 0 { 0.0 } else { 0.013 };
+                    let ys: Vec<f64> = (0..70).map(|j| -3.1 + j as f64 * 0.09).collect();
+                    let wanted = vec![true; ys.len()];
+                    let (mut targets, mut blocked) = (Vec::new(), vec![false; ys.len()]);
+                    let users = RowOfUsers { x, ys: &ys, z };
+                    scene.blocks_row(
+                        &source,
+                        horizon.as_ref(),
+                        users,
+                        &wanted,
+                        &mut targets,
+                        &mut blocked,
+                    );
+                    for (j, &y) in ys.iter().enumerate() {
+                        let user = P3::new(x, y, z);
+                        let expected = scene.blocks_segment(&source, &user);
+                        assert_eq!(blocked[j], expected, "{source:?} to {user:?}");
+                        let raster = scene.raster.as_ref().unwrap();
+                        settled += usize::from(
+                            raster
+                                .settled(horizon.as_ref().unwrap(), &source, &user)
+                                .is_some(),
+                        );
+                    }
+                }
+            }
+        }
+        assert!(settled > 10_000, "{settled} links settled by the horizons");
     }
 
     /// The occupancy of `grid` as `radiomap::occupancy` computes it, for obstructions without

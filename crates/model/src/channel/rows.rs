@@ -3,7 +3,7 @@
 //! ([`crate::vecmath`]), with working arrays kept between rows so a row allocates nothing.
 
 use super::{ChannelModel, LinkBudget, P3, path_loss_db_at};
-use crate::geometry::RowOfUsers;
+use crate::geometry::{RowOfUsers, SightLines};
 
 /// `out[k] = √L` = 10^(−PL/20) of links of squared length `d2[k]` (m², clamped to ≥ 1 m as
 /// [`path_loss_db`] does, the InF-SH law of eqs. 41–42 in docs/model.md §2) and line of sight
@@ -136,7 +136,7 @@ impl ChannelModel {
             for (served, &skipped) in served.iter_mut().zip(skip) {
                 *served = !skipped;
             }
-            self.links_from(&self.ap, users, served, links);
+            self.links_from(&self.ap_sight, users, served, links);
             let direct_scattered = [1.0, 1.0 / (self.kappa + 1.0)]; // L/(K+1) over L, NLoS and LoS
             for (j, (a, t)) in amplitude.iter_mut().zip(tau.iter_mut()).enumerate() {
                 let (root_gain, los) = (links.root_gain[j], links.los[j]);
@@ -157,7 +157,7 @@ impl ChannelModel {
                 let user = P3::new(x, users.ys[j], height);
                 *served = !skip[j] && (user - irs.centre).dot(&irs.normal) > 0.0;
             }
-            self.links_from(&irs.centre, users, served, links);
+            self.links_from(&irs.sight, users, served, links);
             // ‖w̃_s‖₁ over √L_IM for a LoS user link (eq. 12, all N_s sub-surfaces alike), and
             // Lemma 1's scattered power over L_IM for a NLoS and a LoS user link.
             let reflected =
@@ -179,10 +179,17 @@ impl ChannelModel {
         }
     }
 
-    /// The links from `source` to the users of a row: squared lengths, line of sight
+    /// The links from `sight`'s source to the users of a row: squared lengths, line of sight
     /// (blockage tested where `wanted[j]` holds, a row at a time; elsewhere NLoS, untested)
     /// and √L of each.
-    fn links_from(&self, source: &P3, users: RowOfUsers, wanted: &[bool], links: &mut RowLinks) {
+    fn links_from(
+        &self,
+        sight: &SightLines,
+        users: RowOfUsers,
+        wanted: &[bool],
+        links: &mut RowLinks,
+    ) {
+        let source = sight.source();
         for (d2, &y) in links.d2.iter_mut().zip(users.ys) {
             *d2 = (P3::new(users.x, y, users.z) - source).norm_squared();
         }
@@ -192,8 +199,9 @@ impl ChannelModel {
             d2,
             root_gain,
         } = links;
+        let horizon = sight.horizon(&self.obstructions);
         self.obstructions
-            .blocks_row(source, users, wanted, targets, los);
+            .blocks_row(source, horizon, users, wanted, targets, los);
         for (los, &wanted) in los.iter_mut().zip(wanted) {
             *los = wanted && !*los;
         }

@@ -11,7 +11,8 @@
 //! has no horizontal extent (a user straight below the source). The raster of a floor plan is
 //! walked as before: its cost is already the pixels crossed.
 
-use super::{Aabb, Obstructions, P3, Wall};
+use super::{Aabb, Horizon, Obstructions, P3, Wall};
+use std::sync::OnceLock;
 
 /// Sectors of the full turn. At 1024 a sector is 0.35°: a 2 m machine 20 m from the AP spans
 /// 5.7°, 17 sectors, so a link meets the one or two obstacles in its direction instead of all
@@ -36,6 +37,9 @@ pub struct SightLines {
     box_in_sector: Vec<u32>,
     wall_start: Vec<u32>,
     wall_in_sector: Vec<u32>,
+    /// The floor plan's horizon from the source ([`SightLines::horizon`]), worked out on first
+    /// use: a map's rows use it, a link tested on its own does not.
+    horizon: OnceLock<Option<Horizon>>,
 }
 
 impl SightLines {
@@ -54,7 +58,19 @@ impl SightLines {
             box_in_sector,
             wall_start,
             wall_in_sector,
+            horizon: OnceLock::new(),
         }
+    }
+
+    /// The floor plan's [`Horizon`] from the source (`None` without a plan, or from a source on
+    /// an occupied pixel); `obstructions` are the ones this index was built from.
+    pub fn horizon(&self, obstructions: &Obstructions) -> Option<&Horizon> {
+        self.horizon
+            .get_or_init(|| {
+                let raster = obstructions.raster.as_ref()?;
+                raster.horizon(&self.source)
+            })
+            .as_ref()
     }
 
     /// The point every link of this index starts at.
@@ -107,17 +123,23 @@ impl SightLines {
     /// the sector starts of each kind present and each obstacle listed in 100 sectors (35°): on
     /// the paper's 20 m floor its five 4 m boxes are listed in about 73 sectors per source on
     /// average (from the map's weighed bytes), a 2 m machine 20 m away in 17.
-    pub fn estimated_heap_bytes(boxes: usize, walls: usize) -> usize {
+    /// With a floor plan, a map's rows also work out the plan's horizon from the source.
+    pub fn estimated_heap_bytes(boxes: usize, walls: usize, floor_plan: bool) -> usize {
         let starts = 4 * (SECTORS + 1) * (usize::from(boxes > 0) + usize::from(walls > 0));
-        starts + 4 * 100 * (boxes + walls)
+        starts + 4 * 100 * (boxes + walls) + if floor_plan { Horizon::HEAP_BYTES } else { 0 }
     }
 
-    /// Bytes of the index.
+    /// Bytes of the index, and of the horizon once worked out.
     pub fn heap_bytes(&self) -> usize {
         4 * (self.box_start.capacity()
             + self.wall_start.capacity()
             + self.box_in_sector.capacity()
             + self.wall_in_sector.capacity())
+            + self
+                .horizon
+                .get()
+                .and_then(Option::as_ref)
+                .map_or(0, Horizon::heap_bytes)
     }
 }
 
@@ -132,7 +154,7 @@ fn in_sector<'a>(start: &[u32], listed: &'a [u32], s: usize) -> &'a [u32] {
 /// A monotone stand-in for atan2(dy, dx) mapped to [0, 4): 0 along +x, 1 along +y, 2 along −x,
 /// 3 along −y, and exactly 2 more (mod 4) for the opposite direction. One division instead of
 /// an arctangent; sectors need only the order of directions, not the angle.
-fn pseudo_angle(dx: f64, dy: f64) -> f64 {
+pub(super) fn pseudo_angle(dx: f64, dy: f64) -> f64 {
     let p = dy / (dx.abs() + dy.abs());
     if dx >= 0.0 {
         if dy >= 0.0 { p } else { 4.0 + p }
