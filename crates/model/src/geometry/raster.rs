@@ -464,8 +464,8 @@ const SHUT_DEPTH_PX: f64 = 1e-3;
 pub struct Horizon {
     /// The source in pixel coordinates, as [`Raster::trace`] sees it (snapped).
     source: (f64, f64),
-    open: Vec<f64>,
-    shut: Vec<f64>,
+    /// Per bin, `open` and `shut` side by side: a link reads both from one cache line.
+    bins: Vec<[f64; 2]>,
 }
 
 impl Horizon {
@@ -474,13 +474,15 @@ impl Horizon {
 
     /// Bytes of the bins.
     pub fn heap_bytes(&self) -> usize {
-        (self.open.capacity() + self.shut.capacity()) * std::mem::size_of::<f64>()
+        self.bins.capacity() * std::mem::size_of::<[f64; 2]>()
     }
 }
 
 /// The bin of a pseudo-angle in [0, 4) (or of one a little outside, wrapped by the caller).
+/// The inline [`floor`]: `f64::floor` is a libm call, once per link of a map's rows.
+#[inline]
 fn horizon_bin(angle: f64) -> i64 {
-    (angle * (HORIZON_BINS as f64 / 4.0)).floor() as i64
+    floor(angle * (HORIZON_BINS as f64 / 4.0))
 }
 
 /// A distance (squared) within a margin far above rounding: `a` surely below `b`.
@@ -497,9 +499,9 @@ impl Raster {
         if self.interior_at(su, sv) {
             return None;
         }
-        let bins = HORIZON_BINS as i64;
-        let mut open = vec![f64::INFINITY; HORIZON_BINS];
-        let mut shut = vec![f64::INFINITY; HORIZON_BINS];
+        let count = HORIZON_BINS as i64;
+        // [open, shut] per bin.
+        let mut bins = vec![[f64::INFINITY; 2]; HORIZON_BINS];
         // The cone of directions from the source to the square [x0, x1] × [y0, y1] (which
         // does not hold the source in its interior, so the cone is at most a half turn wide,
         // when the source is on an edge): its ends as pseudo-angles, measured from the
@@ -529,8 +531,8 @@ impl Raster {
             let near = dx * dx + dy * dy;
             let (lo, hi) = cone(x0, x0 + 1.0, y0, y0 + 1.0);
             for b in horizon_bin(lo) - 1..=horizon_bin(hi) + 1 {
-                let b = b.rem_euclid(bins) as usize;
-                open[b] = open[b].min(near);
+                let b = b.rem_euclid(count) as usize;
+                bins[b][0] = bins[b][0].min(near);
             }
             // The bins whose every direction (widened by a bin each side) crosses the pixel
             // shrunk by SHUT_DEPTH_PX: those lying inside its cone, a bin in. (Edge pixels
@@ -544,15 +546,14 @@ impl Raster {
                 let far_y = (y0 - sv).abs().max((y0 + 1.0 - sv).abs());
                 let far = far_x * far_x + far_y * far_y;
                 for b in first..=last {
-                    let b = b.rem_euclid(bins) as usize;
-                    shut[b] = shut[b].min(far);
+                    let b = b.rem_euclid(count) as usize;
+                    bins[b][1] = bins[b][1].min(far);
                 }
             }
         }
         Some(Horizon {
             source: (su, sv),
-            open,
-            shut,
+            bins,
         })
     }
 
@@ -567,12 +568,13 @@ impl Raster {
         }
         let d2 = du * du + dv * dv;
         let bin = horizon_bin(pseudo_angle(du, dv)).clamp(0, HORIZON_BINS as i64 - 1) as usize;
-        if surely_below(d2, horizon.open[bin]) {
+        let [open, shut] = horizon.bins[bin];
+        if surely_below(d2, open) {
             return Some(false);
         }
         // Shut only where the whole link is walked: both ends strictly below the obstacles.
         let below = |z: f64| z > 0.0 && z < self.obstacle_height;
-        if below(source[2]) && below(b[2]) && surely_below(horizon.shut[bin], d2) {
+        if below(source[2]) && below(b[2]) && surely_below(shut, d2) {
             return Some(true);
         }
         None
