@@ -138,8 +138,9 @@ proptest! {
         y in 0.0..4.0f64,
         z in 0.2..2.8f64,
         angle in 0.0..std::f64::consts::TAU,
-        // Walls 0.8 m long kept inside the room and clear of the AP at (0.5, 3.5).
-        wall in (1.5..5.0f64, 1.0..3.0f64, 0.0..std::f64::consts::PI, 0.05..0.3f64),
+        // Walls 0.8 m long (and up to 0.3 m thick) kept inside the room and clear of the AP
+        // at (0.5, 3.5) and of the SRU at (5.5, 3.5): they end before x = 5.3 + 0.15.
+        wall in (1.5..4.5f64, 1.0..3.0f64, 0.0..std::f64::consts::PI, 0.05..0.3f64),
         within in 0.1..2.0f64,
     ) {
         let (wx, wy, wa, wt) = wall;
