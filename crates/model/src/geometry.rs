@@ -474,7 +474,7 @@ impl Obstructions {
                 continue;
             }
             let user = P3::new(users.x, users.ys[j], users.z);
-            *blocked = match horizon.and_then(|h| raster.settled(h, source, &user)) {
+            *blocked = match horizon.and_then(|h| raster.settled(h, &user)) {
                 Some(blocked) => blocked,
                 None => raster.blocks_after(source, &user, &mut last),
             };
@@ -947,11 +947,8 @@ pub(crate) mod tests {
                         let expected = scene.blocks_segment(&source, &user);
                         assert_eq!(blocked[j], expected, "{source:?} to {user:?}");
                         let raster = scene.raster.as_ref().unwrap();
-                        settled += usize::from(
-                            raster
-                                .settled(horizon.as_ref().unwrap(), &source, &user)
-                                .is_some(),
-                        );
+                        settled +=
+                            usize::from(raster.settled(horizon.as_ref().unwrap(), &user).is_some());
                     }
                 }
             }

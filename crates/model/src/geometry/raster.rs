@@ -60,7 +60,7 @@ impl Raster {
         let edges = (0..width * height)
             .filter(|&k| {
                 let (c, r) = (k % width, k / width);
-                // An occupied pixel with clearance 1 around it is next to a free one.
+                // Occupied, with a free pixel (clearance ≠ 0) among the 3 × 3 around it.
                 clearance[k] == 0
                     && (c == 0
                         || r == 0
@@ -464,6 +464,8 @@ const SHUT_DEPTH_PX: f64 = 1e-3;
 pub struct Horizon {
     /// The source in pixel coordinates, as [`Raster::trace`] sees it (snapped).
     source: (f64, f64),
+    /// Whether the source is strictly below the obstacles' top: only then may a bin shut.
+    source_below: bool,
     /// Per bin, `open` and `shut` side by side: a link reads both from one cache line.
     bins: Vec<[f64; 2]>,
 }
@@ -553,14 +555,20 @@ impl Raster {
         }
         Some(Horizon {
             source: (su, sv),
+            source_below: self.below_obstacles(source[2]),
             bins,
         })
     }
 
-    /// What [`Raster::blocks`] answers for the link from the horizon's `source` to `b`, when
+    /// Whether height `z` lies strictly between the floor and the obstacles' top.
+    fn below_obstacles(&self, z: f64) -> bool {
+        z > 0.0 && z < self.obstacle_height
+    }
+
+    /// What [`Raster::blocks`] answers for the link from the horizon's source to `b`, when
     /// the horizon settles it: `Some(false)` for a link surely in the open, `Some(true)` for
     /// one surely through an occupied pixel; `None` when it must be walked.
-    pub fn settled(&self, horizon: &Horizon, source: &P3, b: &P3) -> Option<bool> {
+    pub fn settled(&self, horizon: &Horizon, b: &P3) -> Option<bool> {
         let (u, v) = self.to_pixels(b[0], b[1]);
         let (du, dv) = (u - horizon.source.0, v - horizon.source.1);
         if du == 0.0 && dv == 0.0 {
@@ -573,8 +581,7 @@ impl Raster {
             return Some(false);
         }
         // Shut only where the whole link is walked: both ends strictly below the obstacles.
-        let below = |z: f64| z > 0.0 && z < self.obstacle_height;
-        if below(source[2]) && below(b[2]) && surely_below(shut, d2) {
+        if horizon.source_below && self.below_obstacles(b[2]) && surely_below(shut, d2) {
             return Some(true);
         }
         None
@@ -1011,7 +1018,7 @@ mod tests {
             };
             for user in users {
                 let b = at(user);
-                if let Some(blocked) = r.settled(&horizon, &a, &b) {
+                if let Some(blocked) = r.settled(&horizon, &b) {
                     prop_assert_eq!(blocked, plain(&r, &a, &b), "{:?} → {:?}", a, b);
                 }
             }
@@ -1034,7 +1041,7 @@ mod tests {
                     oy + 0.1 * j as f64 + 0.029,
                     1.0,
                 );
-                match r.settled(&horizon, &a, &b) {
+                match r.settled(&horizon, &b) {
                     Some(false) => open += 1,
                     Some(true) => shut += 1,
                     None => {}
