@@ -198,7 +198,7 @@ pub(crate) fn format_phases(
         match (format, precision.decimals()) {
             (PhaseFormat::Codes, _) => phases.to_codes(),
             (PhaseFormat::Radians, None) => phases,
-            (PhaseFormat::Radians, Some(decimals)) => phases.to_decimals(decimals),
+            (PhaseFormat::Radians, Some(decimals)) => phases.into_decimals(decimals),
         }
     })
 }
