@@ -121,12 +121,15 @@ impl RoundedPhases {
             text[at] = b']';
             // SAFETY: the writers above put only digits, '.', ',' and brackets in `text`: ASCII,
             // so UTF-8 (checking it was 2 % of writing a long path's answer).
-            let text = unsafe { std::str::from_utf8_unchecked(&text[..at + 1]) }.to_owned();
+            let written = unsafe { std::str::from_utf8_unchecked(&text[..at + 1]) }.to_owned();
             debug_assert!(
-                serde_json::from_str::<Vec<Vec<f64>>>(&text).is_ok(),
-                "{text}"
+                serde_json::from_str::<Vec<Vec<f64>>>(&written).is_ok(),
+                "{written}"
             );
-            text
+            if text.len() > SCRATCH_KEPT_BYTES {
+                *text = Vec::new();
+            }
+            written
         })
     }
 
@@ -142,9 +145,15 @@ impl RoundedPhases {
 
 thread_local! {
     /// Where [`RoundedPhases::text`] writes, kept by each thread: as long as the longest text
-    /// it has written (one waypoint's phases).
+    /// it has written (one waypoint's phases), up to [`SCRATCH_KEPT_BYTES`].
     static SCRATCH: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
 }
+
+/// The longest buffer a thread keeps for [`RoundedPhases::text`]: the phases of about 9 000
+/// elements at four decimals. A scenario may have 200 000 (1.4 MB of text a waypoint); a
+/// thread does not hold that much for good, and such a waypoint's text is written in a buffer
+/// of its own.
+const SCRATCH_KEPT_BYTES: usize = 1 << 16;
 
 /// Written as its JSON text, which the serialiser copies into its output.
 impl Serialize for RoundedPhases {
