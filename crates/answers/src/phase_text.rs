@@ -7,9 +7,9 @@
 //! of 10⁻ᵈ rad and that integer's digits are the text. Going through a rounded f64 and a
 //! general float formatter, number by number, was a quarter of the server's CPU on path queries
 //! (perf, paper map, 16 connections, every query new). The text is written as the answer is
-//! serialised, one waypoint at a time, and copied straight into the body: written ahead of
-//! time, each waypoint's text was an allocation kept until the body was written, and those
-//! allocations cost more than writing the digits.
+//! serialised, one waypoint at a time, in a buffer the thread keeps, and copied from there
+//! into the body: written ahead of time, each waypoint's text was an allocation kept until
+//! the body was written, and those allocations cost more than writing the digits.
 
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
@@ -374,7 +374,7 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
     // groups after it; the next byte written overwrites what it does not keep. The k-th of n
     // numbers starts at most 1 + k·(4·groups + 3) bytes in, so every byte written lies within
     // `surface_len`. The writes below are unchecked on the strength of it: bounds checks were
-    // a third of the time a phase.
+    // a quarter of the time a phase.
     assert!(out.len() >= surface_len(D, phases.len()));
     let out = out.as_mut_ptr();
     // SAFETY (every write below): at the offsets bounded above.
