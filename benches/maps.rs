@@ -467,7 +467,10 @@ fn placement(c: &mut Criterion) {
 
 /// A path query's answer on the paper map (−10,0 → 10,0 at −62 dB: 41 waypoints × 60
 /// phases), as the service makes it on a miss of its answer cache: the indexed search, the
-/// waypoints' eq. 11 phases, the phases written at a precision, the JSON body.
+/// waypoints' eq. 11 phases, the phases written at a precision, the JSON body. Decimals are
+/// written as the body is (`phase_text::RoundedPhases`), so `write_phases_1e-4` times only
+/// their preparation and the `body_*` benches their text; codes are written by
+/// `write_phases`.
 fn path_answer(c: &mut Criterion) {
     let s = paper("paper-single-user", |_| {});
     let key = MapKey::gain("bench", &s, PhaseMode::Continuous).unwrap();
