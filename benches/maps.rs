@@ -9,7 +9,7 @@
 //! `RAYON_NUM_THREADS=1 cargo bench`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use irs_answers::path::write_phases;
+use irs_answers::path::{CheckedPath, write_phases};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::scenario::ScenarioDocument;
 use irs_model::channel::ChannelModel;
@@ -520,7 +520,11 @@ fn path_answer(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter(|| {
                 let path = write_phases(&s, &map, plan(), PhaseFormat::Radians, precision);
-                serde_json::to_vec(&path).unwrap()
+                CheckedPath {
+                    path,
+                    monte_carlo: None,
+                }
+                .to_json()
             })
         });
     }
@@ -554,10 +558,11 @@ fn path_answer(c: &mut Criterion) {
                     PhaseFormat::Radians,
                     PhasePrecision::TenthMilli,
                 );
-                // Sized up front as the service sizes it.
-                let mut body = Vec::with_capacity(irs_answers::path::body_capacity(&path));
-                serde_json::to_writer(&mut body, &path).unwrap();
-                body
+                CheckedPath {
+                    path,
+                    monte_carlo: None,
+                }
+                .to_json()
             },
             criterion::BatchSize::SmallInput,
         )

@@ -19,7 +19,7 @@ use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::render::{self, RenderOptions};
 use irs_answers::route::{self, RouteFormat};
 use irs_answers::scenario::{Document, ScenarioDocument};
-use irs_answers::timing::Timed;
+use irs_answers::timing::{self, Timed};
 use irs_answers::vda5050;
 use irs_model::input::{FieldError, parse_finite, parse_point};
 use irs_model::montecarlo::MAX_DRAWS;
@@ -499,10 +499,10 @@ fn print_json(value: &impl Serialize) -> Result<(), Failure> {
 
 /// Writes `text` to standard output. A reader that stopped reading (`| head`) is not an error:
 /// what it wanted it has, as for any Unix filter; `print!` would panic there.
-fn print_text(text: &str) -> Result<(), Failure> {
+fn print_text(text: &[u8]) -> Result<(), Failure> {
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+    match out.write_all(text).and_then(|()| out.flush()) {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
             Err(Failure::runtime(format!("writing the answer: {e}")))
         }
@@ -648,9 +648,17 @@ pub fn run_plan(args: &PlanArgs) -> Result<(), Failure> {
             .unwrap_or_else(|| "infeasible".into())
     });
     match args.output {
-        RouteFormat::Json => print_json(&Timed::since(started, CheckedPath { path, monte_carlo }))?,
+        RouteFormat::Json => {
+            let took_ms = timing::took_ms(started);
+            let mut body = CheckedPath { path, monte_carlo }.to_json();
+            // Reopened for took_ms, last as in every timed answer.
+            body.pop();
+            timing::close_with_took_ms(&mut body, took_ms);
+            body.push(b'\n');
+            print_text(&body)?
+        }
         RouteFormat::NavMsgsPath => print_json(&route::nav_msgs_path(&path))?,
-        RouteFormat::Csv => print_text(&route::csv(&path))?,
+        RouteFormat::Csv => print_text(route::csv(&path).as_bytes())?,
         // No route, no order: the exit status says so.
         RouteFormat::Vda5050Order if !path.feasible => {}
         RouteFormat::Vda5050Order => print_json(

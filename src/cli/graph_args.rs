@@ -63,7 +63,7 @@ pub fn run_graph(args: &GraphArgs) -> Result<(), Failure> {
 fn print_graph(graph: Annotated) -> Result<(), Failure> {
     match graph {
         Annotated::GeoJson(graph) => print_json(&graph),
-        Annotated::Yaml(text) => print_text(&text),
+        Annotated::Yaml(text) => print_text(text.as_bytes()),
     }
 }
 

@@ -30,6 +30,7 @@ pub mod json;
 pub mod map;
 pub mod mapfile;
 pub mod path;
+pub mod path_json;
 pub mod phase_text;
 pub mod render;
 pub mod route;

@@ -10,17 +10,14 @@ use irs_model::montecarlo::{self, MonteCarloReport};
 use irs_model::planner::{PathAnswer, Threshold, route_graph};
 use irs_model::radiomap::{Cancelled, Progress, RadioMap, Unit};
 use irs_model::scenario::Scenario;
-use serde::Serialize;
 
 /// A path answer with its optional Monte Carlo check: the body of `irs-planner plan` and of
-/// `POST /v1/paths`.
-#[derive(Debug, Clone, Serialize)]
+/// `POST /v1/paths`, written by [`CheckedPath::to_json`].
+#[derive(Debug, Clone)]
 pub struct CheckedPath {
-    /// The planner's answer, phases written as asked; flattened into the body.
-    #[serde(flatten)]
+    /// The planner's answer, phases written as asked; its fields are the body's.
     pub path: PathAnswer<SurfacePhases>,
     /// The Monte Carlo check of the phases as sent (docs/model.md §8), when asked for.
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<MonteCarloReport>,
 }
 
@@ -174,17 +171,6 @@ pub fn write_phases(
         }
     }
     written
-}
-
-/// About the bytes of `path`'s JSON body: the phases' text and ~220 bytes per waypoint's other
-/// fields, so that a buffer sized by it is not regrown (and copied) a dozen times on the way to
-/// hundreds of kilobytes.
-pub fn body_capacity(path: &PathAnswer<SurfacePhases>) -> usize {
-    512 + path
-        .waypoints
-        .iter()
-        .map(|w| 220 + w.config.phases.json_len_hint())
-        .sum::<usize>()
 }
 
 /// Every waypoint's IRS phases written as `format` asks, radians rounded to `precision`.

@@ -6,37 +6,35 @@
 //! from each phase to its digits in one pass: θ is rounded once to an integer number of steps
 //! of 10⁻ᵈ rad and that integer's digits are the text. Going through a rounded f64 and a
 //! general float formatter, number by number, was a quarter of the server's CPU on path queries
-//! (perf, paper map, 16 connections, every query new). The text is written as the answer is
-//! serialised, one waypoint at a time, in a buffer the thread keeps, and copied from there
-//! into the body: written ahead of time, each waypoint's text was an allocation kept until
-//! the body was written, and those allocations cost more than writing the digits.
+//! (perf, paper map, 16 connections, every query new). The text is written straight into the
+//! answer's body as it is written ([`crate::path_json`]): written ahead of time, each
+//! waypoint's text was an allocation kept until the body was written, and those allocations
+//! cost more than writing the digits; written through serde, it took a string of its own and
+//! a second copy.
 
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
 use serde::{Deserialize, Serialize};
-use serde_json::value::RawValue;
-use std::cell::RefCell;
 use std::f64::consts::TAU;
+use std::mem::MaybeUninit;
 use std::str::FromStr;
 
 use irs_model::vecmath::ROUNDING_SHIFT;
 
 /// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
 /// each; none for phases `none`), in radians or as the compact codes a path answer may be
-/// asked for ([`PhaseFormat`]).
-#[derive(Debug, Clone, Serialize)]
+/// asked for ([`PhaseFormat`]); written as a waypoint's field by [`SurfacePhases::write_field`].
+#[derive(Debug, Clone)]
 pub enum SurfacePhases {
-    /// θ in [0, 2π).
-    #[serde(rename = "irs_phases_rad")]
+    /// θ in [0, 2π), written as `irs_phases_rad`.
     Radians(Vec<Vec<f64>>),
-    /// The same JSON array of arrays as `Radians`, each phase rounded to d decimals and
-    /// written as that decimal ([`SurfacePhases::into_decimals`]).
-    #[serde(rename = "irs_phases_rad")]
+    /// The same JSON array of arrays as `Radians` (`irs_phases_rad`), each phase rounded to d
+    /// decimals and written as that decimal ([`SurfacePhases::into_decimals`]).
     Decimals(RoundedPhases),
     /// Each surface's phases as 16-bit codes c, θ = 2π·c/2¹⁶ ([`irs_model::phases::encode_phase`],
     /// within π/2¹⁶ of the phase), little-endian, two bytes a phase, in base64 (RFC 4648 with
-    /// padding): 2.7 characters a phase against 6–7 for a decimal at 10⁻⁴ rad.
-    #[serde(rename = "irs_phase_codes")]
+    /// padding), written as `irs_phase_codes`: 2.7 characters a phase against 6–7 for a decimal
+    /// at 10⁻⁴ rad.
     Codes(Vec<String>),
 }
 
@@ -87,9 +85,9 @@ impl RoundedPhases {
             .collect()
     }
 
-    /// The JSON text: an array of arrays of decimals.
-    fn text(&self) -> String {
-        let write: fn(&[f64], &mut [u8]) -> usize = match self.decimals {
+    /// Appends the JSON text, an array of arrays of decimals, to `out`.
+    fn write_json(&self, out: &mut Vec<u8>) {
+        let write: fn(&[f64], &mut [MaybeUninit<u8>]) -> usize = match self.decimals {
             1 => write_surface::<1>,
             2 => write_surface::<2>,
             3 => write_surface::<3>,
@@ -101,36 +99,29 @@ impl RoundedPhases {
             9 => write_surface::<9>,
             _ => unreachable!("decimals checked by into_decimals"),
         };
-        // Written in a buffer kept by the thread, then copied at its length: one allocation
-        // a waypoint, of the size it keeps, where a zeroed one at the longest, then shrunk,
-        // made writing a long path's phases 1.25 times slower.
-        SCRATCH.with_borrow_mut(|text| {
-            let len = self.max_len();
-            if text.len() < len {
-                text.resize(len, 0);
+        // Written in place, in room reserved at the longest, so that nothing is zeroed first
+        // and nothing copied after.
+        out.reserve(self.max_len());
+        let start = out.len();
+        let room = out.spare_capacity_mut();
+        room[0].write(b'[');
+        let mut at = 1;
+        for (s, surface) in self.radians.iter().enumerate() {
+            if s > 0 {
+                room[at].write(b',');
+                at += 1;
             }
-            text[0] = b'[';
-            let mut at = 1;
-            for (s, surface) in self.radians.iter().enumerate() {
-                if s > 0 {
-                    text[at] = b',';
-                    at += 1;
-                }
-                at += write(surface, &mut text[at..]);
-            }
-            text[at] = b']';
-            // SAFETY: the writers above put only digits, '.', ',' and brackets in `text`: ASCII,
-            // so UTF-8 (checking it was 2 % of writing a long path's answer).
-            let written = unsafe { std::str::from_utf8_unchecked(&text[..at + 1]) }.to_owned();
-            debug_assert!(
-                serde_json::from_str::<Vec<Vec<f64>>>(&written).is_ok(),
-                "{written}"
-            );
-            if text.len() > SCRATCH_KEPT_BYTES {
-                *text = Vec::new();
-            }
-            written
-        })
+            at += write(surface, &mut room[at..]);
+        }
+        room[at].write(b']');
+        // SAFETY: the first at + 1 bytes of the spare room were written above (a surface's
+        // writer writes every byte below the length it returns).
+        unsafe { out.set_len(start + at + 1) };
+        debug_assert!(
+            serde_json::from_slice::<Vec<Vec<f64>>>(&out[start..]).is_ok(),
+            "{}",
+            String::from_utf8_lossy(&out[start..])
+        );
     }
 
     /// Room for the text: each surface's room ([`surface_len`]) and a comma, the outer
@@ -143,33 +134,31 @@ impl RoundedPhases {
     }
 }
 
-thread_local! {
-    /// Where [`RoundedPhases::text`] writes, kept by each thread: as long as the longest text
-    /// it has written (one waypoint's phases), up to [`SCRATCH_KEPT_BYTES`].
-    static SCRATCH: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
-}
-
-/// The longest buffer a thread keeps for [`RoundedPhases::text`]: the phases of about 9 000
-/// elements at four decimals. A scenario may have 200 000 (1.4 MB of text a waypoint); a
-/// thread does not hold that much for good, and such a waypoint's text is written in a buffer
-/// of its own.
-const SCRATCH_KEPT_BYTES: usize = 1 << 16;
-
-/// Written as its JSON text, which the serialiser copies into its output.
-impl Serialize for RoundedPhases {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        // SAFETY: `text` is one JSON array of arrays of numbers with no whitespace around it
-        // (debug builds re-parse it).
-        let raw = unsafe { RawValue::from_string_unchecked(self.text()) };
-        raw.serialize(serializer)
-    }
-}
-
 /// Most decimals [`RoundedPhases`] writes: 10⁻⁹ rad is far below any phase
 /// shifter's resolution, and keeps k = θ·10⁹ < 2π·10⁹ an exact integer in a double.
 pub const MAX_PHASE_DECIMALS: u32 = 9;
 
 impl SurfacePhases {
+    /// Appends the phases as a waypoint's field to `out`: `"irs_phases_rad":` and an array of
+    /// arrays of numbers (radians, or decimals), or `"irs_phase_codes":` and an array of
+    /// strings.
+    pub fn write_field(&self, out: &mut Vec<u8>) {
+        match self {
+            SurfacePhases::Radians(surfaces) => {
+                out.extend_from_slice(br#""irs_phases_rad":"#);
+                serde_json::to_writer(out, surfaces).expect("numbers serialise");
+            }
+            SurfacePhases::Decimals(rounded) => {
+                out.extend_from_slice(br#""irs_phases_rad":"#);
+                rounded.write_json(out);
+            }
+            SurfacePhases::Codes(surfaces) => {
+                out.extend_from_slice(br#""irs_phase_codes":"#);
+                serde_json::to_writer(out, surfaces).expect("strings serialise");
+            }
+        }
+    }
+
     /// The same phases as codes (exact for phases already on the 2π/2¹⁶ grid: rate maps, `bits`).
     pub fn to_codes(&self) -> SurfacePhases {
         let surfaces = match self {
@@ -333,11 +322,14 @@ fn steps(theta: f64, scale: f64, wrap: u64) -> u64 {
     if steps >= wrap { 0 } else { steps }
 }
 
-/// Every group of four decimals, "0000" to "9999", with in its fifth byte how many of them a
-/// fraction ending in the group keeps once its trailing zeros are dropped (0 for "0000", 3 for
-/// "1230"): a phase's fraction is one lookup a group, no loop for its zeros. 80 kB, built at
-/// compile time. (A table of pairs would stay in the first-level cache, but its extra
-/// arithmetic made a phase 2.6 times slower.)
+/// Every group of four decimals, "0000" to "9999", as a fraction ending in it is written: the
+/// digits kept once trailing zeros are dropped, at least one ("1230" → "123", "0000" → "0"),
+/// and a comma, in bytes 0 to 4; the number of digits kept without that minimum (0 for "0000",
+/// 3 for "1230") in byte 5; the length of "d.", the digits kept and the comma in byte 7. A
+/// phase's fraction is one lookup a group, no loop for its zeros: with one group, the lookup
+/// and the whole digit make one 8-byte store. 80 kB, built at compile time. (A table of pairs
+/// would stay in the first-level cache, but its extra arithmetic made a phase 2.6 times
+/// slower.)
 static FOUR_DIGITS: [[u8; 8]; 10_000] = four_digits();
 
 const fn four_digits() -> [[u8; 8]; 10_000] {
@@ -349,10 +341,13 @@ const fn four_digits() -> [[u8; 8]; 10_000] {
         while k < 4 {
             table[n][k] = b'0' + digits[k] as u8;
             if digits[k] != 0 {
-                table[n][4] = k as u8 + 1;
+                table[n][5] = k as u8 + 1;
             }
             k += 1;
         }
+        let shown = if table[n][5] == 0 { 1 } else { table[n][5] };
+        table[n][shown as usize] = b',';
+        table[n][7] = 2 + shown + 1;
         n += 1;
     }
     table
@@ -360,9 +355,10 @@ const fn four_digits() -> [[u8; 8]; 10_000] {
 
 /// One surface's phases as a JSON array of decimals with at most `D` places (see
 /// [`RoundedPhases`]) at the start of `out`, which has room for them ([`surface_len`]);
-/// returns the bytes written. `D` is a constant so that the powers of ten are too, the
-/// divisions below become multiplications and the loops over groups unroll.
-fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
+/// returns the length of the text, every byte of which is written. `D` is a constant so that
+/// the powers of ten are too, the divisions below become multiplications and the loops over
+/// groups unroll.
+fn write_surface<const D: u32>(phases: &[f64], out: &mut [MaybeUninit<u8>]) -> usize {
     let scale = 10u64.pow(D);
     // The fraction as whole groups of four digits, padded on the right: D = 6 writes
     // "dddddd00", whose padding is trailing zeros and so never kept.
@@ -370,13 +366,13 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
     let groups = D.div_ceil(4) as usize;
     let pad = 10u64.pow(4 * groups as u32 - D);
     let wrap = wrap(scale as f64);
-    // Each number is written whole: "d." and its first group in one 8-byte store, the other
-    // groups after it; the next byte written overwrites what it does not keep. The k-th of n
-    // numbers starts at most 1 + k·(4·groups + 3) bytes in, so every byte written lies within
-    // `surface_len`. The writes below are unchecked on the strength of it: bounds checks were
-    // a quarter of the time a phase.
+    // Each number is written whole, with its comma: "d." and its first group in one 8-byte
+    // store, the other groups after it; the next byte written overwrites what it does not
+    // keep. The k-th of n numbers starts at most 1 + k·(4·groups + 3) bytes in, so every byte
+    // written lies within `surface_len`. The writes below are unchecked on the strength of it:
+    // bounds checks were a quarter of the time a phase.
     assert!(out.len() >= surface_len(D, phases.len()));
-    let out = out.as_mut_ptr();
+    let out = out.as_mut_ptr().cast::<u8>();
     // SAFETY (every write below): at the offsets bounded above.
     unsafe { *out = b'[' };
     let mut at = 1;
@@ -391,30 +387,50 @@ fn write_surface<const D: u32>(phases: &[f64], out: &mut [u8]) -> usize {
             fraction /= 10_000;
         }
         index[0] = fraction as usize;
-        // "d." and the first group in one store; its two spare bytes are overwritten by the
-        // next group or whatever follows the number.
-        let first = &FOUR_DIGITS[index[0]];
-        let digits = u32::from_le_bytes([first[0], first[1], first[2], first[3]]) as u64;
-        let word = (b'0' as u64 + whole) | (b'.' as u64) << 8 | digits << 16;
+        let first = u64::from_le_bytes(FOUR_DIGITS[index[0]]);
+        let whole = (b'0' as u64 + whole) | (b'.' as u64) << 8;
+        if groups == 1 {
+            // "d.", the digits kept and the comma in one store; its spare bytes are
+            // overwritten by whatever follows the number.
+            let word = whole | (first & 0xff_ffff_ffff) << 16;
+            unsafe { std::ptr::write_unaligned(out.add(at).cast::<u64>(), word.to_le()) };
+            at += (first >> 56) as usize;
+            continue;
+        }
+        // Several groups: each written with all four digits, the comma after the digits kept,
+        // which run to the last one other than 0 (the rightmost group with one decides), at
+        // least one ("3.0").
+        let word = whole | all_four(first) << 16;
         unsafe { std::ptr::write_unaligned(out.add(at).cast::<u64>(), word.to_le()) };
-        // The digits kept run to the last one other than 0 (the rightmost group with one
-        // decides), at least one ("3.0").
-        let mut kept = (first[4] as usize).max(1);
+        let mut digits_kept = (kept(first) as usize).max(1);
         for (g, &index) in index.iter().enumerate().take(groups).skip(1) {
-            let group = &FOUR_DIGITS[index];
-            unsafe { std::ptr::copy_nonoverlapping(group.as_ptr(), out.add(at + 2 + 4 * g), 4) };
-            if group[4] != 0 {
-                kept = 4 * g + group[4] as usize;
+            let group = u64::from_le_bytes(FOUR_DIGITS[index]);
+            let digits = (all_four(group) as u32).to_le_bytes();
+            unsafe { std::ptr::copy_nonoverlapping(digits.as_ptr(), out.add(at + 2 + 4 * g), 4) };
+            if kept(group) != 0 {
+                digits_kept = 4 * g + kept(group) as usize;
             }
         }
-        // Every number followed by a comma, the last one's then overwritten by the bracket.
-        at += 2 + kept;
+        at += 2 + digits_kept;
         unsafe { *out.add(at) = b',' };
         at += 1;
     }
+    // The last number's comma is overwritten by the bracket.
     let end = if phases.is_empty() { at } else { at - 1 };
     unsafe { *out.add(end) = b']' };
     end + 1
+}
+
+/// A [`FOUR_DIGITS`] entry's digits kept, without the minimum of one.
+fn kept(entry: u64) -> u32 {
+    (entry >> 40) as u8 as u32
+}
+
+/// A [`FOUR_DIGITS`] entry's four digits, trailing zeros and all ("123," → "1230"), in the low
+/// four bytes: the zeros it drops put back where it kept none.
+fn all_four(entry: u64) -> u64 {
+    let kept = (1u64 << (8 * kept(entry))) - 1;
+    (entry & kept) | (0x3030_3030 & !kept)
 }
 
 /// The room [`write_surface`] needs for `phases` phases at `decimals` places: two brackets;
@@ -480,7 +496,7 @@ mod tests {
                 handovers: Vec::new(),
             };
             let path = format_phases(path, format, precision);
-            serde_json::to_value(&path.waypoints[0].config).unwrap()
+            field(&path.waypoints[0].config.phases)
         };
         assert_eq!(PhasePrecision::default(), PhasePrecision::TenthMilli);
         for (precision, written) in [
@@ -502,10 +518,21 @@ mod tests {
 
     use rand::{RngExt, SeedableRng};
 
+    /// The phases as their field, in an object of their own.
+    fn field(phases: &SurfacePhases) -> serde_json::Value {
+        let mut text = b"{".to_vec();
+        phases.write_field(&mut text);
+        text.push(b'}');
+        serde_json::from_slice(&text).unwrap()
+    }
+
     fn decimals_text(surfaces: Vec<Vec<f64>>, decimals: u32) -> String {
         match SurfacePhases::Radians(surfaces).into_decimals(decimals) {
             SurfacePhases::Decimals(rounded) => {
-                let text = serde_json::to_string(&rounded).unwrap();
+                // Written after other text, as in a body.
+                let mut written = b"ab".to_vec();
+                rounded.write_json(&mut written);
+                let text = String::from_utf8(written.split_off(2)).unwrap();
                 // What the answer says it sent is what the text reads back as, bit for bit.
                 let read: Vec<Vec<f64>> = serde_json::from_str(&text).unwrap();
                 let bits = |v: Vec<Vec<f64>>| -> Vec<u64> {
@@ -608,20 +635,23 @@ mod tests {
         }
     }
 
-    /// Each form reads back as the radians it carries, and serialises under the key its
+    /// Each form reads back as the radians it carries, and is written under the key its
     /// variant names.
     #[test]
-    fn every_form_reads_back_and_serialises_under_its_key() {
+    fn every_form_reads_back_and_is_written_under_its_key() {
+        let text = |phases: &SurfacePhases| {
+            let mut text = Vec::new();
+            phases.write_field(&mut text);
+            String::from_utf8(text).unwrap()
+        };
         let radians = SurfacePhases::Radians(vec![vec![0.25, 6.0], vec![1.5]]);
         let decimals = radians.clone().into_decimals(2);
         assert_eq!(decimals.radians(), vec![vec![0.25, 6.0], vec![1.5]]);
+        assert_eq!(text(&decimals), r#""irs_phases_rad":[[0.25,6.0],[1.5]]"#);
+        assert_eq!(text(&radians), text(&decimals));
         assert_eq!(
-            serde_json::to_string(&decimals).unwrap(),
-            r#"{"irs_phases_rad":[[0.25,6.0],[1.5]]}"#
-        );
-        assert_eq!(
-            serde_json::to_string(&radians).unwrap(),
-            serde_json::to_string(&decimals).unwrap()
+            text(&SurfacePhases::Codes(vec!["AAA=".into()])),
+            r#""irs_phase_codes":["AAA="]"#
         );
         // Decimals' hint is an upper bound, so that a buffer sized by it is never regrown.
         let hint = decimals.json_len_hint();

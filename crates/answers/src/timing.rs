@@ -18,10 +18,23 @@ pub struct Timed<T> {
 impl<T> Timed<T> {
     /// `answer`, computed since `started`.
     pub fn since(started: Instant, answer: T) -> Self {
-        let micros = started.elapsed().as_micros() as f64;
         Timed {
             answer,
-            took_ms: micros / 1e3,
+            took_ms: took_ms(started),
         }
     }
+}
+
+/// Milliseconds since `started`, to the microsecond.
+pub fn took_ms(started: Instant) -> f64 {
+    started.elapsed().as_micros() as f64 / 1e3
+}
+
+/// Closes `open`, the text of a JSON object without its closing brace, with `took_ms` as its
+/// last field: what [`Timed`] writes, for a body written as text (a path answer, or one kept
+/// and sent again).
+pub fn close_with_took_ms(open: &mut Vec<u8>, took_ms: f64) {
+    open.extend_from_slice(br#","took_ms":"#);
+    serde_json::to_writer(&mut *open, &took_ms).expect("a number serialises");
+    open.push(b'}');
 }

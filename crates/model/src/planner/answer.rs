@@ -35,7 +35,7 @@ pub struct Endpoint {
 /// where its route enters each cell it crosses (the cell's configuration applies from there),
 /// and one at the centre of each vertex (its start, turns and goal), so the waypoints, joined in
 /// order, are the route itself.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Waypoint<P = SurfaceRadians> {
     /// x of the point (m): the cell's centre, or where an any-angle route enters the cell.
     pub x: f64,
@@ -55,8 +55,7 @@ pub struct Waypoint<P = SurfaceRadians> {
     /// When the robot reaches this waypoint driving at V_max from the start (s).
     pub time_s: f64,
     /// What to configure here (serving AP, IRS phases; on rate maps the power split and decoding
-    /// order), flattened into the waypoint's JSON.
-    #[serde(flatten)]
+    /// order); its fields are the waypoint's in JSON.
     pub config: CellConfig<P>,
 }
 
@@ -77,14 +76,14 @@ pub struct Handover {
 }
 
 /// The answer to a path query; the same body from the CLI and the API once its phases are
-/// written (`P`, see [`CellConfig`]).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// written (`P`, see [`CellConfig`]; the body is written by `irs_answers::path_json`, its
+/// fields in this order).
+#[derive(Debug, Clone, PartialEq)]
 pub struct PathAnswer<P = SurfaceRadians> {
     /// The id of the map the path was planned on.
     pub map_id: String,
     /// The unit of values and thresholds, written as its symbol ([`Unit::symbol`]): the
     /// query's unit, by default the map's (`dB` on gain maps, `bit/s/Hz` on rate maps).
-    #[serde(serialize_with = "unit_symbol")]
     pub unit: Unit,
     /// The threshold applied (for `"max"`, the largest feasible one).
     pub threshold: Option<f64>,

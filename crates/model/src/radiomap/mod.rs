@@ -28,7 +28,6 @@ pub use units::{LinkBudget, Unit};
 use crate::channel::ChannelModel;
 use crate::scenario::{Grid, Scenario};
 use rayon::prelude::*;
-use serde::Serialize;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -122,18 +121,17 @@ pub type SurfaceRadians = Vec<Vec<f64>>;
 
 /// The configuration to apply at one waypoint. `P` is how its phases are held: radians in the
 /// model, the written form (decimals or codes) in an answer.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CellConfig<P = SurfaceRadians> {
     /// The AP serving this cell (an index into the scenario's APs; 0 with one AP).
     pub ap: usize,
     /// The IRS phases, written as `irs_phases_rad` or `irs_phase_codes`.
-    #[serde(flatten)]
     pub phases: P,
-    /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// Rate maps: transmit power per user (W), MRU first then the SRUs in scenario order
+    /// (written only on them).
     pub power_w: Option<Vec<f64>>,
-    /// NOMA rate maps: users in SIC decoding order (decoded first = weakest first).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// NOMA rate maps: users in SIC decoding order (decoded first = weakest first; written only
+    /// on them).
     pub decoding_order: Option<Vec<String>>,
 }
 

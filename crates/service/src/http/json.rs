@@ -1,9 +1,9 @@
-//! Large JSON answers (paths), written straight into one buffer sized up front, and closed
-//! with their own `took_ms`. Their bulk, the IRS phases, arrives already written as text
-//! (radiomap::phase_text), so serialising an answer is mostly copying it.
+//! Large JSON answers (paths, fleet plans), written straight into one buffer sized up front,
+//! and closed with their own `took_ms`.
 
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
+use irs_answers::timing;
 use serde::Serialize;
 use std::time::Instant;
 
@@ -24,15 +24,9 @@ pub(crate) fn serialize_sized(
 /// A JSON answer from `open`, an object's text without its closing brace, closed with
 /// `took_ms` (the milliseconds since `started`, to the microsecond) as its last field.
 pub(crate) fn with_took_ms(open: &[u8], started: Instant) -> Response {
-    let took_ms = started.elapsed().as_micros() as f64 / 1e3;
+    let took_ms = timing::took_ms(started);
     let mut body = Vec::with_capacity(open.len() + 32);
     body.extend_from_slice(open);
-    body.extend_from_slice(b",\"took_ms\":");
-    match serde_json::to_writer(&mut body, &took_ms) {
-        Ok(()) => {
-            body.push(b'}');
-            ([(header::CONTENT_TYPE, "application/json")], body).into_response()
-        }
-        Err(e) => ApiError::from(crate::app::Error::internal(e.to_string())).into_response(),
-    }
+    timing::close_with_took_ms(&mut body, took_ms);
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }

@@ -1,7 +1,7 @@
 //! `/v1/paths`, `/v1/sweeps` and `/v1/maps/{map_id}/coverage`: the queries on a built map
 //! (a path at a threshold, a sweep of thresholds, the covered share of the floor).
 
-use super::json::{self, serialize_sized};
+use super::json;
 use super::maps::MapRequest;
 use super::problem::ApiError;
 use super::{Body, accepted, heavy, only_query};
@@ -385,7 +385,8 @@ pub(super) async fn plan_path(
                             path,
                             monte_carlo: Some(report),
                         };
-                        let mut answer = serde_json::to_value(&checked).expect("answers serialise");
+                        let mut answer: serde_json::Value =
+                            serde_json::from_slice(&checked.to_json()).expect("answers are JSON");
                         answer["took_ms"] =
                             serde_json::json!(started.elapsed().as_secs_f64() * 1e3);
                         Ok(answer)
@@ -406,11 +407,7 @@ pub(super) async fn plan_path(
         }
         _ => None,
     };
-    let capacity = path::body_capacity(&path);
-    let answer = OpenAnswer::new(serialize_sized(
-        &CheckedPath { path, monte_carlo },
-        capacity,
-    )?)?;
+    let answer = OpenAnswer::new(CheckedPath { path, monte_carlo }.to_json())?;
     if let Some(query) = query {
         state.answers().insert(query, answer.clone());
     }

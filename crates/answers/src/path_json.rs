@@ -1,0 +1,360 @@
+//! A path answer's JSON body, the one `irs-planner plan` prints and `POST /v1/paths` sends,
+//! written by hand.
+//!
+//! A path answer is mostly its waypoints: a thousand on a large map, each a dozen fields and
+//! the phases of every surface. Through serde's derived serialisers a waypoint cost about
+//! 250 ns besides its phases: each key escaped byte by byte, each piece one call of the writer
+//! copying a few bytes, the flattened configuration a map of its own; and the phases, which
+//! serde could only take as a raw value, a string of their own copied once more. Here the keys
+//! are constants and the numbers are written by the formatters serde_json itself uses (zmij
+//! for floats, itoa for integers, `null` for a float that is not finite), so the text is the
+//! one the derived serialisers wrote, byte for byte; the rest of the body (its ends, handovers
+//! and Monte Carlo report), written once a body, goes through serde.
+
+use crate::path::CheckedPath;
+use crate::phase_text::SurfacePhases;
+use irs_model::planner::{PathAnswer, Waypoint};
+use serde::Serialize;
+
+impl CheckedPath {
+    /// The body as JSON text: one object, its fields in the order of openapi.yaml's
+    /// `PathAnswer` (the answer's, then `monte_carlo` when there is one).
+    pub fn to_json(&self) -> Vec<u8> {
+        let path = &self.path;
+        let mut out = Vec::with_capacity(capacity(path));
+        out.extend_from_slice(br#"{"map_id":"#);
+        value(&mut out, &path.map_id);
+        field(&mut out, "unit", path.unit.symbol());
+        field(&mut out, "threshold", &path.threshold);
+        field(&mut out, "feasible", &path.feasible);
+        field(&mut out, "reason", &path.reason);
+        field(&mut out, "path_shape", &path.path_shape);
+        field(&mut out, "distance_m", &path.distance_m);
+        field(&mut out, "travel_time_s", &path.travel_time_s);
+        field(
+            &mut out,
+            "max_feasible_threshold",
+            &path.max_feasible_threshold,
+        );
+        field(&mut out, "start", &path.start);
+        field(&mut out, "goal", &path.goal);
+        field(&mut out, "frame_id", &path.frame_id);
+        out.extend_from_slice(br#","waypoints":["#);
+        let mut numbers = Numbers::default();
+        for (k, waypoint) in path.waypoints.iter().enumerate() {
+            if k > 0 {
+                out.push(b',');
+            }
+            numbers.waypoint(&mut out, waypoint);
+        }
+        out.push(b']');
+        field(&mut out, "vertices", &path.vertices);
+        field(&mut out, "handovers", &path.handovers);
+        if let Some(report) = &self.monte_carlo {
+            field(&mut out, "monte_carlo", report);
+        }
+        out.push(b'}');
+        out
+    }
+}
+
+/// About the bytes of `path`'s body: its phases' text and ~220 bytes per waypoint's other
+/// fields, so that the buffer is not regrown (and copied) a dozen times on the way to hundreds
+/// of kilobytes.
+fn capacity(path: &PathAnswer<SurfacePhases>) -> usize {
+    512 + path
+        .waypoints
+        .iter()
+        .map(|w| 220 + w.config.phases.json_len_hint())
+        .sum::<usize>()
+}
+
+/// Appends `,"key":` and `value` as serde_json writes it. `key` needs no escaping.
+fn field(out: &mut Vec<u8>, key: &str, value: &(impl Serialize + ?Sized)) {
+    debug_assert!(key.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_'));
+    out.extend_from_slice(b",\"");
+    out.extend_from_slice(key.as_bytes());
+    out.extend_from_slice(b"\":");
+    self::value(out, value);
+}
+
+/// Appends `value` as serde_json writes it.
+fn value(out: &mut Vec<u8>, value: &(impl Serialize + ?Sized)) {
+    // Into a vector, only a type that cannot be written as JSON (a map with keys that are not
+    // strings) fails, and an answer has none.
+    serde_json::to_writer(out, value).expect("answers serialise");
+}
+
+/// The number formatters' buffers, kept across a body's waypoints, and the text of the last
+/// x, y and heading written: consecutive waypoints often share them (the heading along every
+/// straight run, x or y along the grid's axes), and copying a text is cheaper than writing
+/// the shortest decimal of a double again (≈ 13 ns).
+#[derive(Default)]
+struct Numbers {
+    float: zmij::Buffer,
+    integer: itoa::Buffer,
+    x: LastFloat,
+    y: LastFloat,
+    yaw: LastFloat,
+}
+
+/// A float and its text, as last written.
+#[derive(Default)]
+struct LastFloat {
+    bits: Option<u64>,
+    len: usize,
+    text: [u8; 24],
+}
+
+impl Numbers {
+    /// Appends one waypoint's object: its pose, value and time, then its configuration (the
+    /// serving AP, the phases, and on rate maps the power split and decoding order).
+    fn waypoint(&mut self, out: &mut Vec<u8>, w: &Waypoint<SurfacePhases>) {
+        out.extend_from_slice(br#"{"x":"#);
+        Self::repeated(&mut self.float, &mut self.x, out, w.x);
+        out.extend_from_slice(br#","y":"#);
+        Self::repeated(&mut self.float, &mut self.y, out, w.y);
+        out.extend_from_slice(br#","i":"#);
+        self.integer(out, w.i);
+        out.extend_from_slice(br#","j":"#);
+        self.integer(out, w.j);
+        out.extend_from_slice(br#","value":"#);
+        self.float(out, w.value);
+        out.extend_from_slice(br#","yaw_rad":"#);
+        Self::repeated(&mut self.float, &mut self.yaw, out, w.yaw_rad);
+        out.extend_from_slice(br#","distance_m":"#);
+        self.float(out, w.distance_m);
+        out.extend_from_slice(br#","time_s":"#);
+        self.float(out, w.time_s);
+        out.extend_from_slice(br#","ap":"#);
+        self.integer(out, w.config.ap);
+        out.push(b',');
+        w.config.phases.write_field(out);
+        if let Some(power) = &w.config.power_w {
+            field(out, "power_w", power);
+        }
+        if let Some(order) = &w.config.decoding_order {
+            field(out, "decoding_order", order);
+        }
+        out.push(b'}');
+    }
+
+    /// `v` as serde_json writes an f64: its shortest round-trip decimal, `null` if not finite.
+    fn float(&mut self, out: &mut Vec<u8>, v: f64) {
+        out.extend_from_slice(Self::float_text(&mut self.float, v));
+    }
+
+    fn float_text(buffer: &mut zmij::Buffer, v: f64) -> &[u8] {
+        if v.is_finite() {
+            buffer.format_finite(v).as_bytes()
+        } else {
+            b"null"
+        }
+    }
+
+    /// `v` as [`Numbers::float`] writes it, copied from `last` when it holds the same double.
+    fn repeated(buffer: &mut zmij::Buffer, last: &mut LastFloat, out: &mut Vec<u8>, v: f64) {
+        if last.bits != Some(v.to_bits()) {
+            let text = Self::float_text(buffer, v);
+            last.text[..text.len()].copy_from_slice(text);
+            last.len = text.len();
+            last.bits = Some(v.to_bits());
+        }
+        out.extend_from_slice(&last.text[..last.len]);
+    }
+
+    fn integer(&mut self, out: &mut Vec<u8>, n: usize) {
+        out.extend_from_slice(self.integer.format(n).as_bytes());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::path::{check, write_phases};
+    use crate::phase_text::{PhaseFormat, PhasePrecision};
+    use crate::scenario::ScenarioDocument;
+    use irs_model::phases::PhaseMode;
+    use irs_model::planner::{self, PathOptions, PathShape, Threshold};
+    use irs_model::radiomap::{MapKey, Progress};
+    use irs_model::rate::Access;
+    use irs_model::scenario::Scenario;
+    use serde_json::{Value, json};
+
+    fn text(value: &(impl Serialize + ?Sized)) -> String {
+        serde_json::to_string(value).unwrap()
+    }
+
+    /// The body as serde_json writes each value, joined in the documented order: the
+    /// reference the hand-written body must equal byte for byte.
+    fn reference(checked: &CheckedPath) -> String {
+        let p = &checked.path;
+        let waypoints: Vec<String> = p
+            .waypoints
+            .iter()
+            .map(|w| {
+                let c = &w.config;
+                let phases = match &c.phases {
+                    SurfacePhases::Codes(codes) => format!(r#""irs_phase_codes":{}"#, text(codes)),
+                    other => format!(r#""irs_phases_rad":{}"#, text(&other.radians())),
+                };
+                let mut rate = String::new();
+                if let Some(power) = &c.power_w {
+                    rate += &format!(r#","power_w":{}"#, text(power));
+                }
+                if let Some(order) = &c.decoding_order {
+                    rate += &format!(r#","decoding_order":{}"#, text(order));
+                }
+                format!(
+                    r#"{{"x":{},"y":{},"i":{},"j":{},"value":{},"yaw_rad":{},"distance_m":{},"time_s":{},"ap":{},{phases}{rate}}}"#,
+                    text(&w.x),
+                    text(&w.y),
+                    text(&w.i),
+                    text(&w.j),
+                    text(&w.value),
+                    text(&w.yaw_rad),
+                    text(&w.distance_m),
+                    text(&w.time_s),
+                    text(&c.ap),
+                )
+            })
+            .collect();
+        let monte_carlo = checked
+            .monte_carlo
+            .as_ref()
+            .map(|r| format!(r#","monte_carlo":{}"#, text(r)))
+            .unwrap_or_default();
+        format!(
+            r#"{{"map_id":{},"unit":{},"threshold":{},"feasible":{},"reason":{},"path_shape":{},"distance_m":{},"travel_time_s":{},"max_feasible_threshold":{},"start":{},"goal":{},"frame_id":{},"waypoints":[{}],"vertices":{},"handovers":{}{monte_carlo}}}"#,
+            text(&p.map_id),
+            text(p.unit.symbol()),
+            text(&p.threshold),
+            text(&p.feasible),
+            text(&p.reason),
+            text(&p.path_shape),
+            text(&p.distance_m),
+            text(&p.travel_time_s),
+            text(&p.max_feasible_threshold),
+            text(&p.start),
+            text(&p.goal),
+            text(&p.frame_id),
+            waypoints.join(","),
+            text(&p.vertices),
+            text(&p.handovers),
+        )
+    }
+
+    fn scenario(name: &str, edit: impl FnOnce(&mut Value)) -> Scenario {
+        let mut doc: Value = serde_json::from_str(
+            &std::fs::read_to_string(format!(
+                "{}/../../scenarios/{name}.json",
+                env!("CARGO_MANIFEST_DIR")
+            ))
+            .unwrap(),
+        )
+        .unwrap();
+        edit(&mut doc);
+        Scenario::from_value(doc).unwrap()
+    }
+
+    /// Gain maps with one AP and two (handovers), grid and any-angle paths, an infeasible
+    /// query, rate maps (NOMA and OMA: powers and decoding orders), every phase format and a
+    /// Monte Carlo report: each body equals, byte for byte, the reference joined from
+    /// serde_json's text of each value, and reads back as JSON.
+    #[test]
+    fn bodies_are_what_serde_json_writes_for_each_value() {
+        let one_ap = scenario("paper-single-user", |_| {});
+        let two_aps = scenario("paper-single-user", |doc| {
+            let mut second = doc["ap"].clone();
+            second["position"] = json!([-9.5, -9.5, 2.0]);
+            doc["aps"] = json!([doc["ap"].take(), second]);
+            doc.as_object_mut().unwrap().remove("ap");
+        });
+        let srus = scenario("paper-multi-user", |doc| {
+            doc["grid"]["resolution_m"] = 1.0.into();
+        });
+        let mut maps = Vec::new();
+        for s in [&one_ap, &two_aps] {
+            let key = MapKey::gain("test", s, PhaseMode::Continuous).unwrap();
+            maps.push((s, crate::map::build(s, &key, &Progress::default()).unwrap()));
+        }
+        for access in [Access::Noma, Access::Oma] {
+            let key = MapKey::rate("test", &srus, PhaseMode::Continuous, access).unwrap();
+            maps.push((
+                &srus,
+                crate::map::build(&srus, &key, &Progress::default()).unwrap(),
+            ));
+        }
+        let formats = [
+            (PhaseFormat::Radians, PhasePrecision::TenthMilli),
+            (PhaseFormat::Radians, PhasePrecision::Centi),
+            (PhaseFormat::Radians, PhasePrecision::Full),
+            (PhaseFormat::Codes, PhasePrecision::TenthMilli),
+        ];
+        let (mut handovers, mut powers, mut infeasible, mut checked_once) = (0, 0, 0, false);
+        for (s, map) in &maps {
+            let unit = map.native_unit();
+            for (shape, threshold) in [
+                (PathShape::Grid, Threshold::Max),
+                (PathShape::AnyAngle, Threshold::Max),
+                (PathShape::Grid, Threshold::Value(1e9)),
+            ] {
+                let options = PathOptions {
+                    shape,
+                    ..PathOptions::default()
+                };
+                let path =
+                    planner::plan(map, unit, options, [-8.0, -8.0], [8.0, 8.0], threshold, 1.0)
+                        .unwrap();
+                for (format, precision) in formats {
+                    let written = write_phases(s, map, path.clone(), format, precision);
+                    let monte_carlo = (written.feasible && !checked_once).then(|| {
+                        checked_once = true;
+                        check(s, map, &written, 8, 1, &Progress::default()).unwrap()
+                    });
+                    handovers += written.handovers.len();
+                    infeasible += usize::from(!written.feasible);
+                    powers += written
+                        .waypoints
+                        .iter()
+                        .filter(|w| w.config.decoding_order.is_some())
+                        .count();
+                    let checked = CheckedPath {
+                        path: written,
+                        monte_carlo,
+                    };
+                    let body = String::from_utf8(checked.to_json()).unwrap();
+                    assert_eq!(
+                        body,
+                        reference(&checked),
+                        "{format:?} {precision:?} {shape:?}"
+                    );
+                    let read: Value = serde_json::from_str(&body).unwrap();
+                    assert_eq!(read["unit"], json!(unit.symbol()));
+                }
+            }
+        }
+        assert!(
+            handovers > 0 && powers > 0 && infeasible > 0 && checked_once,
+            "every part exercised: {handovers} handovers, {powers} decoding orders, \
+             {infeasible} infeasible"
+        );
+    }
+
+    /// A float that is not finite is written as serde_json writes it: `null`.
+    #[test]
+    fn floats_not_finite_are_null() {
+        let mut out = Vec::new();
+        let mut numbers = Numbers::default();
+        for v in [f64::NAN, f64::INFINITY, -0.0, 1e-7, 0.1 + 0.2] {
+            numbers.float(&mut out, v);
+            out.push(b' ');
+            out.extend_from_slice(text(&v).as_bytes());
+            out.push(b'|');
+        }
+        for pair in String::from_utf8(out).unwrap().split_terminator('|') {
+            let (ours, serde) = pair.split_once(' ').unwrap();
+            assert_eq!(ours, serde);
+        }
+    }
+}
