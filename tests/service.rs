@@ -1304,12 +1304,26 @@ async fn repeated_path_queries_are_answered_from_the_answer_cache() {
     assert_eq!(server.metric(hits).await, 1.0);
     assert!(first["feasible"].as_bool().unwrap());
     assert_eq!(untimed(first.clone()), untimed(second));
+    // A kept answer goes out as its text and then took_ms, with their length stated.
+    let reply = server
+        .client
+        .post(format!("{}/v1/paths", server.base))
+        .json(&query)
+        .send()
+        .await
+        .unwrap();
+    let stated = reply.content_length();
+    let text = reply.bytes().await.unwrap();
+    assert_eq!(stated, Some(text.len() as u64));
+    let third: Value = serde_json::from_slice(&text).unwrap();
+    assert_eq!(untimed(third), untimed(first.clone()));
+    assert_eq!(server.metric(hits).await, 2.0);
     // Another precision, another answer (and not a hit).
     let mut full = query.clone();
     full["phase_precision"] = "full".into();
     let (_, other) = server.post("/v1/paths", full).await;
     assert_ne!(untimed(other), untimed(first));
-    assert_eq!(server.metric(hits).await, 1.0);
+    assert_eq!(server.metric(hits).await, 2.0);
     // The map goes: its kept answer is not served.
     let (s, _) = server
         .send("DELETE", &format!("/v1/maps/{map_id}"), None)

@@ -82,10 +82,11 @@ impl OpenAnswer {
         }
     }
 
-    /// The answer's text without its closing brace: `took_ms` is written after it, when the
-    /// answer is sent (where [`irs_answers::timing::Timed`] writes it).
-    pub fn open_text(&self) -> &[u8] {
-        &self.0
+    /// The answer's text without its closing brace (shared, not copied): `took_ms` is
+    /// written after it, when the answer is sent (where [`irs_answers::timing::Timed`] writes
+    /// it).
+    pub fn open_text(&self) -> Bytes {
+        self.0.clone()
     }
 }
 
