@@ -79,11 +79,17 @@ fn relocate(
             return;
         }
         let (i, j) = (i as usize, j as usize);
+        let c = grid.index(i, j);
+        // Whether the cell is usable first: an end deep in an obstacle looks at thousands of
+        // cells that are not (40 000 within 2 m on a 2 cm grid), and measuring each one's
+        // distance was 5 % of a server's CPU under path queries with a tolerance.
+        if !usable(c) {
+            return;
+        }
         let [x, y] = grid.centre(i, j);
         let d = (x - px).hypot(y - py);
-        let c = grid.index(i, j);
         // Ties to the lower flat index, whatever order the rings visit cells in.
-        if d <= tolerance_m && best.is_none_or(|b| (d, c) < b) && usable(c) {
+        if d <= tolerance_m && best.is_none_or(|b| (d, c) < b) {
             *best = Some((d, c));
         }
     };
