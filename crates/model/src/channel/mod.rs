@@ -251,8 +251,8 @@ impl ChannelModel {
     }
 
     /// N_s of each surface in scenario order: how θ splits into the surfaces' phase vectors.
-    pub fn surface_lengths(&self) -> Vec<usize> {
-        self.surfaces.iter().map(|s| s.subsurfaces).collect()
+    pub fn surface_lengths(&self) -> impl ExactSizeIterator<Item = usize> + '_ {
+        self.surfaces.iter().map(|s| s.subsurfaces)
     }
 
     /// True when the segment between two points passes through an obstacle's interior.

@@ -507,7 +507,10 @@ impl<'m> World<'m> {
                 step: k,
                 time_s,
                 served: config.served.iter().map(|s| s.map(party)).collect(),
-                phases: crate::radiomap::per_surface(&config.phases, &lengths),
+                phases: crate::radiomap::per_surface(
+                    config.phases.clone(),
+                    lengths.iter().copied(),
+                ),
                 robots: states,
                 srus,
             });

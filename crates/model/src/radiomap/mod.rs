@@ -166,15 +166,22 @@ pub struct RadioMap {
     pub built_at_unix_s: u64,
 }
 
-/// Splits a concatenated phase vector into the surfaces' vectors (lengths N_s in order).
-pub(crate) fn per_surface(flat: &[f64], lengths: &[usize]) -> Vec<Vec<f64>> {
+/// Splits a concatenated phase vector into the surfaces' vectors (lengths N_s in order). One
+/// surface, the usual case, keeps `flat` itself: a path's waypoints each asked for a copy and
+/// a list of lengths, three allocations where one does.
+pub(crate) fn per_surface(
+    flat: Vec<f64>,
+    lengths: impl ExactSizeIterator<Item = usize>,
+) -> Vec<Vec<f64>> {
     if flat.is_empty() {
         return Vec::new();
     }
-    let mut rest = flat;
+    if lengths.len() == 1 {
+        return vec![flat];
+    }
+    let mut rest = &flat[..];
     lengths
-        .iter()
-        .map(|&n| {
+        .map(|n| {
             let (own, tail) = rest.split_at(n);
             rest = tail;
             own.to_vec()
@@ -231,8 +238,8 @@ impl RadioMap {
                 CellConfig {
                     ap,
                     phases: per_surface(
-                        &gain::waypoint_phases(model, [x, y, *antenna_height_m], self.key.phases),
-                        &model.surface_lengths(),
+                        gain::waypoint_phases(model, [x, y, *antenna_height_m], self.key.phases),
+                        model.surface_lengths(),
                     ),
                     power_w: None,
                     decoding_order: None,

@@ -151,7 +151,7 @@ impl RadioMap {
                 CellSolutions::Rate(RateCells {
                     upper_bound,
                     subsurfaces: n,
-                    surface_lengths: channel.surface_lengths(),
+                    surface_lengths: channel.surface_lengths().collect(),
                     phases,
                     power_w,
                     order,

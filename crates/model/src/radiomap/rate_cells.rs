@@ -41,11 +41,11 @@ impl RateCells {
         CellConfig {
             ap: 0,
             phases: super::per_surface(
-                &self.phases[index * n..(index + 1) * n]
+                self.phases[index * n..(index + 1) * n]
                     .iter()
                     .map(|&code| decode_phase(code))
-                    .collect::<Vec<_>>(),
-                &self.surface_lengths,
+                    .collect(),
+                self.surface_lengths.iter().copied(),
             ),
             power_w: Some(self.power_w[index * users..(index + 1) * users].to_vec()),
             decoding_order: (self.model.access == Access::Noma)
@@ -327,7 +327,7 @@ pub(super) fn build_rate_cells(
     let cells = RateCells {
         upper_bound: upper,
         subsurfaces: n,
-        surface_lengths: channel.surface_lengths(),
+        surface_lengths: channel.surface_lengths().collect(),
         phases,
         power_w: power,
         order,
