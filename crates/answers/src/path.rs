@@ -8,7 +8,7 @@ use crate::phase_text::{PhaseFormat, PhasePrecision, SurfacePhases};
 use irs_model::input::FieldError;
 use irs_model::montecarlo::{self, MonteCarloReport};
 use irs_model::planner::{PathAnswer, Threshold, route_graph};
-use irs_model::radiomap::{Cancelled, Progress, RadioMap, Unit};
+use irs_model::radiomap::{Cancelled, Progress, RadioMap, SurfaceRadians, Unit};
 use irs_model::scenario::Scenario;
 
 /// A path answer with its optional Monte Carlo check: the body of `irs-planner plan` and of
@@ -144,7 +144,7 @@ pub fn write_phases(
     let Some(evaluator) = map.rate_evaluator(scenario).filter(|_| rounded) else {
         return format_phases(path, format, precision);
     };
-    let full: Vec<Vec<Vec<f64>>> = path
+    let full: Vec<SurfaceRadians> = path
         .waypoints
         .iter()
         .map(|w| w.config.phases.clone())

@@ -259,7 +259,7 @@ mod tests {
                 let c = &w.config;
                 let phases = match &c.phases {
                     SurfacePhases::Codes(codes) => format!(r#""irs_phase_codes":{}"#, text(codes)),
-                    other => format!(r#""irs_phases_rad":{}"#, text(&other.radians())),
+                    other => format!(r#""irs_phases_rad":{}"#, text(other.radians().as_slice())),
                 };
                 let mut rate = String::new();
                 if let Some(power) = &c.power_w {

@@ -19,6 +19,7 @@ use std::f64::consts::TAU;
 use std::mem::MaybeUninit;
 use std::str::FromStr;
 
+use irs_model::radiomap::SurfaceRadians;
 use irs_model::vecmath::ROUNDING_SHIFT;
 
 /// The phase vector θ of one configuration, one vector per IRS in scenario order (N_s values
@@ -27,7 +28,7 @@ use irs_model::vecmath::ROUNDING_SHIFT;
 #[derive(Debug, Clone)]
 pub enum SurfacePhases {
     /// θ in [0, 2π), written as `irs_phases_rad`.
-    Radians(Vec<Vec<f64>>),
+    Radians(SurfaceRadians),
     /// The same JSON array of arrays as `Radians` (`irs_phases_rad`), each phase rounded to d
     /// decimals and written as that decimal ([`SurfacePhases::into_decimals`]).
     Decimals(RoundedPhases),
@@ -62,14 +63,14 @@ impl PartialEq for SurfacePhases {
 #[derive(Debug, Clone)]
 pub struct RoundedPhases {
     /// Each surface's phases as computed, rounded only as they are written.
-    radians: Vec<Vec<f64>>,
+    radians: SurfaceRadians,
     /// 1 to [`MAX_PHASE_DECIMALS`].
     decimals: u32,
 }
 
 impl RoundedPhases {
     /// Every surface's phases as written: the doubles their decimals read back as.
-    pub fn radians(&self) -> Vec<Vec<f64>> {
+    pub fn radians(&self) -> SurfaceRadians {
         let scale = 10f64.powi(self.decimals as i32);
         let wrap = wrap(scale);
         self.radians
@@ -146,7 +147,7 @@ impl SurfacePhases {
         match self {
             SurfacePhases::Radians(surfaces) => {
                 out.extend_from_slice(br#""irs_phases_rad":"#);
-                serde_json::to_writer(out, surfaces).expect("numbers serialise");
+                serde_json::to_writer(out, surfaces.as_slice()).expect("numbers serialise");
             }
             SurfacePhases::Decimals(rounded) => {
                 out.extend_from_slice(br#""irs_phases_rad":"#);
@@ -201,7 +202,7 @@ impl SurfacePhases {
     }
 
     /// Every surface's phases in radians (decimals read back, codes decoded).
-    pub fn radians(&self) -> Vec<Vec<f64>> {
+    pub fn radians(&self) -> SurfaceRadians {
         match self {
             SurfacePhases::Radians(surfaces) => surfaces.clone(),
             SurfacePhases::Decimals(rounded) => rounded.radians(),
@@ -487,7 +488,7 @@ mod tests {
                     time_s: 0.0,
                     config: CellConfig {
                         ap: 0,
-                        phases: vec![vec![theta, 0.5]],
+                        phases: vec![vec![theta, 0.5]].into(),
                         power_w: None,
                         decoding_order: None,
                     },
@@ -527,7 +528,7 @@ mod tests {
     }
 
     fn decimals_text(surfaces: Vec<Vec<f64>>, decimals: u32) -> String {
-        match SurfacePhases::Radians(surfaces).into_decimals(decimals) {
+        match SurfacePhases::Radians(surfaces.into()).into_decimals(decimals) {
             SurfacePhases::Decimals(rounded) => {
                 // Written after other text, as in a body.
                 let mut written = b"ab".to_vec();
@@ -538,7 +539,7 @@ mod tests {
                 let bits = |v: Vec<Vec<f64>>| -> Vec<u64> {
                     v.concat().into_iter().map(f64::to_bits).collect()
                 };
-                assert_eq!(bits(read), bits(rounded.radians()), "{text}");
+                assert_eq!(bits(read), bits(rounded.radians().into_vec()), "{text}");
                 text
             }
             other => panic!("{other:?}"),
@@ -644,9 +645,12 @@ mod tests {
             phases.write_field(&mut text);
             String::from_utf8(text).unwrap()
         };
-        let radians = SurfacePhases::Radians(vec![vec![0.25, 6.0], vec![1.5]]);
+        let radians = SurfacePhases::Radians(vec![vec![0.25, 6.0], vec![1.5]].into());
         let decimals = radians.clone().into_decimals(2);
-        assert_eq!(decimals.radians(), vec![vec![0.25, 6.0], vec![1.5]]);
+        assert_eq!(
+            decimals.radians().into_vec(),
+            vec![vec![0.25, 6.0], vec![1.5]]
+        );
         assert_eq!(text(&decimals), r#""irs_phases_rad":[[0.25,6.0],[1.5]]"#);
         assert_eq!(text(&radians), text(&decimals));
         assert_eq!(

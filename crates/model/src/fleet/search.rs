@@ -510,7 +510,8 @@ impl<'m> World<'m> {
                 phases: crate::radiomap::per_surface(
                     config.phases.clone(),
                     lengths.iter().copied(),
-                ),
+                )
+                .into_vec(),
                 robots: states,
                 srus,
             });
