@@ -63,7 +63,7 @@ impl CheckedPath {
 /// phases' text, taken as the first waypoint's for every one. A path's waypoints hold the same
 /// surfaces, written alike (a rate map's waypoint written in full instead of rounded aside,
 /// which the buffer grows for); summing every waypoint's hint cost a pass over all their
-/// phases' memory, 2 % of the body's time.
+/// phases' memory, 3 % of the body's time.
 fn capacity(path: &PathAnswer<SurfacePhases>) -> usize {
     let phases = path
         .waypoints
@@ -191,7 +191,7 @@ fn push_short(out: &mut Vec<u8>, text: &[u8]) {
 /// Copies `text`, at most [`SHORT`] bytes, to `to` in a few loads and stores that may overlap,
 /// inline. A number's text has a different length each time, so the copies it was written
 /// with became calls of the C library's memmove, whose dispatch on the length cost more than
-/// the copy: 7 % of a path body's time went there (perf, bench `path_answer`).
+/// the copy: 12 % of a path body's time went there (perf, bench `path_answer`).
 ///
 /// # Safety
 /// `text.len() <= SHORT`, and `to` is valid for writing `text.len()` bytes.
