@@ -113,25 +113,41 @@ impl Numbers {
     /// Appends one waypoint's object: its pose, value and time, then its configuration (the
     /// serving AP, the phases, and on rate maps the power split and decoding order).
     fn waypoint(&mut self, out: &mut Vec<u8>, w: &Waypoint<SurfacePhases>) {
-        out.extend_from_slice(br#"{"x":"#);
-        Self::repeated(&mut self.float, &mut self.x, out, w.x);
-        out.extend_from_slice(br#","y":"#);
-        Self::repeated(&mut self.float, &mut self.y, out, w.y);
-        out.extend_from_slice(br#","i":"#);
-        self.integer(out, w.i);
-        out.extend_from_slice(br#","j":"#);
-        self.integer(out, w.j);
-        out.extend_from_slice(br#","value":"#);
-        self.float(out, w.value);
-        out.extend_from_slice(br#","yaw_rad":"#);
-        Self::repeated(&mut self.float, &mut self.yaw, out, w.yaw_rad);
-        out.extend_from_slice(br#","distance_m":"#);
-        self.float(out, w.distance_m);
-        out.extend_from_slice(br#","time_s":"#);
-        self.float(out, w.time_s);
-        out.extend_from_slice(br#","ap":"#);
-        self.integer(out, w.config.ap);
-        out.push(b',');
+        // The fields before the phases are written through a cursor in room reserved once:
+        // through the vector, every key and number checked the room and stored the length, and
+        // each byte stored could have changed the vector (a u8 pointer aliases anything), so its
+        // pointer and length were loaded again after each.
+        out.reserve(FIELDS_ROOM);
+        let base = out.as_mut_ptr();
+        // SAFETY: the writes below, the keys (71 bytes) and nine numbers of at most SHORT bytes,
+        // stay within the FIELDS_ROOM bytes reserved, and the length counts only the bytes
+        // written.
+        unsafe {
+            let mut at = base.add(out.len());
+            at = put(at, br#"{"x":"#);
+            at = put_short(at, Self::repeated(&mut self.float, &mut self.x, w.x));
+            at = put(at, br#","y":"#);
+            at = put_short(at, Self::repeated(&mut self.float, &mut self.y, w.y));
+            at = put(at, br#","i":"#);
+            at = put_short(at, self.integer.format(w.i).as_bytes());
+            at = put(at, br#","j":"#);
+            at = put_short(at, self.integer.format(w.j).as_bytes());
+            at = put(at, br#","value":"#);
+            at = put_short(at, Self::float_text(&mut self.float, w.value));
+            at = put(at, br#","yaw_rad":"#);
+            at = put_short(
+                at,
+                Self::repeated(&mut self.float, &mut self.yaw, w.yaw_rad),
+            );
+            at = put(at, br#","distance_m":"#);
+            at = put_short(at, Self::float_text(&mut self.float, w.distance_m));
+            at = put(at, br#","time_s":"#);
+            at = put_short(at, Self::float_text(&mut self.float, w.time_s));
+            at = put(at, br#","ap":"#);
+            at = put_short(at, self.integer.format(w.config.ap).as_bytes());
+            at = put(at, b",");
+            out.set_len(at.offset_from(base) as usize);
+        }
         w.config.phases.write_field(out);
         if let Some(power) = &w.config.power_w {
             field(out, "power_w", power);
@@ -143,10 +159,6 @@ impl Numbers {
     }
 
     /// `v` as serde_json writes an f64: its shortest round-trip decimal, `null` if not finite.
-    fn float(&mut self, out: &mut Vec<u8>, v: f64) {
-        push_short(out, Self::float_text(&mut self.float, v));
-    }
-
     fn float_text(buffer: &mut zmij::Buffer, v: f64) -> &[u8] {
         if v.is_finite() {
             buffer.format_finite(v).as_bytes()
@@ -155,8 +167,8 @@ impl Numbers {
         }
     }
 
-    /// `v` as [`Numbers::float`] writes it, copied from `last` when it holds the same double.
-    fn repeated(buffer: &mut zmij::Buffer, last: &mut LastFloat, out: &mut Vec<u8>, v: f64) {
+    /// `v` as [`Numbers::float_text`] writes it, from `last` when it holds the same double.
+    fn repeated<'a>(buffer: &mut zmij::Buffer, last: &'a mut LastFloat, v: f64) -> &'a [u8] {
         if last.bits != Some(v.to_bits()) {
             let text = Self::float_text(buffer, v);
             // SAFETY: a float's text is at most SHORT bytes, the room of `last.text`.
@@ -164,29 +176,43 @@ impl Numbers {
             last.len = text.len();
             last.bits = Some(v.to_bits());
         }
-        push_short(out, &last.text[..last.len]);
+        &last.text[..last.len]
     }
+}
 
-    fn integer(&mut self, out: &mut Vec<u8>, n: usize) {
-        push_short(out, self.integer.format(n).as_bytes());
+/// Room for a waypoint's fields before its phases: their keys and commas (71 bytes) and nine
+/// numbers (x, y, i, j, value, yaw, distance, time, AP).
+const FIELDS_ROOM: usize = 71 + 9 * SHORT;
+
+/// Writes `bytes` (a key: its length a constant once inlined, so the copy is a few stores) at
+/// `at`; returns the byte after them.
+///
+/// # Safety
+/// `at` is valid for writing `bytes.len()` bytes.
+#[inline(always)]
+unsafe fn put(at: *mut u8, bytes: &[u8]) -> *mut u8 {
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), at, bytes.len());
+        at.add(bytes.len())
+    }
+}
+
+/// Writes a number's `text`, at most [`SHORT`] bytes, at `at` ([`copy_short`]); returns the
+/// byte after it.
+///
+/// # Safety
+/// `text.len() <= SHORT`, and `at` is valid for writing `text.len()` bytes.
+#[inline(always)]
+unsafe fn put_short(at: *mut u8, text: &[u8]) -> *mut u8 {
+    unsafe {
+        copy_short(text, at);
+        at.add(text.len())
     }
 }
 
 /// The longest number text written: an f64's shortest decimal (zmij: "-1.2345678901234567e-308"
 /// is 24 bytes) or a usize's digits (20).
 const SHORT: usize = 24;
-
-/// Appends `text`, at most [`SHORT`] bytes, as [`copy_short`] copies it.
-#[inline(always)]
-fn push_short(out: &mut Vec<u8>, text: &[u8]) {
-    out.reserve(SHORT);
-    // SAFETY: `text` fits the room reserved, and its bytes are written before they are
-    // counted in.
-    unsafe {
-        copy_short(text, out.as_mut_ptr().add(out.len()));
-        out.set_len(out.len() + text.len());
-    }
-}
 
 /// Copies `text`, at most [`SHORT`] bytes, to `to` in a few loads and stores that may overlap,
 /// inline. A number's text has a different length each time, so the copies it was written
@@ -416,10 +442,46 @@ mod tests {
                 to[n..].iter().all(|&b| b == b'.'),
                 "length {n} wrote past its end"
             );
-            let mut out = b"x".to_vec();
-            push_short(&mut out, &text[..n]);
-            assert_eq!(&out[1..], &text[..n]);
+            let mut out = [b'.'; SHORT + 2];
+            let end = unsafe { put_short(out.as_mut_ptr().add(1), &text[..n]) };
+            assert_eq!(end as usize - out.as_ptr() as usize, 1 + n);
+            assert_eq!(&out[1..1 + n], &text[..n]);
         }
+    }
+
+    #[test]
+    fn the_longest_numbers_fit_the_fields_room() {
+        // 24 bytes, the longest shortest decimal of an f64, and 20 digits, usize::MAX's.
+        let long = -1.2345678901234567e-308;
+        assert_eq!(text(&long).len(), SHORT);
+        let waypoint = Waypoint {
+            x: long,
+            y: long,
+            i: usize::MAX,
+            j: usize::MAX,
+            value: long,
+            yaw_rad: long,
+            distance_m: long,
+            time_s: long,
+            config: irs_model::radiomap::CellConfig {
+                ap: usize::MAX,
+                phases: SurfacePhases::Radians(Default::default()),
+                power_w: None,
+                decoding_order: None,
+            },
+        };
+        let mut out = b"[".to_vec();
+        Numbers::default().waypoint(&mut out, &waypoint);
+        let body = String::from_utf8(out).unwrap();
+        let fields = body.find(r#""irs_phases_rad""#).unwrap() - 1;
+        assert!(fields <= FIELDS_ROOM, "{fields} bytes: {body}");
+        let (n, x) = (text(&usize::MAX), text(&long));
+        assert_eq!(
+            body,
+            format!(
+                r#"[{{"x":{x},"y":{x},"i":{n},"j":{n},"value":{x},"yaw_rad":{x},"distance_m":{x},"time_s":{x},"ap":{n},"irs_phases_rad":[]}}"#
+            )
+        );
     }
 
     #[test]
@@ -427,7 +489,11 @@ mod tests {
         let mut out = Vec::new();
         let mut numbers = Numbers::default();
         for v in [f64::NAN, f64::INFINITY, -0.0, 1e-7, 0.1 + 0.2] {
-            numbers.float(&mut out, v);
+            out.extend_from_slice(Numbers::float_text(&mut numbers.float, v));
+            out.push(b' ');
+            out.extend_from_slice(text(&v).as_bytes());
+            out.push(b'|');
+            out.extend_from_slice(Numbers::repeated(&mut numbers.float, &mut numbers.x, v));
             out.push(b' ');
             out.extend_from_slice(text(&v).as_bytes());
             out.push(b'|');
