@@ -16,7 +16,7 @@ use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 use irs_answers::fleet::{self, FleetQuery, RobotSpec};
-use irs_answers::timing::Timed;
+use irs_answers::timing::{self, Timed};
 use irs_model::input::present;
 use irs_model::radiomap::{Unit, WorkError};
 use irs_model::rate::Access;
@@ -98,7 +98,7 @@ pub(super) async fn plan_fleet(
                 let started = Instant::now();
                 let answer = fleet::plan(&scenario, &map, &query, progress)?;
                 let mut answer = serde_json::to_value(&answer).expect("answers serialise");
-                answer["took_ms"] = serde_json::json!(started.elapsed().as_secs_f64() * 1e3);
+                answer["took_ms"] = serde_json::json!(timing::took_ms(started));
                 Ok(answer)
             },
         )?;

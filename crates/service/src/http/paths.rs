@@ -19,7 +19,7 @@ use axum::response::{IntoResponse, Response};
 use irs_answers::path::{self, CheckedPath, FrameId};
 use irs_answers::phase_text::{PhaseFormat, PhasePrecision};
 use irs_answers::route::{self, RouteFormat};
-use irs_answers::timing::Timed;
+use irs_answers::timing::{self, Timed};
 use irs_answers::vda5050::{self, Header, OrderParams};
 use irs_model::input::{FieldError, parse_finite, present};
 use irs_model::montecarlo;
@@ -387,8 +387,7 @@ pub(super) async fn plan_path(
                         };
                         let mut answer: serde_json::Value =
                             serde_json::from_slice(&checked.to_json()).expect("answers are JSON");
-                        answer["took_ms"] =
-                            serde_json::json!(started.elapsed().as_secs_f64() * 1e3);
+                        answer["took_ms"] = serde_json::json!(timing::took_ms(started));
                         Ok(answer)
                     },
                 )?;
