@@ -430,7 +430,7 @@ mod tests {
         );
     }
 
-    /// A float that is not finite is written as serde_json writes it: `null`.
+    /// Every length a number's text can have is copied whole, and nothing past it.
     #[test]
     fn short_copies_copy_every_length_exactly() {
         let text: Vec<u8> = (b'a'..).take(SHORT).collect();
@@ -449,6 +449,8 @@ mod tests {
         }
     }
 
+    /// A waypoint of the longest numbers in every field is written within the room reserved
+    /// for its fields, as serde_json writes each value.
     #[test]
     fn the_longest_numbers_fit_the_fields_room() {
         // 24 bytes, the longest shortest decimal of an f64, and 20 digits, usize::MAX's.
@@ -484,6 +486,8 @@ mod tests {
         );
     }
 
+    /// A float that is not finite is written as serde_json writes it, `null`, whether new or
+    /// repeated.
     #[test]
     fn floats_not_finite_are_null() {
         let mut out = Vec::new();
