@@ -1,5 +1,6 @@
-//! Large JSON answers (paths, fleet plans), written straight into one buffer sized up front,
-//! and closed with their own `took_ms`.
+//! Large JSON answers: a fleet plan serialised into one buffer sized up front
+//! ([`serialize_sized`]), and a path answer's text (written by `irs_answers::path_json`, kept
+//! for repeated queries) sent with its own `took_ms` after it ([`with_took_ms`]).
 
 use axum::body::{Body, Bytes, HttpBody};
 use axum::http::header;
