@@ -20,7 +20,7 @@ mod nearby;
 mod raster;
 mod sightlines;
 pub use nearby::Nearby;
-pub use raster::{Blocker, Horizon, Raster};
+pub use raster::{Blocker, Horizon, Raster, Settled};
 pub use sightlines::SightLines;
 
 type P3 = Vector3<f64>;
@@ -138,6 +138,15 @@ pub struct RowOfUsers<'a> {
     pub ys: &'a [f64],
     /// The users' height (m), the same for every user of the row.
     pub z: f64,
+}
+
+/// Scratch of [`Obstructions::blocks_row`], kept by the caller from row to row.
+#[derive(Debug, Default)]
+pub struct RowScratch {
+    /// A wall's users in its frame.
+    targets: Vec<[f64; 2]>,
+    /// What the floor plan's horizon tells of each link.
+    settled: Vec<Settled>,
 }
 
 /// A pixel coordinate this close (in pixels) to a whole number is taken as that number, so a
@@ -440,15 +449,14 @@ impl Obstructions {
     /// `blocked[j]` = [`Obstructions::blocks_segment`] from `source` to each user of a grid
     /// row where `wanted[j]` holds (false elsewhere), bit for bit, a row at a time: what the
     /// gain map's rows test (docs/model.md §2). `horizon` is the floor plan's from `source`
-    /// ([`Raster::horizon`]), if any: the links it settles are not walked. `targets` is
-    /// scratch kept by the caller.
+    /// ([`Raster::horizon`]), if any: the links it settles are not walked.
     pub fn blocks_row(
         &self,
         source: &P3,
         horizon: Option<&Horizon>,
         users: RowOfUsers,
         wanted: &[bool],
-        targets: &mut Vec<[f64; 2]>,
+        scratch: &mut RowScratch,
         blocked: &mut [bool],
     ) {
         blocked.fill(false);
@@ -456,7 +464,7 @@ impl Obstructions {
             bx.block_row(source, users.x, users.z, users.ys, blocked);
         }
         for wall in &self.walls {
-            wall.block_row(source, users, targets, blocked);
+            wall.block_row(source, users, &mut scratch.targets, blocked);
         }
         let Some(raster) = &self.raster else {
             for (blocked, &wanted) in blocked.iter_mut().zip(wanted) {
@@ -464,6 +472,12 @@ impl Obstructions {
             }
             return;
         };
+        let settled = &mut scratch.settled;
+        settled.clear();
+        settled.resize(users.ys.len(), Settled::Walk);
+        if let Some(horizon) = horizon {
+            raster.settle_row(horizon, users, settled);
+        }
         let mut last = raster::Blocker::default();
         for (j, blocked) in blocked.iter_mut().enumerate() {
             if !wanted[j] {
@@ -473,10 +487,13 @@ impl Obstructions {
             if *blocked {
                 continue;
             }
-            let user = P3::new(users.x, users.ys[j], users.z);
-            *blocked = match horizon.and_then(|h| raster.settled(h, &user)) {
-                Some(blocked) => blocked,
-                None => raster.blocks_after(source, &user, &mut last),
+            *blocked = match settled[j] {
+                Settled::Open => false,
+                Settled::Shut => true,
+                Settled::Walk => {
+                    let user = P3::new(users.x, users.ys[j], users.z);
+                    raster.blocks_after(source, &user, &mut last)
+                }
             };
         }
     }
@@ -888,10 +905,10 @@ pub(crate) mod tests {
             }
             ys.sort_by(f64::total_cmp);
             let wanted: Vec<bool> = (0..ys.len()).map(|j| j % 7 != 3).collect();
-            let (mut targets, mut blocked) = (Vec::new(), vec![true; ys.len()]);
+            let (mut scratch, mut blocked) = (RowScratch::default(), vec![true; ys.len()]);
             let source = P3::from(source);
             for x in xs {
-                scene.blocks_row(&source, None, RowOfUsers { x, ys: &ys, z }, &wanted, &mut targets, &mut blocked);
+                scene.blocks_row(&source, None, RowOfUsers { x, ys: &ys, z }, &wanted, &mut scratch, &mut blocked);
                 for (j, &y) in ys.iter().enumerate() {
                     let expected = wanted[j] && scene.blocks_segment(&source, &P3::new(x, y, z));
                     prop_assert_eq!(blocked[j], expected, "{:?} to ({}, {}, {})", source, x, y, z);
@@ -932,14 +949,14 @@ pub(crate) mod tests {
                     let x = -4.0 + step as f64 * 0.17 + if step % 2 == 0 { 0.0 } else { 0.013 };
                     let ys: Vec<f64> = (0..70).map(|j| -3.1 + j as f64 * 0.09).collect();
                     let wanted = vec![true; ys.len()];
-                    let (mut targets, mut blocked) = (Vec::new(), vec![false; ys.len()]);
+                    let (mut scratch, mut blocked) = (RowScratch::default(), vec![false; ys.len()]);
                     let users = RowOfUsers { x, ys: &ys, z };
                     scene.blocks_row(
                         &source,
                         horizon.as_ref(),
                         users,
                         &wanted,
-                        &mut targets,
+                        &mut scratch,
                         &mut blocked,
                     );
                     for (j, &y) in ys.iter().enumerate() {

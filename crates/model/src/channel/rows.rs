@@ -3,7 +3,7 @@
 //! ([`crate::vecmath`]), with working arrays kept between rows so a row allocates nothing.
 
 use super::{ChannelModel, LinkBudget, P3, path_loss_db_at};
-use crate::geometry::{RowOfUsers, SightLines};
+use crate::geometry::{RowOfUsers, RowScratch, SightLines};
 
 /// `out[k] = √L` = 10^(−PL/20) of links of squared length `d2[k]` (m², clamped to ≥ 1 m as
 /// [`path_loss_db`] does, the InF-SH law of eqs. 41–42 in docs/model.md §2) and line of sight
@@ -49,8 +49,8 @@ struct RowLinks {
     los: Vec<bool>,
     /// √L, the square root of each link's path gain.
     root_gain: Vec<f64>,
-    /// Scratch of the blockage test (a wall's users in its frame).
-    targets: Vec<[f64; 2]>,
+    /// Scratch of the blockage test.
+    scratch: RowScratch,
 }
 
 /// Which terms of the closed form a row sums ([`ChannelModel::closed_form_row`]).
@@ -195,13 +195,13 @@ impl ChannelModel {
         }
         let RowLinks {
             los,
-            targets,
+            scratch,
             d2,
             root_gain,
         } = links;
         let horizon = sight.horizon(&self.obstructions);
         self.obstructions
-            .blocks_row(source, horizon, users, wanted, targets, los);
+            .blocks_row(source, horizon, users, wanted, scratch, los);
         for (los, &wanted) in los.iter_mut().zip(wanted) {
             *los = wanted && !*los;
         }
