@@ -488,6 +488,32 @@ fn horizon_bin(angle: f64) -> i64 {
     floor(angle * (HORIZON_BINS as f64 / 4.0))
 }
 
+/// Lowers side `k` (open or shut) of bins `first..=last` (wrapped past the last bin, at most a
+/// turn) to `value`: as at most two runs of consecutive bins, by a compare and a select (no
+/// index wrapped per bin, no NaN test; the values are finite), which is most of a horizon's
+/// cost (a pixel near the source spans thousands of bins).
+fn lower_bins(bins: &mut [[f64; 2]], first: i64, last: i64, k: usize, value: f64) {
+    let count = HORIZON_BINS as i64;
+    debug_assert!(last - first < count, "at most a turn");
+    if last < first {
+        return;
+    }
+    let start = first.rem_euclid(count) as usize;
+    let end = start + (last - first) as usize; // inclusive, may pass the last bin
+    let (head, wrapped) = if end < HORIZON_BINS {
+        (start..=end, 0..0)
+    } else {
+        (start..=HORIZON_BINS - 1, 0..end + 1 - HORIZON_BINS)
+    };
+    let lower = |run: &mut [[f64; 2]]| {
+        for bin in run {
+            bin[k] = if value < bin[k] { value } else { bin[k] };
+        }
+    };
+    lower(&mut bins[head]);
+    lower(&mut bins[wrapped]);
+}
+
 /// A distance (squared) within a margin far above rounding: `a` surely below `b`.
 fn surely_below(a: f64, b: f64) -> bool {
     a * (1.0 + 1e-9) + 1e-6 < b
@@ -502,7 +528,6 @@ impl Raster {
         if self.interior_at(su, sv) {
             return None;
         }
-        let count = HORIZON_BINS as i64;
         // [open, shut] per bin.
         let mut bins = vec![[f64::INFINITY; 2]; HORIZON_BINS];
         // The cone of directions from the source to the square [x0, x1] × [y0, y1] (which
@@ -517,8 +542,16 @@ impl Raster {
                 if cx == su && cy == sv {
                     continue;
                 }
+                // Wrapped into [−2, 2]: a − 4·round(a/4) for |a| < 4, by selects (`round`
+                // is a libm call, eight an edge pixel).
                 let a = pseudo_angle(cx - su, cy - sv) - centre;
-                let a = a - 4.0 * (a / 4.0).round();
+                let a = if a >= 2.0 {
+                    a - 4.0
+                } else if a <= -2.0 {
+                    a + 4.0
+                } else {
+                    a
+                };
                 (lo, hi) = (lo.min(a), hi.max(a));
             }
             (centre + lo, centre + hi)
@@ -533,10 +566,7 @@ impl Raster {
             let dy = (y0 - sv).max(sv - (y0 + 1.0)).max(0.0);
             let near = dx * dx + dy * dy;
             let (lo, hi) = cone(x0, x0 + 1.0, y0, y0 + 1.0);
-            for b in horizon_bin(lo) - 1..=horizon_bin(hi) + 1 {
-                let b = b.rem_euclid(count) as usize;
-                bins[b][0] = bins[b][0].min(near);
-            }
+            lower_bins(&mut bins, horizon_bin(lo) - 1, horizon_bin(hi) + 1, 0, near);
             // The bins whose every direction (widened by a bin each side) crosses the pixel
             // shrunk by SHUT_DEPTH_PX: those lying inside its cone, a bin in. (Edge pixels
             // only: deeper ones lie behind them, and any occupied pixel may vouch.)
@@ -548,10 +578,7 @@ impl Raster {
                 let far_x = (x0 - su).abs().max((x0 + 1.0 - su).abs());
                 let far_y = (y0 - sv).abs().max((y0 + 1.0 - sv).abs());
                 let far = far_x * far_x + far_y * far_y;
-                for b in first..=last {
-                    let b = b.rem_euclid(count) as usize;
-                    bins[b][1] = bins[b][1].min(far);
-                }
+                lower_bins(&mut bins, first, last, 1, far);
             }
         }
         Some(Horizon {
