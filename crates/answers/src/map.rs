@@ -179,6 +179,10 @@ impl Naming for ContentIds {
         scenario.content_hash()
     }
 
+    fn scenario_ids(&self, scenarios: &[&Scenario]) -> Vec<String> {
+        crate::scenario::content_hashes(scenarios)
+    }
+
     fn map_id(&self, key: &MapKey) -> String {
         map_id(key)
     }

@@ -771,6 +771,10 @@ fn candidate_values(
 pub trait Naming: Sync {
     /// The id of a scenario.
     fn scenario_id(&self, scenario: &Scenario) -> String;
+    /// The ids of many scenarios, which may share work (a floor plan's image, hashed once).
+    fn scenario_ids(&self, scenarios: &[&Scenario]) -> Vec<String> {
+        scenarios.iter().map(|s| self.scenario_id(s)).collect()
+    }
     /// The id of the map a key defines.
     fn map_id(&self, key: &MapKey) -> String;
 }
@@ -880,12 +884,15 @@ pub fn rank_candidates(
             .as_ref()
             .expect("only valid candidates are scored")
     };
-    // Ids hash each candidate's whole document (a floor plan's image included): in parallel.
-    let ids: Vec<(String, String)> = scores
-        .par_iter()
-        .map(|&(k, _)| {
-            let scenario_id = naming.scenario_id(scenario(k));
-            let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario(k), mode)?);
+    // Ids hash each candidate's whole document, all at once: the floor plan's image they
+    // share is hashed once.
+    let ranked_scenarios: Vec<&Scenario> = scores.iter().map(|&(k, _)| scenario(k)).collect();
+    let ids: Vec<(String, String)> = naming
+        .scenario_ids(&ranked_scenarios)
+        .into_iter()
+        .zip(&ranked_scenarios)
+        .map(|(scenario_id, scenario)| {
+            let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario, mode)?);
             Ok((scenario_id, map_id))
         })
         .collect::<Result<_, FieldError>>()?;

@@ -22,6 +22,7 @@ use irs_model::scenario::Scenario;
 use sha2::{Digest, Sha256};
 use std::io::Write;
 use std::path::Path;
+use std::sync::Arc;
 
 /// The scenarios compiled into every build (name, document): the paper's two set-ups and a
 /// small floor for quick tries. `scenarios/README.md` describes them.
@@ -129,12 +130,72 @@ impl ScenarioDocument for Scenario {
     }
 
     fn content_hash(&self) -> String {
-        // Streamed into the hash: a floor plan's image is megabytes of base64, which a copy
-        // of the whole text would hold once more (a placement search names every candidate).
-        let mut hash = Hashing(Sha256::new());
-        write_canonical(&self.to_json_value(), &mut hash).expect("hashing cannot fail");
-        hex(&hash.0.finalize())
+        content_hashes(&[self]).pop().expect("one id per scenario")
     }
+}
+
+/// [`ScenarioDocument::content_hash`] of each scenario, hashing a floor plan's image once for
+/// the scenarios that share it (the same `Arc`) and the canonical text before it: a placement
+/// search names every candidate, each carrying the base's image, megabytes of base64 that
+/// cost a millisecond a hash (a quarter of the warehouse's placement search when each
+/// candidate hashed its own).
+///
+/// The canonical text is written with the image left empty, and the hash taken over the text
+/// before the image, the image (base64 has no character JSON escapes, so the canonical form
+/// writes it as it is) and the text after it. The state after the image is reused while the
+/// text before it is unchanged.
+pub fn content_hashes(scenarios: &[&Scenario]) -> Vec<String> {
+    // The text before the image, the image, and the hash's state after both.
+    let mut shared: Option<(Vec<u8>, Arc<str>, Sha256)> = None;
+    scenarios
+        .iter()
+        .map(|scenario| {
+            let whole = || hex(&Sha256::digest(scenario.canonical_json().as_bytes()));
+            let Some(image) = scenario.floor_plan.as_ref().map(|plan| plan.image.clone()) else {
+                return whole();
+            };
+            let mut blank = (*scenario).clone();
+            if let Some(plan) = &mut blank.floor_plan {
+                plan.image = Arc::from("");
+            }
+            let text = blank.canonical_json().into_bytes();
+            let at = image_position(&text);
+            let (before, after) = text.split_at(at);
+            let reusable = shared.as_ref().is_some_and(|(prefix, shared_image, _)| {
+                prefix.as_slice() == before && Arc::ptr_eq(shared_image, &image)
+            });
+            if !reusable {
+                // A document's image is base64 (decoded when read); one made otherwise, with
+                // text JSON escapes, is hashed as written.
+                if needs_escapes(&image) {
+                    return whole();
+                }
+                let mut state = Sha256::new();
+                state.update(before);
+                state.update(image.as_bytes());
+                shared = Some((before.to_vec(), image, state));
+            }
+            let (_, _, state) = shared.as_ref().expect("set above");
+            let mut state = state.clone();
+            state.update(after);
+            hex(&state.finalize())
+        })
+        .collect()
+}
+
+/// Where the image's text goes in the canonical text of a scenario whose floor plan has an
+/// empty image: just inside the quotes of `floor_plan.image` (a key's quotes are never part of
+/// a string value's text, where JSON escapes them).
+fn image_position(text: &[u8]) -> usize {
+    let find = |needle: &[u8], from: usize| {
+        text[from..]
+            .windows(needle.len())
+            .position(|w| w == needle)
+            .map(|k| from + k + needle.len())
+            .expect("a floor plan's canonical text has its image")
+    };
+    let plan = find(br#""floor_plan":{"#, 0);
+    find(br#""image":""#, plan)
 }
 
 /// A floor plan's image file from the base64 text of `floor_plan.image`.
@@ -167,19 +228,6 @@ fn needs_escapes(text: &str) -> bool {
             found | (b < 0x20) | (b == b'"') | (b == b'\\')
         })
     })
-}
-
-/// Text written into a SHA-256 hash.
-struct Hashing(Sha256);
-
-impl Write for Hashing {
-    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
-        self.0.update(bytes);
-        Ok(bytes.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
 }
 
 /// The first 128 bits of a digest in hex.
@@ -271,17 +319,14 @@ mod tests {
 
     proptest::proptest! {
         /// Strings are written as serde_json writes them, whether or not they take the path
-        /// for text without escapes; the streamed hash is the hash of the written text.
+        /// for text without escapes.
         #[test]
         fn canonical_strings_are_serde_json_strings(text in "(\\PC|[\"\\\\\u{0}-\u{1f}\u{7f}])*") {
             let value = serde_json::json!({"k": text, "n": [1.5, 0.0, 2.0]});
             let mut out = Vec::new();
             write_canonical(&value, &mut out).unwrap();
             let expected = format!("{{\"k\":{},\"n\":[1.5,0,2]}}", serde_json::to_string(&text).unwrap());
-            proptest::prop_assert_eq!(String::from_utf8(out.clone()).unwrap(), expected);
-            let mut hash = Hashing(Sha256::new());
-            write_canonical(&value, &mut hash).unwrap();
-            proptest::prop_assert_eq!(hex(&hash.0.finalize()), hash_hex(&out));
+            proptest::prop_assert_eq!(String::from_utf8(out).unwrap(), expected);
         }
     }
 
@@ -691,6 +736,56 @@ mod tests {
         let e =
             Scenario::from_value(serde_json::json!({"floor_plan": {"map": "m.yaml"}})).unwrap_err();
         assert_eq!(e.field, "floor_plan.map");
+    }
+
+    /// Ids taken together, the floor plan's image hashed once for those sharing it, are each
+    /// scenario's SHA-256 of its canonical form: candidates differing after the image (the
+    /// name) reuse the state, one differing before it (an AP) or holding another image does
+    /// not, and a scenario without a floor plan is hashed whole.
+    #[test]
+    fn ids_taken_together_hash_each_canonical_form() {
+        use base64::Engine;
+        let image = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
+        let plan = |grey: u8| {
+            let mut file = b"P5\n12 8\n255\n".to_vec();
+            file.extend([grey; 96]);
+            serde_json::json!({
+                "image": image(&file), "resolution": 0.5, "origin": [0.0, 0.0, 0.0],
+                "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.25,
+            })
+        };
+        let with_plan = |grey: u8| {
+            let mut v: serde_json::Value = serde_json::from_str(SMALL).unwrap();
+            v["floor_plan"] = plan(grey);
+            Scenario::from_json(&v.to_string()).unwrap()
+        };
+        let base = with_plan(254);
+        let renamed = |name: &str| {
+            let mut s = base.clone();
+            s.name = Some(name.into());
+            s
+        };
+        let [x, y, z] = base.access_points()[0].position;
+        let moved_ap = base.with_ap_at(0, [x + 0.25, y, z]).unwrap();
+        let plain = Scenario::from_json(SMALL).unwrap();
+        let scenarios = [
+            base.clone(),
+            renamed("second"),
+            renamed("third"),
+            moved_ap,
+            renamed("fourth"),
+            with_plan(250),
+            plain,
+            renamed("fifth"),
+        ];
+        let refs: Vec<&Scenario> = scenarios.iter().collect();
+        let ids = content_hashes(&refs);
+        for (scenario, id) in scenarios.iter().zip(&ids) {
+            assert_eq!(id, &hash_hex(scenario.canonical_json().as_bytes()));
+            assert_eq!(id, &scenario.content_hash());
+        }
+        let distinct: std::collections::HashSet<&String> = ids.iter().collect();
+        assert_eq!(distinct.len(), ids.len(), "{ids:?}");
     }
 
     #[test]
