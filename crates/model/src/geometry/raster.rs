@@ -457,7 +457,7 @@ const SHUT_DEPTH_PX: f64 = 1e-3;
 ///   the walk finds it.
 ///
 /// Links in between, near a shadow's edge or over the obstacles, are walked
-/// ([`Raster::settled`]). A source inside the occupied region has no horizon; one on its edge
+/// ([`Raster::settle_row`]). A source inside the occupied region has no horizon; one on its edge
 /// (a surface mounted on a wall) has one, the directions into the pixels it touches left to
 /// the walk.
 #[derive(Debug, Clone)]
