@@ -62,10 +62,29 @@ const ATANH_TAIL: [f64; 11] = [
     2.0 / 23.0,
 ];
 
-/// Horner's scheme, highest coefficient last in `c`.
+/// Σ c[k]·xᵏ for 14 coefficients by Estrin's scheme: neighbouring coefficients paired as
+/// c[2i] + c[2i+1]·x, the pairs paired with x², and so on. Its longest chain of dependent
+/// operations is 8, where Horner's is 26: a row's loop waits on that chain for each vector, and
+/// the processor cannot overlap enough vectors to hide it.
 #[inline(always)]
-fn polynomial<const N: usize>(x: f64, c: &[f64; N]) -> f64 {
-    c.iter().rev().fold(0.0, |acc, &ck| acc * x + ck)
+fn estrin14(x: f64, c: &[f64; 14]) -> f64 {
+    let (x2, pair) = (x * x, |k: usize| c[k] + c[k + 1] * x);
+    let (x4, quad) = (x2 * x2, |k: usize| pair(k) + pair(k + 2) * x2);
+    let x8 = x4 * x4;
+    let low = quad(0) + quad(4) * x4;
+    let high = quad(8) + pair(12) * x4;
+    low + high * x8
+}
+
+/// [`estrin14`] for 11 coefficients.
+#[inline(always)]
+fn estrin11(x: f64, c: &[f64; 11]) -> f64 {
+    let (x2, pair) = (x * x, |k: usize| c[k] + c[k + 1] * x);
+    let (x4, quad) = (x2 * x2, |k: usize| pair(k) + pair(k + 2) * x2);
+    let x8 = x4 * x4;
+    let low = quad(0) + quad(4) * x4;
+    let high = pair(8) + c[10] * x2;
+    low + high * x8
 }
 
 /// eˣ for |x| ≤ [`EXP_DOMAIN`] (arguments beyond it are clamped to it).
@@ -78,7 +97,7 @@ pub fn exp(x: f64) -> f64 {
     let r = (x - k * LN2_HI) - k * LN2_LO;
     // 2^k: k + 1023 written into the exponent field; k sits in the low bits of `shifted`.
     let two_to_k = f64::from_bits((shifted.to_bits() << 52).wrapping_add(1023 << 52));
-    polynomial(r, &EXP_TAYLOR) * two_to_k
+    estrin14(r, &EXP_TAYLOR) * two_to_k
 }
 
 /// ln x for positive normal x.
@@ -99,7 +118,7 @@ pub fn ln(x: f64) -> f64 {
     let z = s * s;
     // 2s = f − s·f, so ln m = f − s·(f − R): the exact f leads and the rounding falls on a
     // correction of about f²/2 (2s·(1 + …) directly was 3 ulp off near m = 1).
-    let ln_m = f - s * (f - z * polynomial(z, &ATANH_TAIL));
+    let ln_m = f - s * (f - z * estrin11(z, &ATANH_TAIL));
     e * LN2_HI + (e * LN2_LO + ln_m)
 }
 
