@@ -884,12 +884,21 @@ pub fn rank_candidates(
             .as_ref()
             .expect("only valid candidates are scored")
     };
-    // Ids hash each candidate's whole document, all at once: the floor plan's image they
-    // share is hashed once.
+    // Ids hash each candidate's whole document, a share of the candidates per thread: the
+    // floor plan's image a share has in common is hashed once (a candidate AP, written before
+    // the image, still hashes its own, in parallel).
     let ranked_scenarios: Vec<&Scenario> = scores.iter().map(|&(k, _)| scenario(k)).collect();
-    let ids: Vec<(String, String)> = naming
-        .scenario_ids(&ranked_scenarios)
+    let share = ranked_scenarios
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .max(1);
+    let scenario_ids: Vec<Vec<String>> = ranked_scenarios
+        .par_chunks(share)
+        .map(|chunk| naming.scenario_ids(chunk))
+        .collect();
+    let ids: Vec<(String, String)> = scenario_ids
         .into_iter()
+        .flatten()
         .zip(&ranked_scenarios)
         .map(|(scenario_id, scenario)| {
             let map_id = naming.map_id(&MapKey::gain(&scenario_id, scenario, mode)?);
