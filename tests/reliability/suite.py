@@ -789,10 +789,17 @@ def cpu_budget():
     finally:
         server.stop()
 
+    # A search that takes seconds, so that the cancel lands in it: 501 poses (near the limit of
+    # 10⁸ cell evaluations), each scored by a widest path (3.4 s on 2 cores in 2026-12; the
+    # 101 poses of the coverage search above took 0.27 s, done before a cancel 0.5 s in).
+    long_search = {
+        "candidates": {"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 0.04},
+        "objective": {"kind": "max_threshold", "start": [-9, 0], "goal": [9, 0]},
+    }
     server = Server("--max-body-kb", "32768")
     try:
         status, job, _ = server.post("/v1/placements", {
-            "scenario": floor("cancelled", plan=2048), "candidates": south, "objective": objective})
+            "scenario": floor("cancelled", plan=2048), **long_search})
         expect(status == 202, f"a placement over a 2048² plan is a job: {status} {str(job)[:200]}")
         job_id = job["job_id"]
         kit.wait_until("the search scoring", lambda: server.get(f"/v1/jobs/{job_id}").body["cells_done"] > 0, 60)
