@@ -790,7 +790,7 @@ def cpu_budget():
         server.stop()
 
     # A search that takes seconds, so that the cancel lands in it: 501 poses (near the limit of
-    # 10⁸ cell evaluations), each scored by a widest path (3.4 s on 2 cores in 2026-12; the
+    # 10⁸ cell evaluations), each scored by a widest path (3.4 s on 2 cores; the
     # 101 poses of the coverage search above took 0.27 s, done before a cancel 0.5 s in).
     long_search = {
         "candidates": {"walls": [{"from": [-10, -10], "to": [10, -10]}], "step_m": 0.04},
